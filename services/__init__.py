@@ -1,0 +1,1 @@
+"""voicectl's services; each one runs as its own process and talks to the others over Zenoh only."""

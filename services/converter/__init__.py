@@ -1,0 +1,1 @@
+"""Text to orders: the orders-file model, the parser and the converter service."""

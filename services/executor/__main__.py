@@ -1,0 +1,100 @@
+"""`voicectl executor`: run orders on one robot with the built-in and user executors."""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import logging
+import os
+import sys
+
+from shared.bus import Bus, add_bus_arguments, bus_options, setup_logging, wait_for_stop
+from shared.keys import BridgeKeys, RobotKeys, check_chunk
+from shared.ros2 import Ros2Codec, RosDistro
+
+from .builtin import builtin_executors
+from .framework import BindingError, Bindings, load_binding
+from .robot import RobotLink
+from .runner import ExecutorService
+
+_LOGGER = logging.getLogger(__name__)
+
+
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(prog="voicectl executor", description=__doc__)
+    parser.add_argument(
+        "--robot",
+        default="robot",
+        type=lambda name: check_chunk(name, "robot name"),
+        help="robot name on the voice bus (default: robot)",
+    )
+    parser.add_argument(
+        "--namespace",
+        default="",
+        help="zenoh-bridge-ros2dds namespace of the robot (default: none)",
+    )
+    parser.add_argument(
+        "--distro",
+        type=RosDistro,
+        choices=list(RosDistro),
+        default=RosDistro.JAZZY,
+        help="ROS 2 distribution of the robot (message layouts differ)",
+    )
+    parser.add_argument(
+        "--executor",
+        action="append",
+        default=[],
+        metavar="MODULE:CLASS[=LABEL,...]",
+        help="bind a user executor class to labels (repeatable)",
+    )
+    parser.add_argument(
+        "--cancel-deadline",
+        type=float,
+        default=2.0,
+        help="seconds an executor has to honour a cancel before the robot is halted",
+    )
+    add_bus_arguments(parser)
+    return parser.parse_args(argv)
+
+
+async def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    setup_logging(args.debug)
+    bindings = Bindings()
+    for executor in builtin_executors():
+        bindings.bind(executor, executor.labels)
+    try:
+        for spec in args.executor:
+            bindings.bind(*load_binding(spec))
+    except BindingError as exc:
+        print(f"voicectl executor: {exc}", file=sys.stderr)
+        return 2
+    loop = asyncio.get_running_loop()
+    with Bus.open(bus_options(args), loop) as bus:
+        robot = RobotLink(bus, BridgeKeys(args.namespace), Ros2Codec(args.distro))
+        service = ExecutorService(
+            bus, RobotKeys(args.robot), robot, bindings, cancel_deadline=args.cancel_deadline
+        )
+        service.start()
+        _LOGGER.info("executor ready for %s; labels: %s", args.robot, ", ".join(bindings.labels))
+        try:
+            await wait_for_stop()
+        finally:
+            await service.shutdown()
+    if service.abandoned:
+        # asyncio.run would wait for these forever: an executor that ignores cancellation
+        # must not keep the process alive once the bus is closed.
+        _LOGGER.warning(
+            "exiting past %d executor task(s) that ignore cancel", len(service.abandoned)
+        )
+        logging.shutdown()
+        os._exit(0)
+    return 0
+
+
+def run(argv: list[str] | None = None) -> None:
+    sys.exit(asyncio.run(main(argv)))
+
+
+if __name__ == "__main__":
+    run()

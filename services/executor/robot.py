@@ -1,0 +1,115 @@
+"""The robot as executors see it: ROS 2 through zenoh-bridge-ros2dds' keys, CDR payloads."""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+from collections.abc import Callable
+
+from shared.bus import Bus
+from shared.errors import BusError, OrderFailed
+from shared.keys import BridgeKeys
+from shared.messages import TargetPose
+from shared.ros2 import GoalStatus, NavigateFeedback, Odometry, Pose2D, Ros2Codec, new_goal_id
+
+_LOGGER = logging.getLogger(__name__)
+
+NAVIGATE = "navigate_to_pose"
+SEND_GOAL_TIMEOUT = 10.0
+RESULT_TIMEOUT = 24 * 3600.0
+"""get_result answers when navigation ends, which can take as long as the robot needs."""
+
+
+class RobotLink:
+    """Topics and actions of one robot, shared by every executor of the process."""
+
+    def __init__(self, bus: Bus, keys: BridgeKeys, codec: Ros2Codec) -> None:
+        self.bus = bus
+        self.keys = keys
+        self.codec = codec
+        self.pose: Pose2D | None = None
+        """Latest pose from odometry, None until the first message."""
+        self._feedback: dict[bytes, Callable[[Pose2D, float], None]] = {}
+
+    def start(self) -> None:
+        self.bus.subscribe(self.keys.odom, self.codec.read_odometry, self._on_odom)
+        self.bus.subscribe(
+            self.keys.action(NAVIGATE, "feedback"), self.codec.read_feedback, self._on_feedback
+        )
+
+    def _on_odom(self, _key: str, odometry: Odometry) -> None:
+        self.pose = odometry.pose
+
+    def _on_feedback(self, _key: str, feedback: NavigateFeedback) -> None:
+        listener = self._feedback.get(feedback.goal_id)
+        if listener is not None:
+            listener(feedback.pose, feedback.distance_remaining)
+
+    def drive(self, linear_x: float, angular_z: float) -> None:
+        """Publish one velocity command on cmd_vel."""
+        self.bus.publish_bytes(self.keys.cmd_vel, self.codec.twist(linear_x, angular_z))
+
+    async def halt(self) -> None:
+        """Zero velocity now, then cancel every navigation goal."""
+        self.drive(0.0, 0.0)
+        with contextlib.suppress(BusError):
+            await self.bus.request_bytes(
+                self.keys.action(NAVIGATE, "cancel_goal"),
+                self.codec.cancel_goal_request(),
+                timeout=2.0,
+            )
+
+    async def navigate(
+        self, target: TargetPose, on_feedback: Callable[[Pose2D, float], None]
+    ) -> None:
+        """Run Nav2's NavigateToPose to `target`; return on success, raise otherwise.
+
+        The goal keeps its frame: Nav2 resolves a 'base_link' goal against the robot's
+        pose when it receives it, that is when this order starts executing.
+        """
+        goal_id = new_goal_id()
+        pose = Pose2D(x=target.x, y=target.y, yaw=target.yaw)
+        try:
+            reply = await self.bus.request_bytes(
+                self.keys.action(NAVIGATE, "send_goal"),
+                self.codec.send_goal_request(goal_id, target.frame, pose),
+                timeout=SEND_GOAL_TIMEOUT,
+            )
+        except BusError as exc:
+            raise OrderFailed(f"navigation unavailable: {exc}") from exc
+        if not self.codec.read_send_goal_response(reply):
+            raise OrderFailed(
+                f"navigation rejected the goal ({target.frame} {target.x:g}, {target.y:g})"
+            )
+        self._feedback[goal_id] = on_feedback
+        try:
+            result = await self.bus.request_bytes(
+                self.keys.action(NAVIGATE, "get_result"),
+                self.codec.get_result_request(goal_id),
+                timeout=RESULT_TIMEOUT,
+            )
+        except asyncio.CancelledError:
+            await asyncio.shield(self._cancel_goal(goal_id))
+            raise
+        except BusError as exc:
+            raise OrderFailed(f"navigation result lost: {exc}") from exc
+        finally:
+            self._feedback.pop(goal_id, None)
+        status = self.codec.read_get_result_response(result).status
+        if status == GoalStatus.SUCCEEDED:
+            return
+        if status == GoalStatus.CANCELED:
+            raise OrderFailed("navigation was cancelled on the robot")
+        raise OrderFailed(f"navigation ended with status {GoalStatus(status).name}")
+
+    async def _cancel_goal(self, goal_id: bytes) -> None:
+        try:
+            await self.bus.request_bytes(
+                self.keys.action(NAVIGATE, "cancel_goal"),
+                self.codec.cancel_goal_request(goal_id),
+                timeout=2.0,
+            )
+        except BusError as exc:
+            _LOGGER.warning("cancel of navigation goal failed: %s; halting", exc)
+            self.drive(0.0, 0.0)

@@ -1,0 +1,160 @@
+"""The executor on the bus: takes one order at a time, reports progress and results."""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+
+from shared.bus import Bus, json_decoder
+from shared.errors import OrderFailed
+from shared.keys import RobotKeys
+from shared.messages import (
+    Accepted,
+    CancelOrder,
+    Done,
+    Execute,
+    ExecutorRequest,
+    Failed,
+    Halt,
+    Message,
+    Order,
+    OrderFinished,
+    OrderProgress,
+    OrderStatus,
+    Progress,
+    Rejected,
+)
+
+from .framework import Bindings, ExecutionContext, Executor
+from .robot import RobotLink
+
+_LOGGER = logging.getLogger(__name__)
+
+
+class _Running:
+    """The order being executed and the task that runs it."""
+
+    def __init__(self, order_id: str, task: asyncio.Task[None]) -> None:
+        self.order_id = order_id
+        self.task = task
+        self.reported = False
+        """True once its result has been published, so it is published once."""
+        self.cancel_reason = "cancelled"
+
+
+class ExecutorService:
+    """Serves execute/cancel/halt for one robot."""
+
+    def __init__(
+        self,
+        bus: Bus,
+        keys: RobotKeys,
+        robot: RobotLink,
+        bindings: Bindings,
+        cancel_deadline: float = 2.0,
+    ) -> None:
+        self._bus = bus
+        self._keys = keys
+        self._robot = robot
+        self._bindings = bindings
+        self._cancel_deadline = cancel_deadline
+        self._running: _Running | None = None
+        self.abandoned: set[asyncio.Task[None]] = set()
+        """Tasks of executors that ignored a cancel; they may still be running."""
+
+    def start(self) -> None:
+        self._robot.start()
+        self._bus.serve(self._keys.executor_execute, json_decoder(ExecutorRequest), self.handle)
+        self._bus.serve(self._keys.executor_control, json_decoder(ExecutorRequest), self.handle)
+        self._bus.announce(self._keys.alive("executor"))
+
+    async def handle(self, request: ExecutorRequest) -> Message:
+        match request:
+            case Execute(order_id=order_id, order=order):
+                return self._start(order_id, order)
+            case CancelOrder(order_id=order_id):
+                running = self._running
+                if running is None or running.order_id != order_id:
+                    return Failed(reason=f"order '{order_id}' is not running here")
+                await self._cancel(running, "cancelled")
+                return Done(detail=f"cancelled {order_id}")
+            case Halt():
+                await self._robot.halt()
+                if self._running is not None:
+                    await self._cancel(self._running, "emergency stop")
+                return Done(detail="halted")
+
+    async def shutdown(self) -> None:
+        if self._running is not None:
+            await self._cancel(self._running, "executor shutting down")
+
+    def _start(self, order_id: str, order: Order) -> Message:
+        executor = self._bindings.get(order.label)
+        if executor is None:
+            bound = ", ".join(self._bindings.labels) or "none"
+            return Rejected(
+                order_id=order_id,
+                reason=f"unknown label '{order.label}'; bound labels: {bound}",
+            )
+        if self._running is not None:
+            return Rejected(order_id=order_id, reason=f"busy with order '{self._running.order_id}'")
+        task = asyncio.create_task(self._run(order_id, executor, order))
+        self._running = _Running(order_id, task)
+        return Accepted(order_id=order_id)
+
+    async def _run(self, order_id: str, executor: Executor, order: Order) -> None:
+        def report(progress: Progress) -> None:
+            self._bus.publish(
+                self._keys.executor_events, OrderProgress(order_id=order_id, progress=progress)
+            )
+
+        ctx = ExecutionContext(order_id, self._robot, report)
+        _LOGGER.info("executing %s: %s (%s)", order_id, order.description, order.label)
+        status, message = OrderStatus.SUCCEEDED, ""
+        try:
+            message = await executor.execute(order, ctx) or "done"
+        except asyncio.CancelledError:
+            running = self._running
+            reason = running.cancel_reason if running is not None else "cancelled"
+            status, message = OrderStatus.CANCELLED, reason
+        except OrderFailed as exc:
+            status, message = OrderStatus.FAILED, str(exc)
+        except Exception as exc:
+            _LOGGER.exception("executor for '%s' raised", order.label)
+            status, message = OrderStatus.FAILED, f"{type(exc).__name__}: {exc}"
+        self._report(order_id, status, message)
+
+    def _report(self, order_id: str, status: OrderStatus, message: str) -> None:
+        running = self._running
+        if running is None or running.order_id != order_id or running.reported:
+            return
+        running.reported = True
+        self._running = None
+        _LOGGER.info("order %s %s: %s", order_id, status, message)
+        self._bus.publish(
+            self._keys.executor_events,
+            OrderFinished(order_id=order_id, status=status, message=message),
+        )
+
+    async def _cancel(self, running: _Running, why: str) -> None:
+        """Cancel cooperatively; an executor that ignores it past the deadline is abandoned
+        and the robot is halted, so a stuck executor can never keep it moving."""
+        running.cancel_reason = why
+        running.task.cancel()
+        done, _ = await asyncio.wait({running.task}, timeout=self._cancel_deadline)
+        if not done:
+            _LOGGER.warning(
+                "order %s ignored cancel for %.1f s; halting",
+                running.order_id,
+                self._cancel_deadline,
+            )
+            self.abandoned.add(running.task)
+            running.task.add_done_callback(self.abandoned.discard)
+            await self._robot.halt()
+            self._report(
+                running.order_id,
+                OrderStatus.CANCELLED,
+                f"{why}; executor did not stop in time, robot halted",
+            )
+        else:
+            self._report(running.order_id, OrderStatus.CANCELLED, why)

@@ -1,0 +1,120 @@
+"""voicectl sim: run one simulated robot until SIGINT or SIGTERM."""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import logging
+import sys
+
+from shared.bus import Bus, add_bus_arguments, bus_options, setup_logging, wait_for_stop
+from shared.keys import BridgeKeys
+from shared.ros2 import Ros2Codec, RosDistro
+
+from .node import SimConfig, SimNode
+from .robot import Bounds, Limits
+
+_LOGGER = logging.getLogger(__name__)
+
+
+def _bounds(text: str) -> Bounds:
+    try:
+        return Bounds.parse(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from exc
+
+
+def _namespace(text: str) -> str:
+    try:
+        BridgeKeys(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from exc
+    return text
+
+
+def _positive(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        value = 0.0
+    if not 0 < value < float("inf"):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a positive number")
+    return value
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="voicectl sim",
+        description="A 2-D robot behind a simulated zenoh-bridge-ros2dds: cmd_vel, odom, "
+        "a camera and Nav2's navigate_to_pose action.",
+    )
+    add_bus_arguments(parser)
+    parser.add_argument(
+        "--namespace",
+        type=_namespace,
+        default="",
+        help="bridge namespace of the robot's keys (default: none)",
+    )
+    parser.add_argument(
+        "--distro",
+        type=RosDistro,
+        choices=list(RosDistro),
+        default=RosDistro.JAZZY,
+        help="ROS 2 distribution whose message definitions to speak (default: jazzy)",
+    )
+    parser.add_argument(
+        "--time-scale",
+        type=_positive,
+        default=1.0,
+        metavar="FACTOR",
+        help="simulated seconds per wall second (default: 1)",
+    )
+    parser.add_argument(
+        "--bounds",
+        type=_bounds,
+        default=Bounds(),
+        metavar="XMIN,YMIN,XMAX,YMAX",
+        help="goals outside this rectangle are rejected (default: -10,-10,10,10)",
+    )
+    parser.add_argument(
+        "--max-linear", type=_positive, default=0.5, metavar="M/S", help="default: 0.5"
+    )
+    parser.add_argument(
+        "--max-angular", type=_positive, default=1.5, metavar="RAD/S", help="default: 1.5"
+    )
+    return parser
+
+
+async def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    setup_logging(args.debug)
+    config = SimConfig(
+        namespace=args.namespace,
+        time_scale=args.time_scale,
+        bounds=args.bounds,
+        limits=Limits(max_linear=args.max_linear, max_angular=args.max_angular),
+    )
+    codec = Ros2Codec(args.distro)
+    loop = asyncio.get_running_loop()
+    with Bus.open(bus_options(args), loop) as bus:
+        node = SimNode(bus, codec, config)
+        node.declare()
+        ticking = asyncio.create_task(node.run())
+        try:
+            await wait_for_stop()
+            _LOGGER.info("stopping")
+        finally:
+            ticking.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await ticking
+            await node.shutdown()
+    return 0
+
+
+def run(argv: list[str] | None = None) -> None:
+    sys.exit(asyncio.run(main(argv)))
+
+
+if __name__ == "__main__":
+    run()

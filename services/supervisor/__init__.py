@@ -1,0 +1,1 @@
+"""The order supervisor: per-robot queue, dispatch to the executor, history."""

@@ -1,0 +1,1 @@
+"""The browser panel and its HTTP API (Starlette + uvicorn)."""

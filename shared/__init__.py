@@ -1,0 +1,1 @@
+"""voicectl's common library: message schemas, key expressions, the Zenoh session helper."""

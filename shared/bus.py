@@ -1,0 +1,295 @@
+"""The one place that owns a Zenoh session and bridges it to asyncio.
+
+Zenoh's Python API calls back on its own threads; a `Bus` turns those callbacks into calls
+on one event loop, decodes payloads once at the edge (a message that does not decode is
+logged in one line with its key and dropped), and closes every declaration with the
+session so that no callback thread keeps the process alive at exit.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import json
+import logging
+import signal
+from collections.abc import Awaitable, Callable, Iterator
+from dataclasses import dataclass, field
+from typing import Any, Literal, TypeVar
+
+import msgspec
+import zenoh
+
+from .errors import BusError
+from .messages import Failed, Message
+
+_LOGGER = logging.getLogger(__name__)
+
+T = TypeVar("T")
+Decode = Callable[[bytes], T]
+
+DEFAULT_ROUTER = "tcp/127.0.0.1:7447"
+JSON = zenoh.Encoding.APPLICATION_JSON
+CDR = zenoh.Encoding.APPLICATION_CDR
+
+
+@dataclass(frozen=True)
+class BusOptions:
+    """How a process joins the Zenoh network."""
+
+    connect: list[str] = field(default_factory=lambda: [DEFAULT_ROUTER])
+    listen: list[str] = field(default_factory=list)
+    mode: Literal["client", "peer", "router"] = "client"
+    lease_ms: int | None = None
+    """Shorter leases notice a lost peer sooner (tests on cut links use ~2000)."""
+
+    def zenoh_config(self) -> zenoh.Config:
+        conf = zenoh.Config()
+        conf.insert_json5("mode", json.dumps(self.mode))
+        conf.insert_json5("scouting/multicast/enabled", "false")
+        if self.connect:
+            conf.insert_json5("connect/endpoints", json.dumps(self.connect))
+        if self.listen:
+            conf.insert_json5("listen/endpoints", json.dumps(self.listen))
+        if self.mode == "client":
+            # Wait for the router instead of failing when it is not up yet.
+            conf.insert_json5("connect/timeout_ms", "-1")
+        if self.lease_ms is not None:
+            conf.insert_json5("transport/link/tx/lease", str(self.lease_ms))
+        return conf
+
+
+def add_bus_arguments(parser: argparse.ArgumentParser) -> None:
+    """The Zenoh flags every voicectl process shares."""
+    parser.add_argument(
+        "--connect",
+        action="append",
+        metavar="ENDPOINT",
+        help=f"Zenoh endpoint to connect to (repeatable; default {DEFAULT_ROUTER})",
+    )
+    parser.add_argument("--debug", action="store_true", help="log at DEBUG level")
+
+
+def bus_options(args: argparse.Namespace) -> BusOptions:
+    return BusOptions(connect=args.connect or [DEFAULT_ROUTER])
+
+
+def setup_logging(debug: bool) -> None:
+    logging.basicConfig(
+        level=logging.DEBUG if debug else logging.INFO,
+        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+    )
+    zenoh.init_log_from_env_or("error")
+
+
+class Bus:
+    """A Zenoh session whose callbacks land on one asyncio loop."""
+
+    def __init__(self, session: zenoh.Session, loop: asyncio.AbstractEventLoop) -> None:
+        self._session = session
+        self._loop = loop
+        self._closers = contextlib.ExitStack()
+        self._encoder = msgspec.json.Encoder()
+
+    @classmethod
+    @contextlib.contextmanager
+    def open(cls, options: BusOptions, loop: asyncio.AbstractEventLoop) -> Iterator[Bus]:
+        session = zenoh.open(options.zenoh_config())
+        bus = cls(session, loop)
+        try:
+            yield bus
+        finally:
+            bus._closers.close()
+            session.close()
+
+    @property
+    def session(self) -> zenoh.Session:
+        return self._session
+
+    def encode(self, message: Message) -> bytes:
+        return self._encoder.encode(message)
+
+    def _call_soon(self, func: Callable[..., object], *args: Any) -> None:
+        with contextlib.suppress(RuntimeError):  # the loop is closing; nothing to deliver to
+            self._loop.call_soon_threadsafe(func, *args)
+
+    # --- publish / subscribe -----------------------------------------------------------
+
+    def publish(self, key: str, message: Message) -> None:
+        self._session.put(key, self._encoder.encode(message), encoding=JSON)
+
+    def publish_bytes(self, key: str, payload: bytes, encoding: zenoh.Encoding = CDR) -> None:
+        self._session.put(key, payload, encoding=encoding)
+
+    def subscribe(self, key: str, decode: Decode[T], handler: Callable[[str, T], None]) -> None:
+        """Call `handler(key, message)` on the loop for every sample that decodes."""
+
+        def on_sample(sample: zenoh.Sample) -> None:
+            sample_key = str(sample.key_expr)
+            try:
+                message = decode(sample.payload.to_bytes())
+            except Exception as exc:  # any decoder's failure is the sender's fault: drop it
+                _LOGGER.warning("dropped undecodable message on %s: %s", sample_key, exc)
+                return
+            self._call_soon(handler, sample_key, message)
+
+        subscriber = self._session.declare_subscriber(key, on_sample)
+        self._closers.callback(subscriber.undeclare)
+
+    # --- request / reply ----------------------------------------------------------------
+
+    async def request_bytes(self, key: str, payload: bytes, timeout: float) -> bytes:
+        """Send one query and return the first good reply's payload."""
+        future: asyncio.Future[bytes] = self._loop.create_future()
+
+        def settle(result: bytes | BaseException) -> None:
+            if future.done():
+                return
+            if isinstance(result, BaseException):
+                future.set_exception(result)
+            else:
+                future.set_result(result)
+
+        def on_reply(reply: zenoh.Reply) -> None:
+            if reply.ok is not None:
+                self._call_soon(settle, reply.ok.payload.to_bytes())
+            elif reply.err is not None:
+                text = reply.err.payload.to_string()
+                self._call_soon(settle, BusError(f"{key}: {text}"))
+
+        def on_done() -> None:
+            self._call_soon(settle, BusError(f"{key}: no service answered"))
+
+        self._session.get(
+            key,
+            zenoh.handlers.Callback(on_reply, on_done),
+            payload=payload,
+            timeout=timeout,
+        )
+        return await future
+
+    async def request(
+        self, key: str, message: Message, decode: Decode[T], timeout: float = 5.0
+    ) -> T:
+        """Send `message` as a query on `key` and decode the reply."""
+        payload = await self.request_bytes(key, self._encoder.encode(message), timeout)
+        try:
+            return decode(payload)
+        except (msgspec.DecodeError, msgspec.ValidationError) as exc:
+            raise BusError(f"{key}: reply does not decode: {exc}") from exc
+
+    def serve(
+        self,
+        key: str,
+        decode: Decode[T],
+        handler: Callable[[T], Awaitable[Message]],
+    ) -> None:
+        """Answer queries on `key` with `handler(request)`, run on the loop."""
+
+        def reply(query: zenoh.Query, done: asyncio.Future[Message]) -> None:
+            try:
+                answer = done.result()
+            except Exception as exc:
+                _LOGGER.exception("handler for %s failed", key)
+                answer = Failed(reason=f"internal error: {exc}")
+            try:
+                query.reply(query.key_expr, self._encoder.encode(answer), encoding=JSON)
+            finally:
+                query.drop()
+
+        def on_query(query: zenoh.Query) -> None:
+            raw = query.payload.to_bytes() if query.payload is not None else b""
+            try:
+                request = decode(raw)
+            except Exception as exc:
+                _LOGGER.warning("rejected undecodable request on %s: %s", key, exc)
+                query.reply(
+                    query.key_expr,
+                    self._encoder.encode(Failed(reason=f"undecodable request: {exc}")),
+                    encoding=JSON,
+                )
+                query.drop()
+                return
+            try:
+                done = asyncio.run_coroutine_threadsafe(_awaitable(handler(request)), self._loop)
+            except RuntimeError:  # loop closed: the process is stopping
+                query.drop()
+                return
+            done.add_done_callback(lambda fut: reply(query, fut))  # type: ignore[arg-type]
+
+        queryable = self._session.declare_queryable(key, on_query)
+        self._closers.callback(queryable.undeclare)
+
+    def serve_bytes(self, key: str, handler: Callable[[bytes], Awaitable[bytes]]) -> None:
+        """Answer queries whose payloads are raw bytes (CDR), for ROS-side services."""
+
+        def on_query(query: zenoh.Query) -> None:
+            raw = query.payload.to_bytes() if query.payload is not None else b""
+
+            def reply(done: Any) -> None:
+                try:
+                    query.reply(query.key_expr, done.result(), encoding=CDR)
+                except Exception as exc:
+                    _LOGGER.warning("query on %s failed: %s", key, exc)
+                    query.reply_err(str(exc))
+                finally:
+                    query.drop()
+
+            try:
+                future = asyncio.run_coroutine_threadsafe(_awaitable(handler(raw)), self._loop)
+            except RuntimeError:
+                query.drop()
+                return
+            future.add_done_callback(reply)
+
+        queryable = self._session.declare_queryable(key, on_query)
+        self._closers.callback(queryable.undeclare)
+
+    # --- liveliness ------------------------------------------------------------------------
+
+    def announce(self, key: str) -> None:
+        """Hold a liveliness token on `key` until the bus closes."""
+        token = self._session.liveliness().declare_token(key)
+        self._closers.callback(token.undeclare)
+
+    def watch(self, key: str, handler: Callable[[str, bool], None]) -> None:
+        """Call `handler(token_key, alive)` on the loop as tokens under `key` come and go."""
+
+        def on_sample(sample: zenoh.Sample) -> None:
+            alive = sample.kind == zenoh.SampleKind.PUT
+            self._call_soon(handler, str(sample.key_expr), alive)
+
+        subscriber = self._session.liveliness().declare_subscriber(key, on_sample, history=True)
+        self._closers.callback(subscriber.undeclare)
+
+
+async def _awaitable(awaitable: Awaitable[T]) -> T:
+    return await awaitable
+
+
+def json_decoder(kind: Any) -> Decode[Any]:
+    """A typed JSON decoder for `kind`, to be built once per subscription."""
+    return msgspec.json.Decoder(kind).decode
+
+
+async def wait_for_stop(*tasks: Awaitable[object]) -> None:
+    """Return on SIGINT or SIGTERM; with `tasks`, also when one of them ends (re-raising
+    its error), cancelling the others."""
+    loop = asyncio.get_running_loop()
+    stop = asyncio.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stop.set)
+    running = [asyncio.ensure_future(t) for t in tasks]
+    stopper = asyncio.ensure_future(stop.wait())
+    try:
+        done, _ = await asyncio.wait([stopper, *running], return_when=asyncio.FIRST_COMPLETED)
+        for task in done:
+            if task is not stopper:
+                task.result()
+    finally:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.remove_signal_handler(sig)
+        for task in [stopper, *running]:
+            task.cancel()
+        await asyncio.gather(stopper, *running, return_exceptions=True)

@@ -1,0 +1,17 @@
+"""The small error hierarchy every voicectl component raises."""
+
+
+class VoicectlError(Exception):
+    """Base of every error voicectl raises on purpose; its text is one line for a person."""
+
+
+class OrdersFileError(VoicectlError):
+    """An orders file that cannot be used: unreadable, malformed, or missing a mandatory key."""
+
+
+class BusError(VoicectlError):
+    """The bus did not deliver: no reply, a timeout, or a reply that does not decode."""
+
+
+class OrderFailed(VoicectlError):
+    """Raised by an executor to end its order as failed with this message."""

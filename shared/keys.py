@@ -1,0 +1,134 @@
+"""Every key expression voicectl uses is built here and nowhere else.
+
+voicectl's own traffic lives under ``voice/<robot>/...`` so that one router can carry
+several robots and ``voice/**`` shows the whole order stream in any Zenoh tool. ROS 2
+traffic follows zenoh-bridge-ros2dds' layout: ``<namespace>/<topic>`` without the
+leading slash.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+ROOT = "voice"
+_CHUNK = re.compile(r"^[A-Za-z0-9_-]+$")
+
+
+def check_chunk(name: str, what: str) -> str:
+    """Return `name` if it is usable as one key chunk, else raise ValueError naming `what`."""
+    if not _CHUNK.match(name):
+        raise ValueError(f"{what} {name!r} must be letters, digits, '_' or '-'")
+    return name
+
+
+@dataclass(frozen=True)
+class RobotKeys:
+    """The keys of one robot's voice pipeline."""
+
+    robot: str
+
+    def __post_init__(self) -> None:
+        check_chunk(self.robot, "robot name")
+
+    @property
+    def prefix(self) -> str:
+        return f"{ROOT}/{self.robot}"
+
+    @property
+    def transcript(self) -> str:
+        """Final transcripts from the speech recogniser."""
+        return f"{self.prefix}/stt/transcript"
+
+    @property
+    def proposal(self) -> str:
+        """What the converter made of a transcript, for the panel to confirm."""
+        return f"{self.prefix}/converter/proposal"
+
+    @property
+    def supervisor(self) -> str:
+        """The supervisor's request/reply queryable (submit, cancel, state...)."""
+        return f"{self.prefix}/supervisor/request"
+
+    @property
+    def state(self) -> str:
+        """The supervisor's state snapshot, published on every change."""
+        return f"{self.prefix}/supervisor/state"
+
+    @property
+    def executor_execute(self) -> str:
+        """The executor's queryable that accepts or rejects one order."""
+        return f"{self.prefix}/executor/execute"
+
+    @property
+    def executor_control(self) -> str:
+        """The executor's queryable for cancel and halt, outside any queue."""
+        return f"{self.prefix}/executor/control"
+
+    @property
+    def executor_events(self) -> str:
+        """Progress and results published by the executor."""
+        return f"{self.prefix}/executor/events"
+
+    def alive(self, service: str) -> str:
+        """Liveliness token of one service serving this robot."""
+        return f"{self.prefix}/alive/{check_chunk(service, 'service name')}"
+
+
+@dataclass(frozen=True)
+class ConverterKeys:
+    """The converter serves every robot with one set of orders."""
+
+    @property
+    def parse(self) -> str:
+        """Request/reply: text in, orders and errors out."""
+        return f"{ROOT}/converter/parse"
+
+    @property
+    def alive(self) -> str:
+        return f"{ROOT}/converter/alive"
+
+    @property
+    def all_transcripts(self) -> str:
+        return f"{ROOT}/*/stt/transcript"
+
+    @staticmethod
+    def robot_of(transcript_key: str) -> str:
+        """The robot name inside a transcript key."""
+        return transcript_key.split("/")[1]
+
+
+@dataclass(frozen=True)
+class BridgeKeys:
+    """Keys of a ROS 2 graph as zenoh-bridge-ros2dds exposes it under `namespace`."""
+
+    namespace: str = ""
+
+    def __post_init__(self) -> None:
+        parts = [p for p in self.namespace.strip("/").split("/") if p]
+        for part in parts:
+            check_chunk(part, "ROS namespace part")
+        object.__setattr__(self, "namespace", "/".join(parts))
+
+    def topic(self, name: str) -> str:
+        """The key of a ROS topic, service or action member `name` ('/cmd_vel' or 'cmd_vel')."""
+        name = name.strip("/")
+        return f"{self.namespace}/{name}" if self.namespace else name
+
+    @property
+    def cmd_vel(self) -> str:
+        return self.topic("cmd_vel")
+
+    @property
+    def odom(self) -> str:
+        return self.topic("odom")
+
+    @property
+    def camera_image(self) -> str:
+        return self.topic("camera/image_raw")
+
+    def action(self, action: str, member: str) -> str:
+        """One of an action's five routes: send_goal, get_result, cancel_goal, feedback, status."""
+        if member not in {"send_goal", "get_result", "cancel_goal", "feedback", "status"}:
+            raise ValueError(f"unknown action member {member!r}")
+        return self.topic(f"{action.strip('/')}/_action/{member}")

@@ -1,0 +1,249 @@
+# msgspec subclasses inherit frozen=True; mypy's dataclass_transform does not know that.
+# mypy: disable-error-code="misc"
+"""The messages voicectl services exchange, as msgspec Structs encoded as JSON.
+
+Each key expression carries one tagged union; a receiver builds one typed decoder for it
+once and dispatches on the decoded type with ``match``. New fields always get defaults so
+that older and newer services can talk.
+"""
+
+from __future__ import annotations
+
+from enum import StrEnum
+
+import msgspec
+
+ParamValue = str | int | float | bool
+
+
+class Message(msgspec.Struct, tag_field="type", tag=str.lower, kw_only=True, frozen=True):
+    """Base of every message on the bus; the tag names its type in the JSON."""
+
+
+class Data(msgspec.Struct, kw_only=True, frozen=True):
+    """Base of values nested inside messages (no tag)."""
+
+
+# --- orders -----------------------------------------------------------------------------
+
+
+class TargetPose(Data):
+    """A planar goal pose; `frame` is a ROS frame id such as 'map' or 'base_link'."""
+
+    frame: str
+    x: float = 0.0
+    y: float = 0.0
+    yaw: float = 0.0
+    """Heading in radians, counter-clockwise."""
+
+
+class Order(Data, kw_only=True):
+    """One thing for the robot to do, as the converter made it from words."""
+
+    order: str
+    """Name of the order in the orders file ('rotation')."""
+    case: str | None = None
+    """Name of the matched case ('left'), or None for an order without cases."""
+    label: str
+    """Which executor runs it ('mbgoal')."""
+    description: str
+    """Human wording of what will happen ('turn left')."""
+    params: dict[str, ParamValue] = msgspec.field(default_factory=dict)
+    """Every key of the order and its case that is not a known one."""
+    target_pose: TargetPose | None = None
+
+
+class ParseError(Data, omit_defaults=True):
+    """A piece of text that did not become an order, and why."""
+
+    text: str
+    reason: str
+    candidates: list[str] = msgspec.field(default_factory=list)
+    """Orders the text could have meant, for the user to pick from; never dispatched alone."""
+
+
+class ParseResult(Data):
+    """What the converter made of a text: orders in spoken order, plus errors."""
+
+    orders: list[Order] = msgspec.field(default_factory=list)
+    errors: list[ParseError] = msgspec.field(default_factory=list)
+
+
+class Transcript(Message):
+    """A final transcript from the speech recogniser."""
+
+    text: str
+    confidence: float | None = None
+
+
+class Proposal(Message):
+    """The converter's reading of a transcript, for the panel to show and confirm."""
+
+    transcript: str
+    orders: list[Order] = msgspec.field(default_factory=list)
+    errors: list[ParseError] = msgspec.field(default_factory=list)
+
+
+class ParseRequest(Message):
+    text: str
+
+
+ConverterRequest = ParseRequest
+
+
+class ParseReply(Message):
+    result: ParseResult
+
+
+# --- supervisor ---------------------------------------------------------------------------
+
+
+class OrderStatus(StrEnum):
+    QUEUED = "queued"
+    RUNNING = "running"
+    SUCCEEDED = "succeeded"
+    FAILED = "failed"
+    CANCELLED = "cancelled"
+    REJECTED = "rejected"
+
+
+class Progress(Data):
+    """How far the current order has come, as much as the executor knows."""
+
+    text: str = ""
+    distance_linear: float | None = None
+    """Metres still to go."""
+    distance_angular: float | None = None
+    """Radians still to turn."""
+    percent: float | None = None
+
+
+class OrderRecord(Data):
+    """An order as the supervisor tracks it, from acceptance to its result."""
+
+    id: str
+    order: Order
+    status: OrderStatus
+    transcript: str = ""
+    request_id: str = ""
+    message: str = ""
+    """The executor's last word on it (why it failed, what it did)."""
+    progress: Progress | None = None
+    submitted_at: float = 0.0
+    started_at: float | None = None
+    ended_at: float | None = None
+
+
+class State(Data):
+    """Everything a panel needs to show a robot's orders at a glance."""
+
+    robot: str
+    executor_online: bool = False
+    current: OrderRecord | None = None
+    queue: list[OrderRecord] = msgspec.field(default_factory=list)
+    history: list[OrderRecord] = msgspec.field(default_factory=list)
+    """Most recent first."""
+
+
+class Submit(Message):
+    """Queue a batch of orders (one utterance); `request_id` makes retries harmless."""
+
+    request_id: str
+    orders: list[Order]
+    transcript: str = ""
+
+
+class Cancel(Message):
+    order_id: str
+
+
+class CancelAll(Message):
+    pass
+
+
+class EmergencyStop(Message):
+    pass
+
+
+class GetState(Message):
+    pass
+
+
+SupervisorRequest = Submit | Cancel | CancelAll | EmergencyStop | GetState
+
+
+class Submitted(Message):
+    order_ids: list[str]
+
+
+class Done(Message):
+    """A request that needs no answer beyond 'it happened'."""
+
+    detail: str = ""
+
+
+class Failed(Message):
+    """A request that could not be carried out; `reason` says why in one line."""
+
+    reason: str
+
+
+class StateReply(Message):
+    state: State
+
+
+class StateUpdate(Message):
+    """Published on the state key whenever anything changes."""
+
+    state: State
+
+
+SupervisorReply = Submitted | Done | Failed | StateReply
+
+
+# --- executor ------------------------------------------------------------------------------
+
+
+class Execute(Message):
+    """Run one order; the reply only says whether the executor took it."""
+
+    order_id: str
+    order: Order
+
+
+class CancelOrder(Message):
+    order_id: str
+
+
+class Halt(Message):
+    """Stop all motion now, outside any order."""
+
+
+ExecutorRequest = Execute | CancelOrder | Halt
+
+
+class Accepted(Message):
+    order_id: str
+
+
+class Rejected(Message):
+    order_id: str
+    reason: str
+
+
+ExecutorReply = Accepted | Rejected | Done | Failed
+
+
+class OrderProgress(Message):
+    order_id: str
+    progress: Progress
+
+
+class OrderFinished(Message):
+    order_id: str
+    status: OrderStatus
+    """succeeded, failed or cancelled."""
+    message: str = ""
+
+
+ExecutorEvent = OrderProgress | OrderFinished

@@ -1,0 +1,562 @@
+"""ROS 2 messages voicectl exchanges with a robot, as the CDR that zenoh-bridge-ros2dds carries.
+
+Every payload is plain little-endian CDR with its 4-byte encapsulation header (``00 01 00 00``),
+encoded and decoded by `rosbags`; nothing here packs bytes by hand. Callers deal in plain
+Python values (`Pose2D`, `bytes` goal ids, `GoalStatus`) and never see a rosbags class.
+
+Nav2's ``nav2_msgs/action/NavigateToPose`` is in no rosbags store, so it is registered from
+its ``.action`` text, together with the wrapper types ROS 2's action machinery derives from it
+(``_SendGoal_Request`` ...). Its Result differs between distributions: Humble's is
+``std_msgs/Empty result``; Jazzy's is ``uint16 error_code`` plus ``string error_msg``.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+import uuid
+from dataclasses import dataclass
+from enum import IntEnum, StrEnum
+from typing import Any, NamedTuple, TypeVar
+
+import numpy as np
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+from rosbags.typesys.store import Typestore
+
+from .errors import VoicectlError
+
+GOAL_ID_SIZE = 16
+CANCEL_ALL = bytes(GOAL_ID_SIZE)
+"""The all-zero goal id: with a zero stamp, a cancel request for every goal (action_msgs)."""
+
+
+class CdrError(VoicectlError):
+    """Bytes that are not the CDR encoding of the ROS 2 message that was expected."""
+
+
+class RosDistro(StrEnum):
+    """The ROS 2 distributions whose message definitions voicectl speaks."""
+
+    HUMBLE = "humble"
+    JAZZY = "jazzy"
+
+    @property
+    def store(self) -> Stores:
+        return Stores.ROS2_HUMBLE if self is RosDistro.HUMBLE else Stores.ROS2_JAZZY
+
+
+class GoalStatus(IntEnum):
+    """action_msgs/msg/GoalStatus.status."""
+
+    UNKNOWN = 0
+    ACCEPTED = 1
+    EXECUTING = 2
+    CANCELING = 3
+    SUCCEEDED = 4
+    CANCELED = 5
+    ABORTED = 6
+
+    @property
+    def terminal(self) -> bool:
+        return self in (GoalStatus.SUCCEEDED, GoalStatus.CANCELED, GoalStatus.ABORTED)
+
+
+class CancelCode(IntEnum):
+    """action_msgs/srv/CancelGoal_Response.return_code."""
+
+    NONE = 0
+    """One or more goals are now canceling."""
+    REJECTED = 1
+    UNKNOWN_GOAL_ID = 2
+    GOAL_TERMINATED = 3
+
+
+class NavigateError(IntEnum):
+    """Jazzy's NavigateToPose_Result.error_code values (Humble's Result has no error code)."""
+
+    NONE = 0
+    UNKNOWN = 9000
+    FAILED_TO_LOAD_BEHAVIOR_TREE = 9001
+    TF_ERROR = 9002
+
+
+def new_goal_id() -> bytes:
+    """A fresh random goal id, as an action client makes one per goal."""
+    return uuid.uuid4().bytes
+
+
+# --- plain values ---------------------------------------------------------------------------
+# Decoded messages are named tuples: unpack them, or read their fields by name.
+
+
+@dataclass(frozen=True, slots=True)
+class Pose2D:
+    """A planar pose."""
+
+    x: float = 0.0
+    y: float = 0.0
+    yaw: float = 0.0
+    """Heading in radians, counter-clockwise from +x."""
+
+
+class Odometry(NamedTuple):
+    """What nav_msgs/msg/Odometry says about a planar base."""
+
+    pose: Pose2D
+    linear_x: float
+    angular_z: float
+    stamp_s: float
+    """Header stamp in seconds."""
+
+
+class GoalRequest(NamedTuple):
+    """A NavigateToPose goal as sent to send_goal."""
+
+    goal_id: bytes
+    frame: str
+    """The goal pose's frame id ('map', 'odom', 'base_link')."""
+    pose: Pose2D
+
+
+class NavigateResult(NamedTuple):
+    """A get_result reply: how the goal ended, and Jazzy's error details."""
+
+    status: GoalStatus
+    error_code: int = 0
+    """Always 0 on Humble, whose Result carries nothing."""
+    error_msg: str = ""
+
+
+class NavigateFeedback(NamedTuple):
+    goal_id: bytes
+    pose: Pose2D
+    distance_remaining: float
+
+
+class CancelRequest(NamedTuple):
+    goal_id: bytes
+    """`CANCEL_ALL` (all zeros) selects goals by `stamp_s` alone."""
+    stamp_s: float = 0.0
+    """Non-zero: also cancel every goal accepted at or before this time."""
+
+
+class CancelResponse(NamedTuple):
+    return_code: CancelCode
+    goal_ids: tuple[bytes, ...] = ()
+    """The goals now canceling."""
+
+
+class Image(NamedTuple):
+    width: int
+    height: int
+    encoding: str
+    data: bytes
+    """Rows of `width` pixels, top row first, no padding."""
+
+
+# Bytes per pixel of the encodings `Ros2Codec.image` writes.
+IMAGE_ENCODINGS = {"rgb8": 3, "bgr8": 3, "rgba8": 4, "bgra8": 4, "mono8": 1, "mono16": 2}
+
+# --- type definitions -----------------------------------------------------------------------
+
+_NAV = "nav2_msgs/action/NavigateToPose"
+_CANCEL = "action_msgs/srv/CancelGoal"
+
+_NAV_GOAL = """
+geometry_msgs/PoseStamped pose
+string behavior_tree
+"""
+
+# Checked against docs.ros.org's nav2_msgs pages (Humble: "std_msgs/Empty result") and Jazzy-era
+# copies of NavigateToPose.action; the constants do not change a byte on the wire. Rolling adds
+# TIMEOUT and two feedback fields (position/heading tracking error) that neither distro has.
+_NAV_RESULT = {
+    RosDistro.HUMBLE: """
+std_msgs/Empty result
+""",
+    RosDistro.JAZZY: """
+uint16 NONE=0
+uint16 UNKNOWN=9000
+uint16 FAILED_TO_LOAD_BEHAVIOR_TREE=9001
+uint16 TF_ERROR=9002
+uint16 error_code
+string error_msg
+""",
+}
+
+_NAV_FEEDBACK = """
+geometry_msgs/PoseStamped current_pose
+builtin_interfaces/Duration navigation_time
+builtin_interfaces/Duration estimated_time_remaining
+int16 number_of_recoveries
+float32 distance_remaining
+"""
+
+# The services and the feedback topic ROS 2 derives from any action (rosidl's action idl).
+_ACTION_WRAPPERS = {
+    "_SendGoal_Request": "unique_identifier_msgs/msg/UUID goal_id\n{action}_Goal goal",
+    "_SendGoal_Response": "bool accepted\nbuiltin_interfaces/msg/Time stamp",
+    "_GetResult_Request": "unique_identifier_msgs/msg/UUID goal_id",
+    "_GetResult_Response": "int8 status\n{action}_Result result",
+    "_FeedbackMessage": "unique_identifier_msgs/msg/UUID goal_id\n{action}_Feedback feedback",
+}
+
+_CANCEL_REQUEST = """
+action_msgs/msg/GoalInfo goal_info
+"""
+
+_CANCEL_RESPONSE = """
+int8 ERROR_NONE=0
+int8 ERROR_REJECTED=1
+int8 ERROR_UNKNOWN_GOAL_ID=2
+int8 ERROR_GOAL_TERMINATED=3
+int8 return_code
+action_msgs/msg/GoalInfo[] goals_canceling
+"""
+
+
+def _definitions(distro: RosDistro) -> dict[str, str]:
+    """Message text of every type voicectl adds to the distribution's store."""
+    texts = {
+        f"{_NAV}_Goal": _NAV_GOAL,
+        f"{_NAV}_Result": _NAV_RESULT[distro],
+        f"{_NAV}_Feedback": _NAV_FEEDBACK,
+        f"{_CANCEL}_Request": _CANCEL_REQUEST,
+        f"{_CANCEL}_Response": _CANCEL_RESPONSE,
+    }
+    for suffix, text in _ACTION_WRAPPERS.items():
+        texts[f"{_NAV}{suffix}"] = text.format(action=_NAV)
+    return texts
+
+
+@functools.cache
+def typestore(distro: RosDistro) -> Typestore:
+    """The distribution's rosbags store plus Nav2's action, built once per process."""
+    # Building a store costs ~0.25 s, and a store is never changed after this function.
+    store = get_typestore(distro.store)
+    for name, text in _definitions(distro).items():
+        if name in store.fielddefs:  # a future rosbags may ship action_msgs' services
+            continue
+        # get_types_from_msg files a service type under '<pkg>/srv/msg/<name>': keep our name.
+        (definition,) = get_types_from_msg(text, name).values()
+        store.register({name: definition})
+    return store
+
+
+# --- the codec ------------------------------------------------------------------------------
+
+_E = TypeVar("_E", bound=IntEnum)
+
+
+class Ros2Codec:
+    """Encode and decode the ROS 2 messages voicectl needs, for one distribution."""
+
+    def __init__(self, distro: RosDistro = RosDistro.JAZZY) -> None:
+        self.distro = distro
+        self._store = typestore(distro)
+        self._types: dict[str, Any] = dict(self._store.types)
+
+    # --- geometry_msgs/msg/Twist --------------------------------------------------------
+
+    def twist(self, linear_x: float, angular_z: float) -> bytes:
+        return self._encode(self._twist(linear_x, angular_z), "geometry_msgs/msg/Twist")
+
+    def read_twist(self, raw: bytes) -> tuple[float, float]:
+        """(linear x, angular z) of a Twist; a planar base ignores the other axes."""
+        msg = self._decode(raw, "geometry_msgs/msg/Twist")
+        return float(msg.linear.x), float(msg.angular.z)
+
+    # --- nav_msgs/msg/Odometry ----------------------------------------------------------
+
+    def odometry(self, pose: Pose2D, linear_x: float, angular_z: float, stamp_s: float) -> bytes:
+        t = self._types
+        msg = t["nav_msgs/msg/Odometry"](
+            header=self._header(stamp_s, "odom"),
+            child_frame_id="base_link",
+            pose=t["geometry_msgs/msg/PoseWithCovariance"](
+                pose=self._pose(pose), covariance=np.zeros(36, dtype=np.float64)
+            ),
+            twist=t["geometry_msgs/msg/TwistWithCovariance"](
+                twist=self._twist(linear_x, angular_z), covariance=np.zeros(36, dtype=np.float64)
+            ),
+        )
+        return self._encode(msg, "nav_msgs/msg/Odometry")
+
+    def read_odometry(self, raw: bytes) -> Odometry:
+        """Pose, velocity and stamp of an Odometry message."""
+        msg = self._decode(raw, "nav_msgs/msg/Odometry")
+        return Odometry(
+            pose=_pose2d(msg.pose.pose),
+            linear_x=float(msg.twist.twist.linear.x),
+            angular_z=float(msg.twist.twist.angular.z),
+            stamp_s=_seconds(msg.header.stamp),
+        )
+
+    # --- navigate_to_pose: send_goal ----------------------------------------------------
+
+    def send_goal_request(
+        self, goal_id: bytes, frame: str, pose: Pose2D, stamp_s: float = 0.0
+    ) -> bytes:
+        t = self._types
+        goal = t[f"{_NAV}_Goal"](
+            pose=t["geometry_msgs/msg/PoseStamped"](
+                header=self._header(stamp_s, frame), pose=self._pose(pose)
+            ),
+            behavior_tree="",
+        )
+        msg = t[f"{_NAV}_SendGoal_Request"](goal_id=self._uuid(goal_id), goal=goal)
+        return self._encode(msg, f"{_NAV}_SendGoal_Request")
+
+    def read_send_goal_request(self, raw: bytes) -> GoalRequest:
+        msg = self._decode(raw, f"{_NAV}_SendGoal_Request")
+        return GoalRequest(
+            goal_id=_goal_id(msg.goal_id),
+            frame=str(msg.goal.pose.header.frame_id),
+            pose=_pose2d(msg.goal.pose.pose),
+        )
+
+    def send_goal_response(self, accepted: bool, stamp_s: float = 0.0) -> bytes:
+        msg = self._types[f"{_NAV}_SendGoal_Response"](accepted=accepted, stamp=self._time(stamp_s))
+        return self._encode(msg, f"{_NAV}_SendGoal_Response")
+
+    def read_send_goal_response(self, raw: bytes) -> bool:
+        """Whether the goal was accepted."""
+        return bool(self._decode(raw, f"{_NAV}_SendGoal_Response").accepted)
+
+    # --- navigate_to_pose: get_result ---------------------------------------------------
+
+    def get_result_request(self, goal_id: bytes) -> bytes:
+        msg = self._types[f"{_NAV}_GetResult_Request"](goal_id=self._uuid(goal_id))
+        return self._encode(msg, f"{_NAV}_GetResult_Request")
+
+    def read_get_result_request(self, raw: bytes) -> bytes:
+        """The goal id asked about."""
+        return _goal_id(self._decode(raw, f"{_NAV}_GetResult_Request").goal_id)
+
+    def get_result_response(self, status: int, error_code: int = 0, error_msg: str = "") -> bytes:
+        """The final status; `error_code` and `error_msg` are dropped on Humble."""
+        t = self._types
+        if self.distro is RosDistro.HUMBLE:
+            result = t[f"{_NAV}_Result"](result=t["std_msgs/msg/Empty"]())
+        else:
+            if not 0 <= error_code <= 0xFFFF:
+                raise ValueError(f"error_code {error_code} must fit in uint16")
+            result = t[f"{_NAV}_Result"](error_code=error_code, error_msg=error_msg)
+        msg = t[f"{_NAV}_GetResult_Response"](status=int(GoalStatus(status)), result=result)
+        return self._encode(msg, f"{_NAV}_GetResult_Response")
+
+    def read_get_result_response(self, raw: bytes) -> NavigateResult:
+        msg = self._decode(raw, f"{_NAV}_GetResult_Response")
+        status = _enum(GoalStatus, msg.status, "goal status")
+        if self.distro is RosDistro.HUMBLE:
+            return NavigateResult(status=status)
+        return NavigateResult(
+            status=status,
+            error_code=int(msg.result.error_code),
+            error_msg=str(msg.result.error_msg),
+        )
+
+    # --- navigate_to_pose: feedback -----------------------------------------------------
+
+    def feedback(
+        self,
+        goal_id: bytes,
+        current: Pose2D,
+        distance_remaining: float,
+        navigation_time_s: float,
+        frame: str = "map",
+        stamp_s: float = 0.0,
+    ) -> bytes:
+        t = self._types
+        feedback = t[f"{_NAV}_Feedback"](
+            current_pose=t["geometry_msgs/msg/PoseStamped"](
+                header=self._header(stamp_s, frame), pose=self._pose(current)
+            ),
+            navigation_time=self._duration(navigation_time_s),
+            estimated_time_remaining=self._duration(0.0),
+            number_of_recoveries=0,
+            distance_remaining=distance_remaining,
+        )
+        msg = t[f"{_NAV}_FeedbackMessage"](goal_id=self._uuid(goal_id), feedback=feedback)
+        return self._encode(msg, f"{_NAV}_FeedbackMessage")
+
+    def read_feedback(self, raw: bytes) -> NavigateFeedback:
+        msg = self._decode(raw, f"{_NAV}_FeedbackMessage")
+        return NavigateFeedback(
+            goal_id=_goal_id(msg.goal_id),
+            pose=_pose2d(msg.feedback.current_pose.pose),
+            distance_remaining=float(msg.feedback.distance_remaining),
+        )
+
+    # --- navigate_to_pose: cancel_goal (action_msgs/srv/CancelGoal) -----------------------
+
+    def cancel_goal_request(self, goal_id: bytes = CANCEL_ALL, stamp_s: float = 0.0) -> bytes:
+        """Cancel `goal_id`; the default (all zeros, zero stamp) cancels every goal."""
+        msg = self._types[f"{_CANCEL}_Request"](goal_info=self._goal_info(goal_id, stamp_s))
+        return self._encode(msg, f"{_CANCEL}_Request")
+
+    def read_cancel_goal_request(self, raw: bytes) -> CancelRequest:
+        info = self._decode(raw, f"{_CANCEL}_Request").goal_info
+        return CancelRequest(goal_id=_goal_id(info.goal_id), stamp_s=_seconds(info.stamp))
+
+    def cancel_goal_response(self, return_code: int, goal_ids: tuple[bytes, ...] = ()) -> bytes:
+        msg = self._types[f"{_CANCEL}_Response"](
+            return_code=int(CancelCode(return_code)),
+            goals_canceling=[self._goal_info(goal_id, 0.0) for goal_id in goal_ids],
+        )
+        return self._encode(msg, f"{_CANCEL}_Response")
+
+    def read_cancel_goal_response(self, raw: bytes) -> CancelResponse:
+        msg = self._decode(raw, f"{_CANCEL}_Response")
+        return CancelResponse(
+            return_code=_enum(CancelCode, msg.return_code, "cancel return code"),
+            goal_ids=tuple(_goal_id(info.goal_id) for info in msg.goals_canceling),
+        )
+
+    # --- navigate_to_pose: status (action_msgs/msg/GoalStatusArray) ---------------------
+
+    def goal_status_array(self, statuses: list[tuple[bytes, GoalStatus]]) -> bytes:
+        """Every goal the server still remembers, with its status (stamps left at zero)."""
+        t = self._types
+        status_list = [
+            t["action_msgs/msg/GoalStatus"](
+                goal_info=self._goal_info(goal_id, 0.0), status=int(GoalStatus(status))
+            )
+            for goal_id, status in statuses
+        ]
+        msg = t["action_msgs/msg/GoalStatusArray"](status_list=status_list)
+        return self._encode(msg, "action_msgs/msg/GoalStatusArray")
+
+    def read_goal_status_array(self, raw: bytes) -> list[tuple[bytes, GoalStatus]]:
+        msg = self._decode(raw, "action_msgs/msg/GoalStatusArray")
+        return [
+            (_goal_id(entry.goal_info.goal_id), _enum(GoalStatus, entry.status, "goal status"))
+            for entry in msg.status_list
+        ]
+
+    # --- sensor_msgs/msg/Image ----------------------------------------------------------
+
+    def image(
+        self,
+        width: int,
+        height: int,
+        encoding: str,
+        data: bytes,
+        stamp_s: float = 0.0,
+        frame: str = "camera",
+    ) -> bytes:
+        if encoding not in IMAGE_ENCODINGS:
+            raise ValueError(
+                f"image encoding {encoding!r} is not supported; use one of "
+                + ", ".join(IMAGE_ENCODINGS)
+            )
+        step = width * IMAGE_ENCODINGS[encoding]
+        if width < 0 or height < 0 or len(data) != step * height:
+            raise ValueError(
+                f"{len(data)} bytes of {encoding} do not make a {width}x{height} image "
+                f"({step * height} expected)"
+            )
+        msg = self._types["sensor_msgs/msg/Image"](
+            header=self._header(stamp_s, frame),
+            height=height,
+            width=width,
+            encoding=encoding,
+            is_bigendian=0,
+            step=step,
+            data=np.frombuffer(data, dtype=np.uint8),
+        )
+        return self._encode(msg, "sensor_msgs/msg/Image")
+
+    def read_image(self, raw: bytes) -> Image:
+        msg = self._decode(raw, "sensor_msgs/msg/Image")
+        width, height, step = int(msg.width), int(msg.height), int(msg.step)
+        data = bytes(msg.data)
+        row = width * IMAGE_ENCODINGS.get(str(msg.encoding), 0)
+        if len(data) != step * height or (row and step < row):
+            raise CdrError(
+                f"image of {width}x{height} {msg.encoding!r} with step {step} "
+                f"carries {len(data)} bytes"
+            )
+        if row and step != row:  # drop row padding so that callers see packed rows
+            data = b"".join(data[i * step : i * step + row] for i in range(height))
+        return Image(width=width, height=height, encoding=str(msg.encoding), data=data)
+
+    # --- helpers ------------------------------------------------------------------------
+
+    def _encode(self, msg: object, typename: str) -> bytes:
+        return bytes(self._store.serialize_cdr(msg, typename, little_endian=True))
+
+    def _decode(self, raw: bytes, typename: str) -> Any:
+        try:
+            return self._store.deserialize_cdr(raw, typename)
+        except Exception as exc:  # every rosbags failure on foreign bytes is a malformed frame
+            raise CdrError(f"{len(raw)} bytes are not a valid {typename}: {exc}") from exc
+
+    def _time(self, seconds: float) -> Any:
+        sec, nanosec = _split_seconds(seconds)
+        return self._types["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec)
+
+    def _duration(self, seconds: float) -> Any:
+        sec, nanosec = _split_seconds(seconds)
+        return self._types["builtin_interfaces/msg/Duration"](sec=sec, nanosec=nanosec)
+
+    def _header(self, stamp_s: float, frame: str) -> Any:
+        return self._types["std_msgs/msg/Header"](stamp=self._time(stamp_s), frame_id=frame)
+
+    def _uuid(self, goal_id: bytes) -> Any:
+        if len(goal_id) != GOAL_ID_SIZE:
+            raise ValueError(f"a goal id is {GOAL_ID_SIZE} bytes, not {len(goal_id)}")
+        return self._types["unique_identifier_msgs/msg/UUID"](
+            uuid=np.frombuffer(goal_id, dtype=np.uint8)
+        )
+
+    def _goal_info(self, goal_id: bytes, stamp_s: float) -> Any:
+        return self._types["action_msgs/msg/GoalInfo"](
+            goal_id=self._uuid(goal_id), stamp=self._time(stamp_s)
+        )
+
+    def _twist(self, linear_x: float, angular_z: float) -> Any:
+        vector = self._types["geometry_msgs/msg/Vector3"]
+        return self._types["geometry_msgs/msg/Twist"](
+            linear=vector(x=linear_x, y=0.0, z=0.0), angular=vector(x=0.0, y=0.0, z=angular_z)
+        )
+
+    def _pose(self, pose: Pose2D) -> Any:
+        t = self._types
+        return t["geometry_msgs/msg/Pose"](
+            position=t["geometry_msgs/msg/Point"](x=pose.x, y=pose.y, z=0.0),
+            orientation=t["geometry_msgs/msg/Quaternion"](
+                x=0.0, y=0.0, z=math.sin(pose.yaw / 2), w=math.cos(pose.yaw / 2)
+            ),
+        )
+
+
+def _split_seconds(seconds: float) -> tuple[int, int]:
+    """(sec, nanosec) of builtin_interfaces Time/Duration: nanosec is always in [0, 1e9)."""
+    total = round(seconds * 1_000_000_000)
+    sec, nanosec = divmod(total, 1_000_000_000)
+    if not -(2**31) <= sec < 2**31:
+        raise ValueError(f"{seconds} s does not fit a ROS time (int32 seconds)")
+    return sec, nanosec
+
+
+def _seconds(stamp: Any) -> float:
+    return int(stamp.sec) + int(stamp.nanosec) * 1e-9
+
+
+def _goal_id(uuid_msg: Any) -> bytes:
+    return bytes(uuid_msg.uuid)
+
+
+def _pose2d(pose: Any) -> Pose2D:
+    q = pose.orientation
+    yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+    return Pose2D(x=float(pose.position.x), y=float(pose.position.y), yaw=yaw)
+
+
+def _enum(kind: type[_E], value: int, what: str) -> _E:
+    try:
+        return kind(int(value))
+    except ValueError:
+        allowed = ", ".join(f"{m.value} ({m.name})" for m in kind)
+        raise CdrError(f"{what} {value} is unknown; known: {allowed}") from None

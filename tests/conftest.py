@@ -1,0 +1,136 @@
+"""Shared fixtures: free loopback ports, a real Zenoh router, service processes that are
+always stopped, and a Bus on the test's own event loop."""
+
+from __future__ import annotations
+
+import asyncio
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+import zenoh
+
+from shared.bus import BusOptions
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        port: int = sock.getsockname()[1]
+        return port
+
+
+@pytest.fixture
+def router() -> Iterator[str]:
+    """A real Zenoh router on a loopback port of its own; yields its endpoint."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    options = BusOptions(mode="router", connect=[], listen=[endpoint])
+    session = zenoh.open(options.zenoh_config())
+    try:
+        yield endpoint
+    finally:
+        session.close()
+
+
+class Processes:
+    """Starts `python -m <module>` children; every one is stopped at teardown."""
+
+    def __init__(self, logs: Path) -> None:
+        self._logs = logs
+        self.started: list[tuple[str, subprocess.Popen[bytes], Path]] = []
+
+    def start(self, module: str, *args: str, name: str | None = None) -> subprocess.Popen[bytes]:
+        name = name or module.rsplit(".", 1)[-1]
+        log = self._logs / f"{name}-{len(self.started)}.log"
+        env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+        with log.open("wb") as out:
+            process = subprocess.Popen(
+                [sys.executable, "-m", module, *args],
+                stdout=out,
+                stderr=subprocess.STDOUT,
+                cwd=REPO,
+                env=env,
+                start_new_session=True,
+            )
+        self.started.append((name, process, log))
+        return process
+
+    def log(self, process: subprocess.Popen[bytes]) -> str:
+        for _, candidate, log in self.started:
+            if candidate is process:
+                return log.read_text(errors="replace")
+        raise KeyError(process)
+
+    def stop(self, process: subprocess.Popen[bytes], timeout: float = 10.0) -> int:
+        """SIGTERM, wait, and SIGKILL if it does not stop; returns the exit code."""
+        if process.poll() is None:
+            process.send_signal(signal.SIGTERM)
+            try:
+                process.wait(timeout=timeout)
+            except subprocess.TimeoutExpired:
+                os.killpg(process.pid, signal.SIGKILL)
+                process.wait()
+        return process.returncode
+
+    def stop_all(self) -> list[str]:
+        """Stop everything; name the ones that did not exit 0 on SIGTERM."""
+        unclean = []
+        for name, process, _ in reversed(self.started):
+            was_running = process.poll() is None
+            code = self.stop(process)
+            if was_running and code != 0:
+                unclean.append(f"{name} exited {code}")
+        return unclean
+
+    def dump(self) -> str:
+        return "\n".join(
+            f"----- {name} -----\n{log.read_text(errors='replace')[-4000:]}"
+            for name, _, log in self.started
+        )
+
+
+@pytest.fixture
+def processes(tmp_path: Path, request: pytest.FixtureRequest) -> Iterator[Processes]:
+    procs = Processes(tmp_path)
+    try:
+        yield procs
+    finally:
+        unclean = procs.stop_all()
+        report = getattr(request.node, "rep_call", None)
+        if report is not None and report.failed:
+            print(procs.dump())
+    assert not unclean, f"processes did not stop cleanly: {unclean}\n{procs.dump()}"
+
+
+@pytest.hookimpl(wrapper=True, tryfirst=True)
+def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]):  # type: ignore[no-untyped-def]
+    report = yield
+    setattr(item, f"rep_{report.when}", report)
+    return report
+
+
+def wait_until(condition: Callable[[], object], timeout: float, what: str) -> None:
+    """Poll `condition` until truthy; fail naming `what` after `timeout` seconds."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if condition():
+            return
+        time.sleep(0.05)
+    raise AssertionError(f"timed out after {timeout:g} s waiting for {what}")
+
+
+async def async_wait_until(condition: Callable[[], object], timeout: float, what: str) -> None:
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if condition():
+            return
+        await asyncio.sleep(0.02)
+    raise AssertionError(f"timed out after {timeout:g} s waiting for {what}")

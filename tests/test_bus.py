@@ -1,0 +1,109 @@
+"""The session helper over a real Zenoh router on loopback."""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+
+import pytest
+import zenoh
+
+from shared.bus import Bus, BusOptions, json_decoder
+from shared.errors import BusError
+from shared.messages import Done, Failed, GetState, Message, SupervisorRequest, Transcript
+
+from .conftest import async_wait_until
+
+
+def options(router: str) -> BusOptions:
+    return BusOptions(connect=[router])
+
+
+def test_publish_subscribe_decodes_and_drops_junk(
+    router: str, caplog: pytest.LogCaptureFixture
+) -> None:
+    async def scenario() -> list[tuple[str, Transcript]]:
+        loop = asyncio.get_running_loop()
+        received: list[tuple[str, Transcript]] = []
+        with Bus.open(options(router), loop) as sub, Bus.open(options(router), loop) as pub:
+            sub.subscribe(
+                "voice/*/stt/transcript",
+                json_decoder(Transcript),
+                lambda key, msg: received.append((key, msg)),
+            )
+            await asyncio.sleep(0.3)  # subscription propagation through the router
+            pub.session.put("voice/r1/stt/transcript", b"\xff not json")
+            pub.session.put("voice/r1/stt/transcript", b'{"type": "transcript"}')
+            pub.publish("voice/r1/stt/transcript", Transcript(text="turn left"))
+            await async_wait_until(lambda: received, 5.0, "a transcript")
+        return received
+
+    with caplog.at_level(logging.WARNING, logger="shared.bus"):
+        received = asyncio.run(scenario())
+    assert received == [("voice/r1/stt/transcript", Transcript(text="turn left"))]
+    dropped = [r.getMessage() for r in caplog.records if "undecodable" in r.getMessage()]
+    assert len(dropped) == 2
+    assert all("voice/r1/stt/transcript" in line for line in dropped)
+
+
+def test_json_on_the_wire_is_readable_by_any_tool(router: str) -> None:
+    async def scenario() -> tuple[bytes, str]:
+        loop = asyncio.get_running_loop()
+        got: list[zenoh.Sample] = []
+        with Bus.open(options(router), loop) as bus:
+            subscriber = bus.session.declare_subscriber("voice/**", got.append)
+            await asyncio.sleep(0.3)
+            bus.publish("voice/r1/stt/transcript", Transcript(text="hi"))
+            await async_wait_until(lambda: got, 5.0, "the raw sample")
+            subscriber.undeclare()
+        return got[0].payload.to_bytes(), str(got[0].encoding)
+
+    payload, encoding = asyncio.run(scenario())
+    assert payload == b'{"type":"transcript","text":"hi","confidence":null}'
+    assert encoding == "application/json"
+
+
+def test_request_reply_and_errors(router: str) -> None:
+    async def scenario() -> None:
+        loop = asyncio.get_running_loop()
+        with Bus.open(options(router), loop) as server, Bus.open(options(router), loop) as client:
+
+            async def handle(request: SupervisorRequest) -> Message:
+                match request:
+                    case GetState():
+                        return Done(detail="state")
+                    case _:
+                        raise RuntimeError("boom")
+
+            server.serve("voice/r1/supervisor/request", json_decoder(SupervisorRequest), handle)
+            await asyncio.sleep(0.3)
+            decode = json_decoder(Done | Failed)
+            reply = await client.request("voice/r1/supervisor/request", GetState(), decode)
+            assert reply == Done(detail="state")
+            raw = await client.request_bytes("voice/r1/supervisor/request", b"junk", 5.0)
+            assert b"undecodable request" in raw
+            failed = await client.request(
+                "voice/r1/supervisor/request",
+                Transcript(text="not a request"),
+                decode,
+            )
+            assert isinstance(failed, Failed)
+            with pytest.raises(BusError, match="no service answered"):
+                await client.request("voice/r2/supervisor/request", GetState(), decode, 1.0)
+
+    asyncio.run(scenario())
+
+
+def test_liveliness_tokens_come_and_go(router: str) -> None:
+    async def scenario() -> list[bool]:
+        loop = asyncio.get_running_loop()
+        seen: list[bool] = []
+        with Bus.open(options(router), loop) as watcher:
+            watcher.watch("voice/r1/alive/executor", lambda _key, alive: seen.append(alive))
+            with Bus.open(options(router), loop) as service:
+                service.announce("voice/r1/alive/executor")
+                await async_wait_until(lambda: seen == [True], 5.0, "the token")
+            await async_wait_until(lambda: seen == [True, False], 5.0, "the token to go")
+        return seen
+
+    assert asyncio.run(scenario()) == [True, False]

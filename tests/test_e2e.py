@@ -1,0 +1,222 @@
+"""The walking skeleton, end to end: `voicectl up` as a real process tree on loopback,
+commands typed through `voicectl say` and the HTTP API, the simulated robot moving."""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import httpx
+import msgspec
+import pytest
+import zenoh
+
+from shared.bus import BusOptions
+from shared.keys import BridgeKeys, RobotKeys
+from shared.messages import OrderStatus, State, StateUpdate
+from shared.ros2 import Pose2D, Ros2Codec, RosDistro
+
+from .conftest import REPO, free_port, wait_until
+
+pytestmark = pytest.mark.e2e
+
+
+@dataclass
+class Stack:
+    router: str
+    port: int
+    env: dict[str, str]
+    process: subprocess.Popen[str]
+    output: list[str] = field(default_factory=list)
+
+    def voicectl(self, *args: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run(
+            [sys.executable, "-m", "voicectl", *args],
+            capture_output=True,
+            text=True,
+            timeout=60,
+            env=self.env,
+            cwd=REPO,
+            check=False,
+        )
+
+
+@pytest.fixture
+def stack(tmp_path: Path) -> Iterator[Stack]:
+    router = f"tcp/127.0.0.1:{free_port()}"
+    port = free_port()
+    env = {**os.environ, "VOICECTL_DATA": str(tmp_path / "data"), "PYTHONUNBUFFERED": "1"}
+    env.pop("VOICECTL_TOKEN", None)
+    process = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "voicectl",
+            "up",
+            "--router",
+            router,
+            "--port",
+            str(port),
+            "--time-scale",
+            "10",
+            "--orders",
+            str(REPO / "orders"),
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        env=env,
+        cwd=REPO,
+        start_new_session=True,
+    )
+    running = Stack(router, port, env, process)
+
+    def pump() -> None:
+        assert process.stdout is not None
+        for line in process.stdout:
+            running.output.append(line.rstrip())
+
+    reader = threading.Thread(target=pump, daemon=True)
+    reader.start()
+    try:
+        wait_until(
+            lambda: any("voicectl up: ready" in line for line in running.output) or process.poll(),
+            60.0,
+            "the stack to start",
+        )
+        assert process.poll() is None, "\n".join(running.output)
+        yield running
+    finally:
+        if process.poll() is None:
+            process.send_signal(signal.SIGINT)
+            try:
+                process.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                os.killpg(process.pid, signal.SIGKILL)
+                process.wait()
+        reader.join(timeout=5)
+        if process.stdout is not None:
+            process.stdout.close()
+        print("\n".join(running.output))
+
+
+class RobotWatch:
+    """The test's own eyes on the bus: odometry from the sim, state from the supervisor."""
+
+    def __init__(self, router: str) -> None:
+        self.codec = Ros2Codec(RosDistro.JAZZY)
+        self.pose: Pose2D | None = None
+        self.pose_at_finish: dict[str, Pose2D] = {}
+        self.state: State | None = None
+        self._decoder = msgspec.json.Decoder(StateUpdate)
+        options = BusOptions(connect=[router])
+        self.session = zenoh.open(options.zenoh_config())
+        self.session.declare_subscriber(BridgeKeys().odom, self._on_odom)
+        self.session.declare_subscriber(RobotKeys("robot").state, self._on_state)
+
+    def _on_odom(self, sample: zenoh.Sample) -> None:
+        self.pose = self.codec.read_odometry(sample.payload.to_bytes()).pose
+
+    def _on_state(self, sample: zenoh.Sample) -> None:
+        state = self._decoder.decode(sample.payload.to_bytes()).state
+        self.state = state
+        for record in state.history:
+            if record.id not in self.pose_at_finish and self.pose is not None:
+                self.pose_at_finish[record.id] = self.pose
+
+    def close(self) -> None:
+        self.session.close()
+
+
+def test_spoken_sequence_moves_the_simulated_robot(stack: Stack) -> None:
+    watch = RobotWatch(stack.router)
+    try:
+        wait_until(lambda: watch.pose is not None, 30.0, "odometry from the sim")
+        said = stack.voicectl("say", "--connect", stack.router, "turn left then reach kitchen")
+        assert said.returncode == 0, said.stderr
+        reply = json.loads(said.stdout)
+        assert [o["description"] for o in reply["orders"]] == ["turn left", "reach kitchen"]
+        first, second = reply["order_ids"]
+
+        wait_until(lambda: second in watch.pose_at_finish, 60.0, "both orders to finish")
+        turned = watch.pose_at_finish[first]
+        assert abs(turned.yaw - 1.57) < 0.05
+        assert abs(turned.x) < 0.05
+        assert abs(turned.y) < 0.05
+        arrived = watch.pose_at_finish[second]
+        assert abs(arrived.x - 3.0) < 0.1
+        assert abs(arrived.y - 5.0) < 0.1
+        assert abs(arrived.yaw - 1.0) < 0.05
+    finally:
+        watch.close()
+
+    state = stack.voicectl("state", "--connect", stack.router)
+    assert state.returncode == 0, state.stderr
+    history = json.loads(state.stdout)["history"]
+    assert [(h["id"], h["status"]) for h in history[:2]] == [
+        (second, OrderStatus.SUCCEEDED),
+        (first, OrderStatus.SUCCEEDED),
+    ]
+    assert history[0]["transcript"] == "turn left then reach kitchen"
+
+
+def test_panel_api_needs_the_token_and_drives_the_robot(stack: Stack) -> None:
+    base = f"http://127.0.0.1:{stack.port}"
+    token = Path(stack.env["VOICECTL_DATA"], "token").read_text().strip()
+    assert token not in "\n".join(stack.output)  # the secret never reaches the logs
+    auth = {"Authorization": f"Bearer {token}"}
+    with httpx.Client(base_url=base, timeout=30) as http:
+        assert http.get("/api/health").json()["ok"] is True
+        assert "voicectl" in http.get("/").text
+        assert http.get("/api/state").status_code == 401
+        assert http.get("/api/state", headers={"Authorization": "Bearer nope"}).status_code == 401
+
+        parsed = http.post("/api/parse", json={"text": "multiply primes then fly"}, headers=auth)
+        assert parsed.status_code == 200
+        assert [o["order"] for o in parsed.json()["orders"]] == ["multiply"]
+        assert parsed.json()["errors"][0]["text"] == "fly"
+
+        bad = http.post("/api/submit", content=b"{not json", headers=auth)
+        assert bad.status_code == 400
+        assert "bad request body" in bad.json()["error"]
+
+        submitted = http.post(
+            "/api/submit",
+            json={"orders": parsed.json()["orders"], "transcript": "multiply primes"},
+            headers=auth,
+        )
+        assert submitted.status_code == 200, submitted.text
+        (order_id,) = submitted.json()["order_ids"]
+
+        def finished() -> dict[str, object] | None:
+            history = http.get("/api/state", headers=auth).json()["history"]
+            return next((h for h in history if h["id"] == order_id), None)
+
+        wait_until(finished, 30.0, "the multiply order to finish")
+        record = finished()
+        assert record is not None
+        assert record["status"] == "succeeded"
+        assert record["message"] == "7 x 5 = 35"
+
+        unknown = http.post("/api/cancel", json={"order_id": "nope"}, headers=auth)
+        assert unknown.status_code == 409
+        assert "neither queued nor running" in unknown.json()["error"]
+
+
+def test_up_stops_every_child_on_sigint(stack: Stack) -> None:
+    stack.process.send_signal(signal.SIGINT)
+    assert stack.process.wait(timeout=30) == 0
+    time.sleep(0.5)
+    assert any("voicectl up: stopped" in line for line in stack.output)
+    leftovers = subprocess.run(
+        ["pgrep", "-f", f"--connect {stack.router}"], capture_output=True, text=True, check=False
+    )
+    assert leftovers.stdout.strip() == "", leftovers.stdout

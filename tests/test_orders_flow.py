@@ -1,0 +1,271 @@
+"""Supervisor and executor as real processes on loopback: dispatch, results, failure
+policy, cancel, emergency stop, an executor that dies, user executors."""
+
+from __future__ import annotations
+
+import asyncio
+import signal
+import uuid
+from collections.abc import Callable, Coroutine
+from dataclasses import dataclass
+from typing import Any
+
+import pytest
+
+from shared.bus import Bus, BusOptions, json_decoder
+from shared.errors import BusError
+from shared.keys import RobotKeys
+from shared.messages import (
+    Cancel,
+    Done,
+    EmergencyStop,
+    Failed,
+    GetState,
+    Message,
+    Order,
+    OrderRecord,
+    OrderStatus,
+    State,
+    StateReply,
+    Submit,
+    Submitted,
+    SupervisorReply,
+)
+
+from .conftest import Processes
+
+USER_EXECUTORS = [
+    "--executor",
+    "tests.executors_for_tests:Boom",
+    "--executor",
+    "tests.executors_for_tests:Refuse",
+    "--executor",
+    "tests.executors_for_tests:Slow=slow,slow2",
+    "--executor",
+    "tests.executors_for_tests:Stubborn",
+]
+
+
+def order(label: str, **params: Any) -> Order:
+    return Order(order=label, label=label, description=f"do {label}", params=params)
+
+
+@dataclass
+class Robot:
+    router: str
+    processes: Processes
+    name: str = "r1"
+
+    def start_executor(self) -> Any:
+        return self.processes.start(
+            "services.executor",
+            "--connect",
+            self.router,
+            "--robot",
+            self.name,
+            "--cancel-deadline",
+            "0.5",
+            *USER_EXECUTORS,
+        )
+
+
+@pytest.fixture
+def robot(router: str, processes: Processes) -> Robot:
+    processes.start("services.supervisor", "--connect", router, "--robot", "r1")
+    bot = Robot(router, processes)
+    bot.start_executor()
+    return bot
+
+
+class Client:
+    """The test's side of the supervisor protocol."""
+
+    def __init__(self, bus: Bus, robot: str) -> None:
+        self.bus = bus
+        self.keys = RobotKeys(robot)
+        self._decode = json_decoder(SupervisorReply)
+
+    async def ask(self, request: Message) -> SupervisorReply:
+        reply: SupervisorReply = await self.bus.request(
+            self.keys.supervisor, request, self._decode, timeout=10.0
+        )
+        return reply
+
+    async def submit(self, *orders: Order, request_id: str | None = None) -> list[str]:
+        reply = await self.ask(
+            Submit(request_id=request_id or uuid.uuid4().hex, orders=list(orders))
+        )
+        assert isinstance(reply, Submitted), reply
+        return reply.order_ids
+
+    async def state(self) -> State:
+        reply = await self.ask(GetState())
+        assert isinstance(reply, StateReply), reply
+        return reply.state
+
+    async def finished(self, order_id: str, timeout: float = 20.0) -> OrderRecord:
+        found: list[OrderRecord] = []
+
+        async def check() -> bool:
+            found[:] = [r for r in (await self.state()).history if r.id == order_id]
+            return bool(found)
+
+        deadline = asyncio.get_running_loop().time() + timeout
+        while not await check():
+            assert asyncio.get_running_loop().time() < deadline, f"{order_id} never finished"
+            await asyncio.sleep(0.05)
+        return found[0]
+
+    async def wait_state(self, predicate: Callable[[State], bool], what: str) -> State:
+        states: list[State] = []
+
+        async def poll() -> None:
+            while True:
+                state = await self.state()
+                if predicate(state):
+                    states.append(state)
+                    return
+                await asyncio.sleep(0.05)
+
+        try:
+            await asyncio.wait_for(poll(), 20.0)
+        except TimeoutError:
+            raise AssertionError(f"timed out waiting for {what}") from None
+        return states[0]
+
+
+def scenario(robot: Robot, body: Callable[[Client], Coroutine[Any, Any, None]]) -> None:
+    async def run() -> None:
+        options = BusOptions(connect=[robot.router])
+        with Bus.open(options, asyncio.get_running_loop()) as bus:
+            client = Client(bus, robot.name)
+            await client_wait_ready(client)
+            await body(client)
+
+    asyncio.run(run())
+
+
+async def client_wait_ready(client: Client) -> None:
+    for _ in range(400):
+        try:
+            if (await client.state()).executor_online:
+                return
+        except BusError:
+            pass  # supervisor not up yet
+        await asyncio.sleep(0.05)
+    raise AssertionError("supervisor never saw the executor")
+
+
+def test_results_of_builtin_and_user_executors(robot: Robot) -> None:
+    async def body(client: Client) -> None:
+        ids = await client.submit(order("mul", a=6, b=7))
+        ok = await client.finished(ids[0])
+        assert (ok.status, ok.message) == (OrderStatus.SUCCEEDED, "6 x 7 = 42")
+
+        (boom,) = await client.submit(order("boom"))
+        record = await client.finished(boom)
+        assert (record.status, record.message) == (OrderStatus.FAILED, "RuntimeError: kaboom")
+
+        (nobody,) = await client.submit(order("dance"))
+        record = await client.finished(nobody)
+        assert record.status == OrderStatus.REJECTED
+        assert record.message.startswith("unknown label 'dance'; bound labels: boom, mbgoal")
+
+        # the executor survived all of that
+        (again,) = await client.submit(order("mul", a=2, b=3))
+        assert (await client.finished(again)).status == OrderStatus.SUCCEEDED
+
+    scenario(robot, body)
+
+
+def test_a_failure_cancels_the_rest_of_the_utterance(robot: Robot) -> None:
+    async def body(client: Client) -> None:
+        refused, after = await client.submit(order("refuse"), order("mul", a=1, b=1))
+        first = await client.finished(refused)
+        assert (first.status, first.message) == (OrderStatus.FAILED, "door is closed")
+        rest = await client.finished(after)
+        assert rest.status == OrderStatus.CANCELLED
+        assert refused in rest.message
+
+    scenario(robot, body)
+
+
+def test_duplicate_submit_is_a_no_op(robot: Robot) -> None:
+    async def body(client: Client) -> None:
+        first = await client.submit(order("slow", seconds=0.5), request_id="same")
+        again = await client.submit(order("slow", seconds=0.5), request_id="same")
+        assert first == again
+        await client.finished(first[0])
+        state = await client.state()
+        assert [r.id for r in state.history].count(first[0]) == 1
+        assert not state.queue
+
+    scenario(robot, body)
+
+
+def test_cancel_running_and_queued_orders(robot: Robot) -> None:
+    async def body(client: Client) -> None:
+        running, queued = await client.submit(order("slow"), order("slow2"))
+        await client.wait_state(
+            lambda s: s.current is not None and s.current.progress is not None,
+            "progress of the running order",
+        )
+        assert isinstance(await client.ask(Cancel(order_id=queued)), Done)
+        assert isinstance(await client.ask(Cancel(order_id=running)), Done)
+        for order_id in (running, queued):
+            assert (await client.finished(order_id)).status == OrderStatus.CANCELLED
+        unknown = await client.ask(Cancel(order_id="nope"))
+        assert isinstance(unknown, Failed)
+        assert "'nope' is neither queued nor running" in unknown.reason
+
+    scenario(robot, body)
+
+
+def test_an_executor_that_ignores_cancel_is_cut_off(robot: Robot) -> None:
+    async def body(client: Client) -> None:
+        (stubborn,) = await client.submit(order("stubborn"))
+        await client.wait_state(lambda s: s.current is not None, "the order to start")
+        await client.ask(Cancel(order_id=stubborn))
+        record = await client.finished(stubborn, timeout=10.0)
+        assert record.status == OrderStatus.CANCELLED
+        assert "did not stop in time" in record.message
+        (after,) = await client.submit(order("mul", a=1, b=2))
+        assert (await client.finished(after)).status == OrderStatus.SUCCEEDED
+
+    scenario(robot, body)
+
+
+def test_emergency_stop_clears_everything(robot: Robot) -> None:
+    async def body(client: Client) -> None:
+        ids = await client.submit(order("slow"), order("mul", a=1, b=1), order("mul", a=2, b=2))
+        await client.wait_state(lambda s: s.current is not None, "the order to start")
+        reply = await client.ask(EmergencyStop())
+        assert isinstance(reply, Done), reply
+        records = [await client.finished(i) for i in ids]
+        assert [r.status for r in records] == [OrderStatus.CANCELLED] * 3
+        assert records[0].message == "emergency stop"
+
+    scenario(robot, body)
+
+
+def test_executor_lost_mid_order_pauses_the_queue(robot: Robot) -> None:
+    async def body(client: Client) -> None:
+        running, waiting = await client.submit(
+            order("slow"), order("mul", a=3, b=3), request_id="a"
+        )
+        (other,) = await client.submit(order("mul", a=4, b=4), request_id="b")
+        await client.wait_state(lambda s: s.current is not None, "the order to start")
+        executor = robot.processes.started[-1][1]
+        executor.send_signal(signal.SIGKILL)
+        executor.wait()
+        lost = await client.finished(running)
+        assert (lost.status, lost.message) == (OrderStatus.FAILED, "executor lost")
+        state = await client.wait_state(lambda s: not s.executor_online, "executor offline")
+        # the failed order's sibling is cancelled; the other utterance waits, not lost
+        assert [r.id for r in state.queue] == [other]
+        assert (await client.finished(waiting)).status == OrderStatus.CANCELLED
+        robot.start_executor()
+        record = await client.finished(other)
+        assert (record.status, record.message) == (OrderStatus.SUCCEEDED, "4 x 4 = 16")
+
+    scenario(robot, body)

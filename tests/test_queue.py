@@ -1,0 +1,107 @@
+"""The supervisor's per-robot state machine, without any I/O."""
+
+from __future__ import annotations
+
+import itertools
+
+import pytest
+
+from services.supervisor.queue import RobotQueue
+from shared.messages import Order, OrderStatus, Progress
+
+
+def order(name: str) -> Order:
+    return Order(order=name, label="mul", description=name)
+
+
+@pytest.fixture
+def queue() -> RobotQueue:
+    ticks = itertools.count(100)
+    q = RobotQueue("r1", clock=lambda: float(next(ticks)))
+    q.executor_online = True
+    return q
+
+
+def test_orders_run_one_at_a_time_in_order(queue: RobotQueue) -> None:
+    ids = queue.submit("req-1", [order("a"), order("b")], "a then b")
+    first = queue.start_next()
+    assert first is not None
+    assert first.id == ids[0]
+    assert first.status == OrderStatus.RUNNING
+    assert queue.start_next() is None  # one at a time
+    assert queue.finish(ids[0], OrderStatus.SUCCEEDED, "ok")
+    second = queue.start_next()
+    assert second is not None
+    assert second.id == ids[1]
+    assert [r.status for r in queue.history] == [OrderStatus.SUCCEEDED]
+    assert queue.history[0].transcript == "a then b"
+
+
+def test_resubmitting_a_request_id_is_a_no_op(queue: RobotQueue) -> None:
+    first = queue.submit("req-1", [order("a")], "")
+    again = queue.submit("req-1", [order("a")], "")
+    assert first == again
+    assert len(queue.queue) == 1
+
+
+def test_nothing_is_dispatched_while_the_executor_is_offline(queue: RobotQueue) -> None:
+    queue.executor_online = False
+    queue.submit("req", [order("a")], "")
+    assert queue.start_next() is None
+    assert len(queue.queue) == 1
+    queue.executor_online = True
+    assert queue.start_next() is not None
+
+
+def test_a_failure_cancels_the_rest_of_its_utterance_only(queue: RobotQueue) -> None:
+    a, b = queue.submit("req-1", [order("a"), order("b")], "")
+    (c,) = queue.submit("req-2", [order("c")], "")
+    queue.start_next()
+    queue.finish(a, OrderStatus.FAILED, "blocked")
+    assert [r.id for r in queue.queue] == [c]
+    assert [(r.id, r.status) for r in queue.history] == [
+        (b, OrderStatus.CANCELLED),
+        (a, OrderStatus.FAILED),
+    ]
+
+
+def test_continue_on_failure_keeps_the_rest() -> None:
+    q = RobotQueue("r", continue_on_failure=True)
+    q.executor_online = True
+    a, b = q.submit("req", [order("a"), order("b")], "")
+    q.start_next()
+    q.finish(a, OrderStatus.FAILED, "x")
+    assert [r.id for r in q.queue] == [b]
+
+
+def test_stale_events_change_nothing(queue: RobotQueue) -> None:
+    (a,) = queue.submit("req", [order("a")], "")
+    assert not queue.finish("nope", OrderStatus.SUCCEEDED)
+    assert not queue.progress(a, Progress(text="x"))  # queued, not running
+    queue.start_next()
+    assert queue.progress(a, Progress(text="half", percent=50))
+    assert queue.current is not None
+    assert queue.current.progress == Progress(text="half", percent=50)
+    assert queue.finish(a, OrderStatus.SUCCEEDED)
+    assert not queue.finish(a, OrderStatus.FAILED)  # finished twice: ignored
+    assert len(queue.history) == 1
+
+
+def test_cancel_queued_and_clear(queue: RobotQueue) -> None:
+    a, b, c = queue.submit("req", [order("a"), order("b"), order("c")], "")
+    assert queue.remove_queued(b, "by user")
+    assert not queue.remove_queued(b, "by user")
+    assert queue.clear_queue("stop") == 2
+    assert {r.id for r in queue.history} == {a, b, c}
+    assert all(r.status == OrderStatus.CANCELLED for r in queue.history)
+
+
+def test_snapshot_lists_history_most_recent_first(queue: RobotQueue) -> None:
+    ids = queue.submit("req", [order(str(i)) for i in range(3)], "")
+    for order_id in ids:
+        queue.start_next()
+        queue.finish(order_id, OrderStatus.SUCCEEDED)
+    state = queue.snapshot()
+    assert [r.id for r in state.history] == list(reversed(ids))
+    assert state.executor_online
+    assert state.current is None

@@ -1,0 +1,1 @@
+"""The `voicectl` command: runs services, the whole local stack, and typed commands."""
