@@ -4,14 +4,9 @@ commands typed through `voicectl say` and the HTTP API, the simulated robot movi
 from __future__ import annotations
 
 import json
-import os
 import signal
 import subprocess
-import sys
-import threading
 import time
-from collections.abc import Iterator
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import httpx
@@ -24,88 +19,9 @@ from shared.keys import BridgeKeys, RobotKeys
 from shared.messages import OrderStatus, State, StateUpdate
 from shared.ros2 import Pose2D, Ros2Codec, RosDistro
 
-from .conftest import REPO, free_port, wait_until
+from .conftest import Stack, wait_until
 
 pytestmark = pytest.mark.e2e
-
-
-@dataclass
-class Stack:
-    router: str
-    port: int
-    env: dict[str, str]
-    process: subprocess.Popen[str]
-    output: list[str] = field(default_factory=list)
-
-    def voicectl(self, *args: str) -> subprocess.CompletedProcess[str]:
-        return subprocess.run(
-            [sys.executable, "-m", "voicectl", *args],
-            capture_output=True,
-            text=True,
-            timeout=60,
-            env=self.env,
-            cwd=REPO,
-            check=False,
-        )
-
-
-@pytest.fixture
-def stack(tmp_path: Path) -> Iterator[Stack]:
-    router = f"tcp/127.0.0.1:{free_port()}"
-    port = free_port()
-    env = {**os.environ, "VOICECTL_DATA": str(tmp_path / "data"), "PYTHONUNBUFFERED": "1"}
-    env.pop("VOICECTL_TOKEN", None)
-    process = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "voicectl",
-            "up",
-            "--router",
-            router,
-            "--port",
-            str(port),
-            "--time-scale",
-            "10",
-            "--orders",
-            str(REPO / "orders"),
-        ],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-        env=env,
-        cwd=REPO,
-        start_new_session=True,
-    )
-    running = Stack(router, port, env, process)
-
-    def pump() -> None:
-        assert process.stdout is not None
-        for line in process.stdout:
-            running.output.append(line.rstrip())
-
-    reader = threading.Thread(target=pump, daemon=True)
-    reader.start()
-    try:
-        wait_until(
-            lambda: any("voicectl up: ready" in line for line in running.output) or process.poll(),
-            60.0,
-            "the stack to start",
-        )
-        assert process.poll() is None, "\n".join(running.output)
-        yield running
-    finally:
-        if process.poll() is None:
-            process.send_signal(signal.SIGINT)
-            try:
-                process.wait(timeout=30)
-            except subprocess.TimeoutExpired:
-                os.killpg(process.pid, signal.SIGKILL)
-                process.wait()
-        reader.join(timeout=5)
-        if process.stdout is not None:
-            process.stdout.close()
-        print("\n".join(running.output))
 
 
 class RobotWatch:

@@ -147,6 +147,7 @@ $("send").onclick = async () => {
   try {
     await api("/api/submit", { orders: proposal.orders, transcript: proposal.transcript });
     $("text").value = "";
+    showProposal("", { orders: [], errors: [] });
     setStatus("");
   } catch (error) { setStatus(error.message); $("send").disabled = false; }
 };
