@@ -89,6 +89,16 @@ class ConverterKeys:
         return f"{ROOT}/converter/alive"
 
     @property
+    def grammar(self) -> str:
+        """The recogniser grammar: published on change, and a queryable for late starters."""
+        return f"{ROOT}/converter/grammar"
+
+    @property
+    def status(self) -> str:
+        """Whether the orders files loaded; published on every (re)load."""
+        return f"{ROOT}/converter/status"
+
+    @property
     def all_transcripts(self) -> str:
         return f"{ROOT}/*/stt/transcript"
 

@@ -88,11 +88,44 @@ class ParseRequest(Message):
     text: str
 
 
-ConverterRequest = ParseRequest
+class GetGrammar(Message):
+    """Ask for the current recogniser grammar (a recogniser that starts late does this)."""
+
+
+ConverterRequest = ParseRequest | GetGrammar
 
 
 class ParseReply(Message):
     result: ParseResult
+
+
+class Grammar(Message):
+    """Everything a speech recogniser needs to listen only for valid commands.
+
+    Published on every change of the orders and answered on request.
+    """
+
+    jsgf: str
+    """A JSGF grammar whose public rule accepts every phrase the orders can produce."""
+    phrases: list[str] = msgspec.field(default_factory=list)
+    """Every single-order phrase, expanded (sequences join them with the separator)."""
+    words: list[str] = msgspec.field(default_factory=list)
+    """Every word that can occur in a command, sorted."""
+    separator_phrases: list[str] = msgspec.field(default_factory=list)
+    unexpandable: list[str] = msgspec.field(default_factory=list)
+    """Orders whose alias cannot be expanded to a finite set, one line each saying why."""
+    version: str = ""
+    """Changes whenever the orders change (a digest of the phrases)."""
+
+
+class OrdersStatus(Message):
+    """Whether the last (re)load of the orders files worked; errors keep the previous orders."""
+
+    ok: bool
+    sources: list[str] = msgspec.field(default_factory=list)
+    errors: list[str] = msgspec.field(default_factory=list)
+    orders: int = 0
+    """How many orders are loaded (the previous set when the reload failed)."""
 
 
 # --- supervisor ---------------------------------------------------------------------------
@@ -199,6 +232,8 @@ class StateUpdate(Message):
 
 
 SupervisorReply = Submitted | Done | Failed | StateReply
+
+ConverterReply = ParseReply | Grammar | Failed
 
 
 # --- executor ------------------------------------------------------------------------------

@@ -8,6 +8,8 @@ from shared.bus import Bus, json_decoder
 from shared.keys import ConverterKeys, RobotKeys
 from shared.messages import (
     ConverterRequest,
+    Failed,
+    GetGrammar,
     Message,
     ParseReply,
     ParseRequest,
@@ -39,6 +41,8 @@ class ConverterService:
         match request:
             case ParseRequest(text=text):
                 return ParseReply(result=self._parser.parse(text))
+            case GetGrammar():
+                return Failed(reason="this converter does not build grammars yet")
 
     def _on_transcript(self, key: str, transcript: Transcript) -> None:
         robot = ConverterKeys.robot_of(key)
