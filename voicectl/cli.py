@@ -58,6 +58,13 @@ def build_parser() -> argparse.ArgumentParser:
     up.add_argument("--orders", type=Path, default=REPO_ORDERS, help="orders file or directory")
     up.add_argument("--time-scale", type=float, default=1.0, help="simulator speed-up")
     up.add_argument("--no-web", action="store_true", help="do not start the panel")
+    up.add_argument(
+        "--executor",
+        action="append",
+        default=[],
+        metavar="MODULE:CLASS[=LABEL,...]",
+        help="bind a user executor in the executor process (repeatable)",
+    )
 
     parse = sub.add_parser("parse", help="print the orders a text becomes, as JSON")
     parse.add_argument("--orders", type=Path, default=REPO_ORDERS, help="orders file or directory")
@@ -106,7 +113,11 @@ def _up(args: argparse.Namespace) -> int:
         Child("router", ["services.router", "--listen", args.router]),
         Child("converter", ["services.converter", "--orders", str(args.orders), *connect]),
         Child("supervisor", ["services.supervisor", *robot, *connect]),
-        Child("executor", ["services.executor", *robot, *connect]),
+        Child(
+            "executor",
+            ["services.executor", *robot, *connect]
+            + [arg for spec in args.executor for arg in ("--executor", spec)],
+        ),
         Child("sim", ["services.sim", "--time-scale", str(args.time_scale), *connect]),
     ]
     web = None

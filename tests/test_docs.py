@@ -1,0 +1,90 @@
+"""The docs' examples, run as written."""
+
+from __future__ import annotations
+
+import json
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from .conftest import REPO, free_port, wait_until
+
+DOCS = REPO / "docs"
+
+
+def block_after(doc: Path, marker: str, language: str) -> str:
+    """The first fenced block of `language` after the text `marker` in `doc`."""
+    text = doc.read_text()
+    start = text.index(marker)
+    found = re.compile(rf"```{language}\n(.*?)```", re.DOTALL).search(text, start)
+    assert found is not None, f"no {language} block after {marker!r} in {doc.name}"
+    return found.group(1)
+
+
+def test_orders_doc_parse_example_prints_what_it_shows() -> None:
+    doc = DOCS / "orders.md"
+    command = block_after(doc, "`voicectl parse` needs no running service", "sh").strip()
+    shown = json.loads(block_after(doc, "prints", "json"))
+    assert command.startswith(".venv/bin/voicectl parse ")
+    text = json.loads(command.removeprefix(".venv/bin/voicectl parse "))
+    done = subprocess.run(
+        [sys.executable, "-m", "voicectl", "parse", text],
+        capture_output=True,
+        text=True,
+        check=True,
+        cwd=REPO,
+    )
+    assert json.loads(done.stdout) == shown
+
+
+@pytest.mark.e2e
+def test_executors_doc_user_executor_runs_as_written(tmp_path: Path) -> None:
+    doc = DOCS / "executors.md"
+    (tmp_path / "my_executors.py").write_text(
+        block_after(doc, "Save this as `my_executors.py`", "python")
+    )
+    (tmp_path / "my_orders.yaml").write_text(block_after(doc, "this as `my_orders.yaml`", "yaml"))
+    up_line = block_after(doc, "Start the stack with both", "sh").strip()
+    up_args = up_line.removeprefix(".venv/bin/voicectl ").split()
+    router = f"tcp/127.0.0.1:{free_port()}"
+    env_dir = tmp_path / "data"
+    stack = subprocess.Popen(
+        [sys.executable, "-m", "voicectl", *up_args, "--router", router, "--no-web"],
+        cwd=tmp_path,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        env={"VOICECTL_DATA": str(env_dir), "PATH": "/usr/bin:/bin", "PYTHONUNBUFFERED": "1"},
+        start_new_session=True,
+    )
+    try:
+
+        def say(*args: str) -> subprocess.CompletedProcess[str]:
+            return subprocess.run(
+                [sys.executable, "-m", "voicectl", *args, "--connect", router],
+                capture_output=True,
+                text=True,
+                cwd=tmp_path,
+                timeout=30,
+                check=False,
+            )
+
+        def ready() -> bool:
+            return '"executor_online": true' in say("state").stdout
+
+        wait_until(ready, 60.0, "the documented stack")
+        said = say("say", "pause")
+        assert said.returncode == 0, said.stderr
+
+        def waited() -> bool:
+            history = json.loads(say("state").stdout)["history"]
+            return any(h["message"] == "waited 3 s" for h in history)
+
+        wait_until(waited, 30.0, "the documented Wait executor to finish")
+    finally:
+        stack.send_signal(2)
+        output, _ = stack.communicate(timeout=30)
+        assert stack.returncode == 0, output
