@@ -1,0 +1,123 @@
+"""The command line's contracts: `voicectl parse` output and exit codes, services that
+refuse a bad configuration in one line, junk on the bus answered and survived."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+from shared.bus import Bus, BusOptions, json_decoder
+from shared.errors import BusError
+from shared.keys import RobotKeys
+from shared.messages import Failed, GetState, StateReply, SupervisorReply
+
+from .conftest import REPO, Processes, wait_until
+
+
+def voicectl(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "voicectl", *args],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        timeout=60,
+        check=False,
+    )
+
+
+def test_parse_prints_one_json_object() -> None:
+    done = voicectl("parse", "--orders", "orders/demo.yaml", "turn left then dance")
+    assert done.returncode == 0
+    assert json.loads(done.stdout) == {
+        "orders": [
+            {
+                "order": "rotation",
+                "case": "left",
+                "label": "mbgoal",
+                "description": "turn left",
+                "params": {},
+                "target_pose": {"frame": "base_link", "x": 0.0, "y": 0.0, "yaw": 1.57},
+            }
+        ],
+        "errors": [{"text": "dance", "reason": "no order matches"}],
+    }
+
+
+def test_parse_without_frame_has_null_pose_and_params() -> None:
+    done = voicectl("parse", "--orders", "orders/tutorial.yaml", "take a picture")
+    (order,) = json.loads(done.stdout)["orders"]
+    assert order["target_pose"] is None
+    assert order["params"] == {"wait": 5}
+
+
+def test_parse_with_a_bad_file_exits_2_in_one_line(tmp_path: Path) -> None:
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("orders:\n  spin: {voice_alias: spin}\n")
+    done = voicectl("parse", "--orders", str(bad), "spin")
+    assert done.returncode == 2
+    assert done.stdout == ""
+    assert done.stderr == f"voicectl parse: {bad}: order 'spin': missing mandatory key 'label'\n"
+
+
+def test_converter_refuses_to_start_with_half_a_config(tmp_path: Path, router: str) -> None:
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("orders:\n  ok: {voice_alias: go, label: x}\n  broken: {label: x}\n")
+    done = subprocess.run(
+        [sys.executable, "-m", "services.converter", "--orders", str(bad), "--connect", router],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        timeout=60,
+        check=False,
+    )
+    assert done.returncode == 2
+    lines = done.stderr.strip().splitlines()
+    assert lines[-1].endswith(f"{bad}: order 'broken': missing mandatory key 'voice_alias'")
+
+
+def test_executor_refuses_a_bad_binding() -> None:
+    done = subprocess.run(
+        [sys.executable, "-m", "services.executor", "--executor", "no_such_module:X"],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        timeout=60,
+        check=False,
+    )
+    assert done.returncode == 2
+    assert "cannot import no_such_module" in done.stderr
+
+
+def test_supervisor_answers_junk_and_keeps_serving(router: str, processes: Processes) -> None:
+    supervisor = processes.start("services.supervisor", "--connect", router, "--robot", "r1")
+    key = RobotKeys("r1").supervisor
+
+    async def scenario() -> None:
+        with Bus.open(BusOptions(connect=[router]), asyncio.get_running_loop()) as bus:
+            decode = json_decoder(SupervisorReply)
+            for _ in range(200):  # until the supervisor is up
+                try:
+                    await bus.request(key, GetState(), decode, timeout=2.0)
+                    break
+                except BusError:
+                    await asyncio.sleep(0.05)
+            for junk in (b"", b"\x00\xff", b'{"type": "submit"}', b'{"type": "launch"}'):
+                reply = decode(await bus.request_bytes(key, junk, 5.0))
+                assert isinstance(reply, Failed)
+                assert reply.reason.startswith("undecodable request")
+            bus.session.put(RobotKeys("r1").executor_events, b"garbage")
+            state = await bus.request(key, GetState(), decode, timeout=5.0)
+            assert isinstance(state, StateReply)
+
+    asyncio.run(scenario())
+    assert supervisor.poll() is None
+    wait_until(
+        lambda: (
+            "dropped undecodable message on voice/r1/executor/events" in processes.log(supervisor)
+        ),
+        10.0,
+        "the supervisor to log the junk event",
+    )
