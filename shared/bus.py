@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import concurrent.futures
 import contextlib
 import json
 import logging
@@ -187,7 +188,21 @@ class Bus:
     ) -> None:
         """Answer queries on `key` with `handler(request)`, run on the loop."""
 
-        def reply(query: zenoh.Query, done: asyncio.Future[Message]) -> None:
+        async def keyless(_key: str, request: T) -> Message:
+            return await handler(request)
+
+        self.serve_keyed(key, decode, keyless)
+
+    def serve_keyed(
+        self,
+        key: str,
+        decode: Decode[T],
+        handler: Callable[[str, T], Awaitable[Message]],
+    ) -> None:
+        """Like `serve`, for a key expression with wildcards: the handler also gets the
+        query's key (``voice/r1/...`` for a queryable on ``voice/*/...``)."""
+
+        def reply(query: zenoh.Query, done: concurrent.futures.Future[Message]) -> None:
             try:
                 answer = done.result()
             except Exception as exc:
@@ -200,10 +215,11 @@ class Bus:
 
         def on_query(query: zenoh.Query) -> None:
             raw = query.payload.to_bytes() if query.payload is not None else b""
+            query_key = str(query.key_expr)
             try:
                 request = decode(raw)
             except Exception as exc:
-                _LOGGER.warning("rejected undecodable request on %s: %s", key, exc)
+                _LOGGER.warning("rejected undecodable request on %s: %s", query_key, exc)
                 query.reply(
                     query.key_expr,
                     self._encoder.encode(Failed(reason=f"undecodable request: {exc}")),
@@ -212,11 +228,13 @@ class Bus:
                 query.drop()
                 return
             try:
-                done = asyncio.run_coroutine_threadsafe(_awaitable(handler(request)), self._loop)
+                done = asyncio.run_coroutine_threadsafe(
+                    _awaitable(handler(query_key, request)), self._loop
+                )
             except RuntimeError:  # loop closed: the process is stopping
                 query.drop()
                 return
-            done.add_done_callback(lambda fut: reply(query, fut))  # type: ignore[arg-type]
+            done.add_done_callback(lambda fut: reply(query, fut))
 
         queryable = self._session.declare_queryable(key, on_query)
         self._closers.callback(queryable.undeclare)

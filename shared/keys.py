@@ -15,6 +15,14 @@ ROOT = "voice"
 _CHUNK = re.compile(r"^[A-Za-z0-9_-]+$")
 
 
+ANY = "*"
+
+
+def robot_of(key: str) -> str:
+    """The robot name inside any ``voice/<robot>/...`` key."""
+    return key.split("/")[1]
+
+
 def check_chunk(name: str, what: str) -> str:
     """Return `name` if it is usable as one key chunk, else raise ValueError naming `what`."""
     if not _CHUNK.match(name):
@@ -27,9 +35,15 @@ class RobotKeys:
     """The keys of one robot's voice pipeline."""
 
     robot: str
+    """A robot name, or `ANY` for key expressions that match every robot."""
 
     def __post_init__(self) -> None:
-        check_chunk(self.robot, "robot name")
+        if self.robot != ANY:
+            check_chunk(self.robot, "robot name")
+
+    @classmethod
+    def any_robot(cls) -> RobotKeys:
+        return cls(ANY)
 
     @property
     def prefix(self) -> str:
@@ -101,11 +115,6 @@ class ConverterKeys:
     @property
     def all_transcripts(self) -> str:
         return f"{ROOT}/*/stt/transcript"
-
-    @staticmethod
-    def robot_of(transcript_key: str) -> str:
-        """The robot name inside a transcript key."""
-        return transcript_key.split("/")[1]
 
 
 @dataclass(frozen=True)

@@ -138,6 +138,8 @@ class OrderStatus(StrEnum):
     FAILED = "failed"
     CANCELLED = "cancelled"
     REJECTED = "rejected"
+    INTERRUPTED = "interrupted"
+    """It was running when the supervisor stopped, and the executor no longer runs it."""
 
 
 class Progress(Data):
@@ -174,8 +176,10 @@ class State(Data):
     executor_online: bool = False
     current: OrderRecord | None = None
     queue: list[OrderRecord] = msgspec.field(default_factory=list)
+    """The head of the queue, in dispatch order (at most a page; see `queue_length`)."""
+    queue_length: int = 0
     history: list[OrderRecord] = msgspec.field(default_factory=list)
-    """Most recent first."""
+    """Recent history, most recent first; GetHistory pages through all of it."""
 
 
 class Submit(Message):
@@ -202,7 +206,21 @@ class GetState(Message):
     pass
 
 
-SupervisorRequest = Submit | Cancel | CancelAll | EmergencyStop | GetState
+class Reorder(Message):
+    """Move a queued order to `position` (0 is next)."""
+
+    order_id: str
+    position: int
+
+
+class GetHistory(Message):
+    """A page of finished orders, most recent first."""
+
+    offset: int = 0
+    limit: int = 50
+
+
+SupervisorRequest = Submit | Cancel | CancelAll | EmergencyStop | GetState | Reorder | GetHistory
 
 
 class Submitted(Message):
@@ -225,13 +243,20 @@ class StateReply(Message):
     state: State
 
 
+class HistoryPage(Message):
+    records: list[OrderRecord]
+    total: int
+    """How many finished orders the robot has in all."""
+    offset: int = 0
+
+
 class StateUpdate(Message):
     """Published on the state key whenever anything changes."""
 
     state: State
 
 
-SupervisorReply = Submitted | Done | Failed | StateReply
+SupervisorReply = Submitted | Done | Failed | StateReply | HistoryPage
 
 ConverterReply = ParseReply | Grammar | Failed
 
@@ -254,7 +279,11 @@ class Halt(Message):
     """Stop all motion now, outside any order."""
 
 
-ExecutorRequest = Execute | CancelOrder | Halt
+class GetRunning(Message):
+    """Which order is the executor running? Asked by a supervisor that restarted."""
+
+
+ExecutorRequest = Execute | CancelOrder | Halt | GetRunning
 
 
 class Accepted(Message):
@@ -266,7 +295,9 @@ class Rejected(Message):
     reason: str
 
 
-ExecutorReply = Accepted | Rejected | Done | Failed
+class Running(Message):
+    order_id: str | None = None
+    """None when idle."""
 
 
 class OrderProgress(Message):
@@ -282,3 +313,8 @@ class OrderFinished(Message):
 
 
 ExecutorEvent = OrderProgress | OrderFinished
+
+
+ExecutorReply = Accepted | Rejected | Done | Failed | Running | OrderFinished
+"""A cancel for an order that has just finished is answered with its OrderFinished, so
+the supervisor records what really happened."""

@@ -52,7 +52,8 @@ class Processes:
     def start(self, module: str, *args: str, name: str | None = None) -> subprocess.Popen[bytes]:
         name = name or module.rsplit(".", 1)[-1]
         log = self._logs / f"{name}-{len(self.started)}.log"
-        env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+        # Each test's processes keep their files (the supervisor's database) in its tmp dir.
+        env = {**os.environ, "PYTHONUNBUFFERED": "1", "VOICECTL_DATA": str(self._logs / "data")}
         with log.open("wb") as out:
             process = subprocess.Popen(
                 [sys.executable, "-m", module, *args],

@@ -5,34 +5,23 @@ from __future__ import annotations
 
 import asyncio
 import signal
-import uuid
 from collections.abc import Callable, Coroutine
 from dataclasses import dataclass
 from typing import Any
 
 import pytest
 
-from shared.bus import Bus, BusOptions, json_decoder
-from shared.errors import BusError
-from shared.keys import RobotKeys
+from shared.bus import Bus, BusOptions
 from shared.messages import (
     Cancel,
     Done,
     EmergencyStop,
     Failed,
-    GetState,
-    Message,
-    Order,
-    OrderRecord,
     OrderStatus,
-    State,
-    StateReply,
-    Submit,
-    Submitted,
-    SupervisorReply,
 )
 
 from .conftest import Processes
+from .support import Client, client_wait_ready, order
 
 USER_EXECUTORS = [
     "--executor",
@@ -44,10 +33,6 @@ USER_EXECUTORS = [
     "--executor",
     "tests.executors_for_tests:Stubborn",
 ]
-
-
-def order(label: str, **params: Any) -> Order:
-    return Order(order=label, label=label, description=f"do {label}", params=params)
 
 
 @dataclass
@@ -77,63 +62,6 @@ def robot(router: str, processes: Processes) -> Robot:
     return bot
 
 
-class Client:
-    """The test's side of the supervisor protocol."""
-
-    def __init__(self, bus: Bus, robot: str) -> None:
-        self.bus = bus
-        self.keys = RobotKeys(robot)
-        self._decode = json_decoder(SupervisorReply)
-
-    async def ask(self, request: Message) -> SupervisorReply:
-        reply: SupervisorReply = await self.bus.request(
-            self.keys.supervisor, request, self._decode, timeout=10.0
-        )
-        return reply
-
-    async def submit(self, *orders: Order, request_id: str | None = None) -> list[str]:
-        reply = await self.ask(
-            Submit(request_id=request_id or uuid.uuid4().hex, orders=list(orders))
-        )
-        assert isinstance(reply, Submitted), reply
-        return reply.order_ids
-
-    async def state(self) -> State:
-        reply = await self.ask(GetState())
-        assert isinstance(reply, StateReply), reply
-        return reply.state
-
-    async def finished(self, order_id: str, timeout: float = 20.0) -> OrderRecord:
-        found: list[OrderRecord] = []
-
-        async def check() -> bool:
-            found[:] = [r for r in (await self.state()).history if r.id == order_id]
-            return bool(found)
-
-        deadline = asyncio.get_running_loop().time() + timeout
-        while not await check():
-            assert asyncio.get_running_loop().time() < deadline, f"{order_id} never finished"
-            await asyncio.sleep(0.05)
-        return found[0]
-
-    async def wait_state(self, predicate: Callable[[State], bool], what: str) -> State:
-        states: list[State] = []
-
-        async def poll() -> None:
-            while True:
-                state = await self.state()
-                if predicate(state):
-                    states.append(state)
-                    return
-                await asyncio.sleep(0.05)
-
-        try:
-            await asyncio.wait_for(poll(), 20.0)
-        except TimeoutError:
-            raise AssertionError(f"timed out waiting for {what}") from None
-        return states[0]
-
-
 def scenario(robot: Robot, body: Callable[[Client], Coroutine[Any, Any, None]]) -> None:
     async def run() -> None:
         options = BusOptions(connect=[robot.router])
@@ -143,17 +71,6 @@ def scenario(robot: Robot, body: Callable[[Client], Coroutine[Any, Any, None]]) 
             await body(client)
 
     asyncio.run(run())
-
-
-async def client_wait_ready(client: Client) -> None:
-    for _ in range(400):
-        try:
-            if (await client.state()).executor_online:
-                return
-        except BusError:
-            pass  # supervisor not up yet
-        await asyncio.sleep(0.05)
-    raise AssertionError("supervisor never saw the executor")
 
 
 def test_results_of_builtin_and_user_executors(robot: Robot) -> None:

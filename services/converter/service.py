@@ -5,7 +5,7 @@ from __future__ import annotations
 import logging
 
 from shared.bus import Bus, json_decoder
-from shared.keys import ConverterKeys, RobotKeys
+from shared.keys import ConverterKeys, RobotKeys, robot_of
 from shared.messages import (
     ConverterRequest,
     Failed,
@@ -45,7 +45,7 @@ class ConverterService:
                 return Failed(reason="this converter does not build grammars yet")
 
     def _on_transcript(self, key: str, transcript: Transcript) -> None:
-        robot = ConverterKeys.robot_of(key)
+        robot = robot_of(key)
         result = self._parser.parse(transcript.text)
         _LOGGER.info(
             "%s: %r -> %d order(s), %d error(s)",

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import asyncio
+import collections
 import logging
 
 from shared.bus import Bus, json_decoder
@@ -15,6 +16,7 @@ from shared.messages import (
     Execute,
     ExecutorRequest,
     Failed,
+    GetRunning,
     Halt,
     Message,
     Order,
@@ -23,12 +25,14 @@ from shared.messages import (
     OrderStatus,
     Progress,
     Rejected,
+    Running,
 )
 
 from .framework import Bindings, ExecutionContext, Executor
 from .robot import RobotLink
 
 _LOGGER = logging.getLogger(__name__)
+RECENT_RESULTS = 32
 
 
 class _Running:
@@ -59,6 +63,8 @@ class ExecutorService:
         self._bindings = bindings
         self._cancel_deadline = cancel_deadline
         self._running: _Running | None = None
+        self._recent: collections.OrderedDict[str, OrderFinished] = collections.OrderedDict()
+        """The last results, to answer a cancel that crossed its order's end."""
         self.abandoned: set[asyncio.Task[None]] = set()
         """Tasks of executors that ignored a cancel; they may still be running."""
 
@@ -75,14 +81,28 @@ class ExecutorService:
             case CancelOrder(order_id=order_id):
                 running = self._running
                 if running is None or running.order_id != order_id:
+                    # Finished as the cancel arrived? Then say how, so it is recorded right.
+                    finished = self._recent.get(order_id)
+                    if finished is not None:
+                        return finished
                     return Failed(reason=f"order '{order_id}' is not running here")
                 await self._cancel(running, "cancelled")
                 return Done(detail=f"cancelled {order_id}")
             case Halt():
+                # Zero velocity first; then cancel the order's task before the robot's goals,
+                # so the order ends as cancelled, not as a navigation the robot dropped.
+                self._robot.drive(0.0, 0.0)
+                running = self._running
+                if running is not None:
+                    running.cancel_reason = "emergency stop"
+                    running.task.cancel()
                 await self._robot.halt()
-                if self._running is not None:
-                    await self._cancel(self._running, "emergency stop")
+                if running is not None:
+                    await self._cancel(running, "emergency stop")
                 return Done(detail="halted")
+            case GetRunning():
+                running = self._running
+                return Running(order_id=running.order_id if running is not None else None)
 
     async def shutdown(self) -> None:
         if self._running is not None:
@@ -131,10 +151,11 @@ class ExecutorService:
         running.reported = True
         self._running = None
         _LOGGER.info("order %s %s: %s", order_id, status, message)
-        self._bus.publish(
-            self._keys.executor_events,
-            OrderFinished(order_id=order_id, status=status, message=message),
-        )
+        finished = OrderFinished(order_id=order_id, status=status, message=message)
+        self._recent[order_id] = finished
+        while len(self._recent) > RECENT_RESULTS:
+            self._recent.popitem(last=False)
+        self._bus.publish(self._keys.executor_events, finished)
 
     async def _cancel(self, running: _Running, why: str) -> None:
         """Cancel cooperatively; an executor that ignores it past the deadline is abandoned

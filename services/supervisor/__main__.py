@@ -1,17 +1,21 @@
-"""`voicectl supervisor`: queue, dispatch and history of orders, for one or more robots."""
+"""`voicectl supervisor`: queue, dispatch and durable history of orders, for every robot."""
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import logging
+import sqlite3
 import sys
+from pathlib import Path
 
 from shared.bus import Bus, add_bus_arguments, bus_options, setup_logging, wait_for_stop
+from shared.config import data_dir
 from shared.keys import check_chunk
 
-from .queue import RobotQueue
-from .service import RobotSupervisor, run_supervisors
+from .service import SupervisorService
+from .store import Durability, OrderStore
 
 _LOGGER = logging.getLogger(__name__)
 
@@ -21,8 +25,24 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument(
         "--robot",
         action="append",
+        default=[],
         type=lambda name: check_chunk(name, "robot name"),
-        help="robot to supervise (repeatable; default: robot)",
+        help="a robot to serve from the start and announce (repeatable); any other robot "
+        "is served as soon as a request, event or executor names it",
+    )
+    parser.add_argument(
+        "--db",
+        type=Path,
+        default=None,
+        help="SQLite file of queues and history (default: data dir/supervisor.sqlite3)",
+    )
+    parser.add_argument(
+        "--durability",
+        type=Durability,
+        choices=list(Durability),
+        default=Durability.PROCESS,
+        help="'process': accepted orders survive the supervisor being killed (default); "
+        "'power': also a power cut, at the cost of a disk flush per write",
     )
     parser.add_argument(
         "--continue-on-failure",
@@ -36,15 +56,21 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 async def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     setup_logging(args.debug)
-    robots: list[str] = args.robot or ["robot"]
-    loop = asyncio.get_running_loop()
-    with Bus.open(bus_options(args), loop) as bus:
-        supervisors = [
-            RobotSupervisor(bus, RobotQueue(robot, continue_on_failure=args.continue_on_failure))
-            for robot in robots
-        ]
-        _LOGGER.info("supervisor ready for %s", ", ".join(robots))
-        await wait_for_stop(run_supervisors(supervisors))
+    db_path: Path = args.db or data_dir() / "supervisor.sqlite3"
+    with contextlib.ExitStack() as closing:
+        try:
+            store = closing.enter_context(OrderStore(db_path, args.durability))
+        except (sqlite3.Error, OSError) as exc:
+            print(f"voicectl supervisor: cannot open {db_path}: {exc}", file=sys.stderr)
+            return 2
+        bus = closing.enter_context(Bus.open(bus_options(args), asyncio.get_running_loop()))
+        service = SupervisorService(bus, store, continue_on_failure=args.continue_on_failure)
+        await service.start(args.robot)
+        _LOGGER.info("supervisor ready; history in %s", db_path)
+        try:
+            await wait_for_stop()
+        finally:
+            await service.stop()
     return 0
 
 

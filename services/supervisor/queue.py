@@ -1,4 +1,8 @@
-"""One robot's orders as a plain state machine: no I/O, so every rule is testable alone."""
+"""One robot's orders as a plain state machine: no I/O, so every rule is testable alone.
+
+Every mutation also records what changed (`take_changes`), which the service writes to
+the store; the queue itself never touches a file or the bus.
+"""
 
 from __future__ import annotations
 
@@ -12,16 +16,26 @@ import msgspec
 from shared.messages import Order, OrderRecord, OrderStatus, Progress, State
 
 FINAL = frozenset(
-    {OrderStatus.SUCCEEDED, OrderStatus.FAILED, OrderStatus.CANCELLED, OrderStatus.REJECTED}
+    {
+        OrderStatus.SUCCEEDED,
+        OrderStatus.FAILED,
+        OrderStatus.CANCELLED,
+        OrderStatus.REJECTED,
+        OrderStatus.INTERRUPTED,
+    }
 )
+BREAKS_SEQUENCE = frozenset({OrderStatus.FAILED, OrderStatus.REJECTED, OrderStatus.INTERRUPTED})
+"""Results after which the rest of the same utterance is cancelled (unless configured not to)."""
+SNAPSHOT_QUEUE = 20
+SNAPSHOT_HISTORY = 20
 
 
 class RobotQueue:
-    """Queue, current order and history of one robot.
+    """Queue, current order and recent history of one robot.
 
-    The failure policy lives here: when an order fails or is rejected, the orders queued
-    from the same utterance are cancelled, since later steps usually assume earlier ones
-    happened (`continue_on_failure` turns that off).
+    The failure policy lives here: when an order fails, is rejected or is interrupted, the
+    orders queued from the same utterance are cancelled, since later steps usually assume
+    earlier ones happened (`continue_on_failure` turns that off).
     """
 
     def __init__(
@@ -29,17 +43,46 @@ class RobotQueue:
         robot: str,
         *,
         clock: Callable[[], float] = time.time,
-        history_limit: int = 200,
+        history_limit: int = 50,
         continue_on_failure: bool = False,
     ) -> None:
         self.robot = robot
         self.executor_online = False
         self.current: OrderRecord | None = None
+        self.current_verified = True
+        """False while a current order restored from the store awaits the executor's word."""
         self.queue: deque[OrderRecord] = deque()
         self.history: deque[OrderRecord] = deque(maxlen=history_limit)
         self._clock = clock
         self._continue_on_failure = continue_on_failure
         self._requests: dict[str, list[str]] = {}
+        self._positions: dict[str, float] = {}
+        self._next_position = 0.0
+        self._changed: dict[str, OrderRecord] = {}
+        self._new_requests: list[tuple[str, list[str]]] = []
+
+    # --- restoring --------------------------------------------------------------------------
+
+    def restore(
+        self,
+        open_orders: list[tuple[OrderRecord, float]],
+        history: list[OrderRecord],
+        requests: dict[str, list[str]],
+    ) -> None:
+        """Take back what the store held: queued orders in order, a running one as current
+        (unverified until the executor says whether it still runs it)."""
+        for record, position in open_orders:
+            self._positions[record.id] = position
+            self._next_position = max(self._next_position, position + 1.0)
+            if record.status == OrderStatus.RUNNING and self.current is None:
+                self.current = record
+                self.current_verified = False
+            else:
+                self.queue.append(record)
+        self.history.extend(history)
+        self._requests.update(requests)
+
+    # --- changes ------------------------------------------------------------------------------
 
     def submit(self, request_id: str, orders: list[Order], transcript: str) -> list[str]:
         """Queue `orders`; the same `request_id` again returns the first answer, queues nothing."""
@@ -57,9 +100,14 @@ class RobotQueue:
             )
             for order in orders
         ]
-        self.queue.extend(records)
+        for record in records:
+            self._positions[record.id] = self._next_position
+            self._next_position += 1.0
+            self.queue.append(record)
+            self._changed[record.id] = record
         ids = [r.id for r in records]
         self._requests[request_id] = ids
+        self._new_requests.append((request_id, ids))
         return ids
 
     def start_next(self) -> OrderRecord | None:
@@ -70,9 +118,12 @@ class RobotQueue:
         self.current = msgspec.structs.replace(
             record, status=OrderStatus.RUNNING, started_at=self._clock()
         )
+        self.current_verified = True
+        self._changed[record.id] = self.current
         return self.current
 
     def progress(self, order_id: str, progress: Progress) -> bool:
+        """Fold progress into the current order (not persisted: it changes too often)."""
         if self.current is None or self.current.id != order_id:
             return False
         self.current = msgspec.structs.replace(self.current, progress=progress)
@@ -86,12 +137,15 @@ class RobotQueue:
             return False
         record = self.current
         self.current = None
+        self.current_verified = True
         self._to_history(record, status, message)
-        if status in (OrderStatus.FAILED, OrderStatus.REJECTED) and not self._continue_on_failure:
+        if status in BREAKS_SEQUENCE and not self._continue_on_failure:
             for sibling in [r for r in self.queue if r.request_id == record.request_id]:
                 self.queue.remove(sibling)
                 self._to_history(
-                    sibling, OrderStatus.CANCELLED, f"an earlier order failed: {record.id}"
+                    sibling,
+                    OrderStatus.CANCELLED,
+                    f"an earlier order of the same command ended {status}: {record.id}",
                 )
         return True
 
@@ -109,13 +163,49 @@ class RobotQueue:
             self._to_history(self.queue.popleft(), OrderStatus.CANCELLED, message)
         return count
 
-    def snapshot(self, history: int = 20) -> State:
+    def reorder(self, order_id: str, position: int) -> bool:
+        """Move a queued order to `position` (clamped to the queue); False if not queued."""
+        record = next((r for r in self.queue if r.id == order_id), None)
+        if record is None:
+            return False
+        self.queue.remove(record)
+        position = max(0, min(position, len(self.queue)))
+        self.queue.insert(position, record)
+        # A position between the neighbours': only the moved order changes in the store.
+        before = self._positions[self.queue[position - 1].id] if position > 0 else None
+        after = (
+            self._positions[self.queue[position + 1].id] if position + 1 < len(self.queue) else None
+        )
+        if before is None and after is None:
+            new = self._positions[order_id]
+        elif before is None:
+            assert after is not None
+            new = after - 1.0
+        elif after is None:
+            new = before + 1.0
+            self._next_position = max(self._next_position, new + 1.0)
+        else:
+            new = (before + after) / 2.0
+        self._positions[order_id] = new
+        self._changed[order_id] = record
+        return True
+
+    def take_changes(self) -> tuple[list[tuple[OrderRecord, float]], list[tuple[str, list[str]]]]:
+        """What changed since the last call: records with their positions, and new requests."""
+        records = [(r, self._positions.get(r.id, 0.0)) for r in self._changed.values()]
+        requests = self._new_requests
+        self._changed = {}
+        self._new_requests = []
+        return records, requests
+
+    def snapshot(self) -> State:
         return State(
             robot=self.robot,
             executor_online=self.executor_online,
             current=self.current,
-            queue=list(self.queue),
-            history=list(self.history)[:history],
+            queue=[self.queue[i] for i in range(min(SNAPSHOT_QUEUE, len(self.queue)))],
+            queue_length=len(self.queue),
+            history=[self.history[i] for i in range(min(SNAPSHOT_HISTORY, len(self.history)))],
         )
 
     def _to_history(self, record: OrderRecord, status: OrderStatus, message: str) -> None:
@@ -123,3 +213,5 @@ class RobotQueue:
             record, status=status, message=message, ended_at=self._clock()
         )
         self.history.appendleft(ended)
+        self._positions.pop(record.id, None)
+        self._changed[record.id] = ended

@@ -1,14 +1,20 @@
-"""The supervisor on the bus: answers requests, dispatches to the executor, publishes state."""
+"""The supervisor on the bus: one process for every robot under ``voice/*``.
+
+Per robot: requests are answered, orders dispatched one at a time to that robot's
+executor, its progress folded in, and a state snapshot published after every change
+(coalesced to at most one every `PUBLISH_INTERVAL`). A robot appears the first time any
+request, event or executor token names it.
+"""
 
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import logging
+import sqlite3
 
 from shared.bus import Bus, json_decoder
 from shared.errors import BusError
-from shared.keys import RobotKeys
+from shared.keys import RobotKeys, robot_of
 from shared.messages import (
     Accepted,
     Cancel,
@@ -20,13 +26,18 @@ from shared.messages import (
     ExecutorEvent,
     ExecutorReply,
     Failed,
+    GetHistory,
+    GetRunning,
     GetState,
     Halt,
+    HistoryPage,
     Message,
     OrderFinished,
     OrderProgress,
     OrderStatus,
     Rejected,
+    Reorder,
+    Running,
     StateReply,
     StateUpdate,
     Submit,
@@ -35,37 +46,52 @@ from shared.messages import (
 )
 
 from .queue import RobotQueue
+from .store import OrderStore
 
 _LOGGER = logging.getLogger(__name__)
 
 EXECUTOR_TIMEOUT = 5.0
-"""How long the executor may take to accept an order or a cancel."""
+"""How long the executor may take to accept an order or answer a cancel."""
+RESUME_GRACE = 3.0
+"""After a restart, how long to wait for the executor before calling a restored running
+order interrupted."""
+PUBLISH_INTERVAL = 0.02
+MAX_HISTORY_PAGE = 500
 
 
 class RobotSupervisor:
-    """Everything one robot's supervisor does; one instance per robot, one process for all."""
+    """Everything the supervisor does for one robot."""
 
-    def __init__(self, bus: Bus, queue: RobotQueue) -> None:
+    def __init__(self, bus: Bus, store: OrderStore, queue: RobotQueue) -> None:
         self._bus = bus
+        self._store = store
         self._queue = queue
         self._keys = RobotKeys(queue.robot)
-        self._wake = asyncio.Event()
         self._reply_decode = json_decoder(ExecutorReply)
+        self._wake = asyncio.Event()
+        self._publish_handle: asyncio.TimerHandle | None = None
+        self._last_publish = 0.0
+        self._tasks: list[asyncio.Task[None]] = []
 
-    async def run(self) -> None:
-        """Serve until cancelled."""
-        self._bus.serve(self._keys.supervisor, json_decoder(SupervisorRequest), self.handle)
-        self._bus.subscribe(self._keys.executor_events, json_decoder(ExecutorEvent), self._on_event)
-        self._bus.watch(self._keys.alive("executor"), self._on_executor_presence)
-        self._bus.announce(self._keys.alive("supervisor"))
+    @property
+    def robot(self) -> str:
+        return self._queue.robot
+
+    def start(self) -> None:
+        loop = asyncio.get_running_loop()
+        self._tasks.append(loop.create_task(self._dispatch_loop()))
+        if not self._queue.current_verified:
+            self._tasks.append(loop.create_task(self._expire_unverified()))
         self._changed()
-        while True:
-            await self._wake.wait()
-            self._wake.clear()
-            record = self._queue.start_next()
-            if record is not None:
-                self._changed()
-                await self._dispatch(record.id, Execute(order_id=record.id, order=record.order))
+
+    async def stop(self) -> None:
+        for task in self._tasks:
+            task.cancel()
+        await asyncio.gather(*self._tasks, return_exceptions=True)
+        if self._publish_handle is not None:
+            self._publish_handle.cancel()
+
+    # --- requests ------------------------------------------------------------------------
 
     async def handle(self, request: SupervisorRequest) -> Message:
         match request:
@@ -73,16 +99,22 @@ class RobotSupervisor:
                 if not request_id:
                     return Failed(reason="submit needs a non-empty request_id")
                 ids = self._queue.submit(request_id, orders, transcript)
-                _LOGGER.info("%s: request %s -> orders %s", self._queue.robot, request_id, ids)
-                self._changed()
+                stored = self._changed()
+                if stored is not None:
+                    try:
+                        # Acknowledge only what is on disk: a SIGKILL from now on loses nothing.
+                        await asyncio.shield(stored)
+                    except sqlite3.Error as exc:
+                        return Failed(reason=f"could not store the orders: {exc}")
                 return Submitted(order_ids=ids)
             case Cancel(order_id=order_id):
-                return await self._cancel(order_id)
+                return await self._cancel(order_id, "cancelled by user")
             case CancelAll():
                 cleared = self._queue.clear_queue("cancelled by user")
-                if self._queue.current is not None:
-                    await self._cancel(self._queue.current.id)
                 self._changed()
+                current = self._queue.current
+                if current is not None:
+                    await self._cancel(current.id, "cancelled by user")
                 return Done(detail=f"cancelled {cleared} queued order(s) and the current one")
             case EmergencyStop():
                 # Clear the queue first (in memory, instant) so that nothing is dispatched
@@ -94,24 +126,41 @@ class RobotSupervisor:
                 if isinstance(halted, Failed):
                     return halted
                 return Done(detail=f"halted; cancelled {cleared} queued order(s)")
+            case Reorder(order_id=order_id, position=position):
+                if not self._queue.reorder(order_id, position):
+                    return Failed(reason=f"order '{order_id}' is not queued")
+                self._changed()
+                return Done(detail=f"moved {order_id} to position {position}")
             case GetState():
                 return StateReply(state=self._queue.snapshot())
+            case GetHistory(offset=offset, limit=limit):
+                if offset < 0 or not 0 < limit <= MAX_HISTORY_PAGE:
+                    return Failed(
+                        reason=f"history page needs offset >= 0 and 1 <= limit <= "
+                        f"{MAX_HISTORY_PAGE}, got offset {offset}, limit {limit}"
+                    )
+                records, total = await self._store.call(
+                    self._store.history_page(self.robot, offset, limit)
+                )
+                return HistoryPage(records=records, total=total, offset=offset)
 
-    async def _cancel(self, order_id: str) -> Message:
-        if self._queue.remove_queued(order_id, "cancelled by user"):
+    async def _cancel(self, order_id: str, why: str) -> Message:
+        if self._queue.remove_queued(order_id, why):
             self._changed()
             return Done(detail=f"removed {order_id} from the queue")
         current = self._queue.current
         if current is None or current.id != order_id:
             return Failed(reason=f"order '{order_id}' is neither queued nor running")
         reply = await self._send_control(CancelOrder(order_id=order_id))
-        if isinstance(reply, Failed) and self._queue.finish(
-            order_id, OrderStatus.CANCELLED, f"cancelled; executor: {reply.reason}"
-        ):
-            self._changed()
+        match reply:
+            case OrderFinished(status=status, message=message):
+                # It finished as the cancel arrived: record what really happened.
+                self._finish(order_id, status, message)
+            case Failed(reason=reason):
+                self._finish(order_id, OrderStatus.CANCELLED, f"{why}; executor: {reason}")
         return Done(detail=f"cancelling {order_id}")
 
-    async def _send_control(self, request: CancelOrder | Halt) -> Message:
+    async def _send_control(self, request: CancelOrder | Halt | GetRunning) -> Message:
         try:
             return await self._bus.request(
                 self._keys.executor_control, request, self._reply_decode, EXECUTOR_TIMEOUT
@@ -119,67 +168,179 @@ class RobotSupervisor:
         except BusError as exc:
             return Failed(reason=f"executor unreachable: {exc}")
 
+    # --- dispatch ------------------------------------------------------------------------------
+
+    async def _dispatch_loop(self) -> None:
+        while True:
+            await self._wake.wait()
+            self._wake.clear()
+            record = self._queue.start_next()
+            if record is None:
+                continue
+            self._changed()
+            await self._dispatch(record.id, Execute(order_id=record.id, order=record.order))
+
     async def _dispatch(self, order_id: str, execute: Execute) -> None:
         try:
             reply = await self._bus.request(
                 self._keys.executor_execute, execute, self._reply_decode, EXECUTOR_TIMEOUT
             )
         except BusError as exc:
+            # It may have started anyway: make sure it does not run unaccounted for.
+            await self._send_control(CancelOrder(order_id=order_id))
             self._finish(order_id, OrderStatus.FAILED, f"executor did not take it: {exc}")
             return
         match reply:
             case Accepted():
-                _LOGGER.info("%s: %s started", self._queue.robot, order_id)
+                _LOGGER.debug("%s: %s started", self.robot, order_id)
             case Rejected(reason=reason):
                 self._finish(order_id, OrderStatus.REJECTED, reason)
             case Failed(reason=reason):
                 self._finish(order_id, OrderStatus.FAILED, reason)
-            case Done():
-                self._finish(order_id, OrderStatus.FAILED, "executor answered out of protocol")
+            case _:
+                self._finish(order_id, OrderStatus.FAILED, f"executor answered {reply!r}")
 
-    def _on_event(self, _key: str, event: ExecutorEvent) -> None:
+    # --- events from the executor -----------------------------------------------------------
+
+    def on_event(self, event: ExecutorEvent) -> None:
         match event:
             case OrderProgress(order_id=order_id, progress=progress):
                 if self._queue.progress(order_id, progress):
-                    self._publish()
+                    self._publish_soon()
             case OrderFinished(order_id=order_id, status=status, message=message):
-                if status not in (
-                    OrderStatus.SUCCEEDED,
-                    OrderStatus.FAILED,
-                    OrderStatus.CANCELLED,
-                ):
-                    _LOGGER.warning("ignored result %s for %s", status, order_id)
+                if status in (OrderStatus.QUEUED, OrderStatus.RUNNING):
+                    _LOGGER.warning("%s: ignored result %s for %s", self.robot, status, order_id)
                     return
                 self._finish(order_id, status, message)
 
-    def _on_executor_presence(self, _key: str, alive: bool) -> None:
-        _LOGGER.info("%s: executor %s", self._queue.robot, "online" if alive else "lost")
+    def on_executor(self, alive: bool) -> None:
+        _LOGGER.info("%s: executor %s", self.robot, "online" if alive else "lost")
         self._queue.executor_online = alive
         current = self._queue.current
-        if not alive and current is not None:
-            self._queue.finish(current.id, OrderStatus.FAILED, "executor lost")
+        if alive and current is not None and not self._queue.current_verified:
+            self._tasks.append(asyncio.get_running_loop().create_task(self._verify(current.id)))
+        elif not alive and current is not None and self._queue.current_verified:
+            self._finish(current.id, OrderStatus.FAILED, "executor lost")
         self._changed()
+
+    async def _verify(self, order_id: str) -> None:
+        """After a restart: resume the restored order if the executor still runs it."""
+        reply = await self._send_control(GetRunning())
+        current = self._queue.current
+        if current is None or current.id != order_id or self._queue.current_verified:
+            return
+        if isinstance(reply, Running) and reply.order_id == order_id:
+            _LOGGER.info("%s: resumed %s, still running on the executor", self.robot, order_id)
+            self._queue.current_verified = True
+            self._changed()
+        else:
+            self._finish(
+                order_id,
+                OrderStatus.INTERRUPTED,
+                "the supervisor restarted while it ran and the executor no longer runs it",
+            )
+
+    async def _expire_unverified(self) -> None:
+        await asyncio.sleep(RESUME_GRACE)
+        current = self._queue.current
+        if current is not None and not self._queue.current_verified:
+            self._finish(
+                current.id,
+                OrderStatus.INTERRUPTED,
+                "the supervisor restarted while it ran and no executor was there",
+            )
+
+    # --- bookkeeping -----------------------------------------------------------------------------
 
     def _finish(self, order_id: str, status: OrderStatus, message: str) -> None:
         if self._queue.finish(order_id, status, message):
-            _LOGGER.info("%s: %s %s %s", self._queue.robot, order_id, status, message)
+            _LOGGER.info("%s: %s %s %s", self.robot, order_id, status, message)
             self._changed()
 
-    def _changed(self) -> None:
-        self._publish()
+    def _changed(self) -> asyncio.Future[None] | None:
+        """Store what changed (in order), publish soon, wake the dispatcher; the returned
+        future, if anything changed, resolves when it is committed."""
+        records, requests = self._queue.take_changes()
+        operations = [self._store.save_orders(self.robot, records)] if records else []
+        operations += [self._store.save_request(self.robot, r, ids) for r, ids in requests]
+        stored = self._store.write(operations) if operations else None
+        self._publish_soon()
         self._wake.set()
+        return stored
+
+    def _publish_soon(self) -> None:
+        if self._publish_handle is not None:
+            return
+        loop = asyncio.get_running_loop()
+        delay = max(0.0, self._last_publish + PUBLISH_INTERVAL - loop.time())
+        self._publish_handle = loop.call_later(delay, self._publish)
 
     def _publish(self) -> None:
+        self._publish_handle = None
+        self._last_publish = asyncio.get_running_loop().time()
         self._bus.publish(self._keys.state, StateUpdate(state=self._queue.snapshot()))
 
 
-async def run_supervisors(supervisors: list[RobotSupervisor]) -> None:
-    """Run every robot's supervisor until cancelled."""
-    tasks = [asyncio.create_task(s.run()) for s in supervisors]
-    try:
-        await asyncio.gather(*tasks)
-    finally:
-        for task in tasks:
-            task.cancel()
-        with contextlib.suppress(asyncio.CancelledError):
-            await asyncio.gather(*tasks, return_exceptions=True)
+class SupervisorService:
+    """Every robot's supervisor in one process, sharing one bus and one store."""
+
+    def __init__(
+        self,
+        bus: Bus,
+        store: OrderStore,
+        *,
+        continue_on_failure: bool = False,
+        history_in_memory: int = 50,
+    ) -> None:
+        self._bus = bus
+        self._store = store
+        self._continue_on_failure = continue_on_failure
+        self._history = history_in_memory
+        self._robots: dict[str, RobotSupervisor] = {}
+
+    async def start(self, robots: list[str]) -> None:
+        saved = await self._store.call(self._store.load(self._history))
+        for name, robot in saved.items():
+            queue = self._new_queue(name)
+            queue.restore(robot.open_orders, robot.history, robot.requests)
+            self._add(queue)
+            if robot.open_orders:
+                _LOGGER.info("%s: restored %d open order(s)", name, len(robot.open_orders))
+        for name in robots:
+            self.robot(name)
+        self._bus.serve_keyed(
+            RobotKeys.any_robot().supervisor, json_decoder(SupervisorRequest), self._on_request
+        )
+        self._bus.subscribe(
+            RobotKeys.any_robot().executor_events, json_decoder(ExecutorEvent), self._on_event
+        )
+        self._bus.watch(RobotKeys.any_robot().alive("executor"), self._on_executor)
+        for name in robots:
+            self._bus.announce(RobotKeys(name).alive("supervisor"))
+
+    async def stop(self) -> None:
+        await asyncio.gather(*(r.stop() for r in self._robots.values()))
+
+    def robot(self, name: str) -> RobotSupervisor:
+        if name not in self._robots:
+            self._add(self._new_queue(name))
+        return self._robots[name]
+
+    def _new_queue(self, name: str) -> RobotQueue:
+        return RobotQueue(
+            name, continue_on_failure=self._continue_on_failure, history_limit=self._history
+        )
+
+    def _add(self, queue: RobotQueue) -> None:
+        supervisor = RobotSupervisor(self._bus, self._store, queue)
+        self._robots[queue.robot] = supervisor
+        supervisor.start()
+
+    async def _on_request(self, key: str, request: SupervisorRequest) -> Message:
+        return await self.robot(robot_of(key)).handle(request)
+
+    def _on_event(self, key: str, event: ExecutorEvent) -> None:
+        self.robot(robot_of(key)).on_event(event)
+
+    def _on_executor(self, key: str, alive: bool) -> None:
+        self.robot(robot_of(key)).on_executor(alive)

@@ -1,0 +1,274 @@
+"""Queue and history of every robot in SQLite, written in order from one thread.
+
+The supervisor's state lives in memory and every change is also written here; a submit is
+acknowledged only once its orders are committed, so an accepted order survives a SIGKILL
+at any moment. Writes that pile up while a transaction commits go into the next one
+together: a burst of submits costs one commit per batch, not one per order.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import queue
+import sqlite3
+import threading
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from enum import StrEnum
+from pathlib import Path
+from typing import Any, TypeVar
+
+import msgspec
+
+from shared.messages import OrderRecord
+
+_LOGGER = logging.getLogger(__name__)
+T = TypeVar("T")
+
+SCHEMA = """
+CREATE TABLE IF NOT EXISTS orders (
+    id TEXT PRIMARY KEY,
+    robot TEXT NOT NULL,
+    status TEXT NOT NULL,
+    position REAL NOT NULL,
+    ended_at REAL,
+    record BLOB NOT NULL
+);
+CREATE INDEX IF NOT EXISTS orders_open ON orders (robot, position) WHERE ended_at IS NULL;
+CREATE INDEX IF NOT EXISTS orders_ended ON orders (robot, ended_at) WHERE ended_at IS NOT NULL;
+CREATE TABLE IF NOT EXISTS requests (
+    robot TEXT NOT NULL,
+    request_id TEXT NOT NULL,
+    order_ids BLOB NOT NULL,
+    PRIMARY KEY (robot, request_id)
+);
+"""
+BATCH_LIMIT = 2000
+"""Most operations in one transaction."""
+
+
+class Durability(StrEnum):
+    PROCESS = "process"
+    """Survives the supervisor being killed (WAL, synchronous=NORMAL): the default."""
+    POWER = "power"
+    """Also survives power loss (synchronous=FULL): every commit waits for the disk."""
+
+
+@dataclass
+class SavedRobot:
+    """What the store holds for one robot, as read at start-up."""
+
+    open_orders: list[tuple[OrderRecord, float]] = field(default_factory=list)
+    """Queued and running orders with their queue positions, in queue order."""
+    history: list[OrderRecord] = field(default_factory=list)
+    """The most recent finished orders, most recent first."""
+    requests: dict[str, list[str]] = field(default_factory=dict)
+
+
+Operation = Callable[[sqlite3.Connection], Any]
+
+
+class OrderStore:
+    """One SQLite database, one writer thread; every call runs there, in call order."""
+
+    def __init__(self, path: Path, durability: Durability = Durability.PROCESS) -> None:
+        self.path = path
+        self._durability = durability
+        self._inbox: queue.SimpleQueue[
+            tuple[Operation, asyncio.Future[Any] | None, asyncio.AbstractEventLoop | None] | None
+        ] = queue.SimpleQueue()
+        self._thread: threading.Thread | None = None
+        self._encoder = msgspec.json.Encoder()
+        self._decoder = msgspec.json.Decoder(OrderRecord)
+        self._ready = threading.Event()
+        self._open_error: BaseException | None = None
+
+    def __enter__(self) -> OrderStore:
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._thread = threading.Thread(target=self._run, name="order-store", daemon=True)
+        self._thread.start()
+        self._ready.wait()
+        if self._open_error is not None:
+            raise self._open_error
+        return self
+
+    def __exit__(self, *_exc: object) -> None:
+        self._inbox.put(None)
+        if self._thread is not None:
+            self._thread.join(timeout=10)
+
+    # --- calls from the event loop -------------------------------------------------------
+
+    async def call(self, operation: Callable[[sqlite3.Connection], T]) -> T:
+        """Run `operation` on the writer thread after everything queued before it."""
+        loop = asyncio.get_running_loop()
+        future: asyncio.Future[T] = loop.create_future()
+        self._inbox.put((operation, future, loop))
+        return await future
+
+    def write(self, operations: list[Operation]) -> asyncio.Future[None]:
+        """Queue `operations` as one; the future resolves when they are committed. Nobody
+        has to await it: a failure is logged either way."""
+        loop = asyncio.get_running_loop()
+        future: asyncio.Future[None] = loop.create_future()
+
+        def run_all(db: sqlite3.Connection) -> None:
+            for operation in operations:
+                operation(db)
+
+        def log_failure(done: asyncio.Future[None]) -> None:
+            if not done.cancelled() and done.exception() is not None:
+                _LOGGER.error("order store: write failed: %s", done.exception())
+
+        future.add_done_callback(log_failure)
+        self._inbox.put((run_all, future, loop))
+        return future
+
+    # --- operations ------------------------------------------------------------------------
+
+    def save_orders(self, robot: str, records: list[tuple[OrderRecord, float]]) -> Operation:
+        rows = [
+            (r.id, robot, r.status.value, position, r.ended_at, self._encoder.encode(r))
+            for r, position in records
+        ]
+
+        def save(db: sqlite3.Connection) -> None:
+            db.executemany(
+                "INSERT INTO orders (id, robot, status, position, ended_at, record)"
+                " VALUES (?, ?, ?, ?, ?, ?) ON CONFLICT (id) DO UPDATE SET"
+                " status = excluded.status, position = excluded.position,"
+                " ended_at = excluded.ended_at, record = excluded.record",
+                rows,
+            )
+
+        return save
+
+    def save_request(self, robot: str, request_id: str, order_ids: list[str]) -> Operation:
+        ids = self._encoder.encode(order_ids)
+
+        def save(db: sqlite3.Connection) -> None:
+            db.execute(
+                "INSERT OR IGNORE INTO requests (robot, request_id, order_ids) VALUES (?, ?, ?)",
+                (robot, request_id, ids),
+            )
+
+        return save
+
+    def history_page(
+        self, robot: str, offset: int, limit: int
+    ) -> Callable[[sqlite3.Connection], tuple[list[OrderRecord], int]]:
+        def page(db: sqlite3.Connection) -> tuple[list[OrderRecord], int]:
+            rows = db.execute(
+                "SELECT record FROM orders WHERE robot = ? AND ended_at IS NOT NULL"
+                " ORDER BY ended_at DESC, rowid DESC LIMIT ? OFFSET ?",
+                (robot, limit, offset),
+            ).fetchall()
+            (total,) = db.execute(
+                "SELECT count(*) FROM orders WHERE robot = ? AND ended_at IS NOT NULL", (robot,)
+            ).fetchone()
+            return [self._decoder.decode(row[0]) for row in rows], int(total)
+
+        return page
+
+    def load(self, history: int) -> Callable[[sqlite3.Connection], dict[str, SavedRobot]]:
+        def load(db: sqlite3.Connection) -> dict[str, SavedRobot]:
+            robots: dict[str, SavedRobot] = {}
+            for robot, position, raw in db.execute(
+                "SELECT robot, position, record FROM orders WHERE ended_at IS NULL"
+                " ORDER BY robot, position"
+            ):
+                saved = robots.setdefault(robot, SavedRobot())
+                saved.open_orders.append((self._decoder.decode(raw), position))
+            for (robot,) in db.execute("SELECT DISTINCT robot FROM orders"):
+                saved = robots.setdefault(robot, SavedRobot())
+                saved.history = self.history_page(robot, 0, history)(db)[0]
+            ids_decoder = msgspec.json.Decoder(list[str])
+            for robot, request_id, ids in db.execute(
+                "SELECT robot, request_id, order_ids FROM requests"
+            ):
+                saved = robots.setdefault(robot, SavedRobot())
+                saved.requests[request_id] = ids_decoder.decode(ids)
+            return robots
+
+        return load
+
+    # --- the writer thread -------------------------------------------------------------------
+
+    def _connect(self) -> sqlite3.Connection:
+        db = sqlite3.connect(self.path, isolation_level=None, check_same_thread=True)
+        db.execute("PRAGMA journal_mode = WAL")
+        sync = "FULL" if self._durability is Durability.POWER else "NORMAL"
+        db.execute(f"PRAGMA synchronous = {sync}")
+        db.executescript(SCHEMA)
+        return db
+
+    def _run(self) -> None:
+        try:
+            db = self._connect()
+        except (sqlite3.Error, OSError) as exc:
+            self._open_error = exc
+            self._ready.set()
+            return
+        self._ready.set()
+        try:
+            while True:
+                first = self._inbox.get()
+                if first is None:
+                    return
+                batch = [first]
+                stop = False
+                while len(batch) < BATCH_LIMIT:
+                    try:
+                        item = self._inbox.get_nowait()
+                    except queue.Empty:
+                        break
+                    if item is None:
+                        stop = True
+                        break
+                    batch.append(item)
+                self._run_batch(db, batch)
+                if stop:
+                    return
+        finally:
+            db.close()
+
+    def _run_batch(
+        self,
+        db: sqlite3.Connection,
+        batch: list[tuple[Operation, asyncio.Future[Any] | None, asyncio.AbstractEventLoop | None]],
+    ) -> None:
+        results: list[tuple[bool, Any]] = []
+        try:
+            db.execute("BEGIN IMMEDIATE")
+            for operation, _, _ in batch:
+                # A savepoint per operation: one that fails is undone alone.
+                db.execute("SAVEPOINT op")
+                try:
+                    results.append((True, operation(db)))
+                    db.execute("RELEASE op")
+                except Exception as exc:
+                    db.execute("ROLLBACK TO op")
+                    db.execute("RELEASE op")
+                    results.append((False, exc))
+            db.execute("COMMIT")
+        except sqlite3.Error as exc:
+            _LOGGER.error("order store: commit failed: %s", exc)
+            if db.in_transaction:
+                db.rollback()
+            results = [(False, exc)] * len(batch)
+        for (_, future, loop), (ok, value) in zip(batch, results, strict=True):
+            if future is None or loop is None:
+                continue
+            with contextlib.suppress(RuntimeError):  # the loop closed: nobody is waiting
+                loop.call_soon_threadsafe(_settle, future, ok, value)
+
+
+def _settle(future: asyncio.Future[Any], ok: bool, value: Any) -> None:
+    if future.done():
+        return
+    if ok:
+        future.set_result(value)
+    else:
+        future.set_exception(value)

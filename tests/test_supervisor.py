@@ -1,0 +1,350 @@
+"""The durable supervisor as a real process on loopback: SIGKILL and restart, executor
+presence, cancel races, reorder, history paging, several robots, bursts."""
+
+from __future__ import annotations
+
+import asyncio
+import signal
+import sqlite3
+import subprocess
+from collections.abc import Awaitable, Callable
+from pathlib import Path
+
+import pytest
+
+from shared.bus import Bus, BusOptions
+from shared.errors import BusError
+from shared.keys import BridgeKeys
+from shared.messages import (
+    Cancel,
+    Done,
+    EmergencyStop,
+    Failed,
+    GetHistory,
+    Order,
+    OrderStatus,
+    Reorder,
+    Submit,
+    Submitted,
+    TargetPose,
+)
+from shared.ros2 import Odometry, Ros2Codec, RosDistro
+
+from .conftest import Processes, async_wait_until
+from .support import Client, client_wait_ready, order
+
+EXECUTORS = ["--executor", "tests.executors_for_tests:Slow=slow"]
+
+
+class Site:
+    """A router, a supervisor with a database that outlives it, executors per robot."""
+
+    def __init__(self, router: str, processes: Processes, db: Path) -> None:
+        self.router = router
+        self.processes = processes
+        self.db = db
+        self.supervisor: subprocess.Popen[bytes] | None = None
+        self.executors: dict[str, subprocess.Popen[bytes]] = {}
+
+    def start_supervisor(self) -> None:
+        self.supervisor = self.processes.start(
+            "services.supervisor", "--connect", self.router, "--db", str(self.db)
+        )
+
+    def kill_supervisor(self) -> None:
+        assert self.supervisor is not None
+        self.supervisor.send_signal(signal.SIGKILL)
+        self.supervisor.wait()
+
+    def start_executor(self, robot: str = "r1") -> None:
+        self.executors[robot] = self.processes.start(
+            "services.executor", "--connect", self.router, "--robot", robot, *EXECUTORS
+        )
+
+    def kill_executor(self, robot: str = "r1") -> None:
+        self.executors[robot].send_signal(signal.SIGKILL)
+        self.executors[robot].wait()
+
+    def run(self, body: Callable[[Bus], Awaitable[None]]) -> None:
+        async def main() -> None:
+            with Bus.open(BusOptions(connect=[self.router]), asyncio.get_running_loop()) as bus:
+                await body(bus)
+
+        asyncio.run(main())
+
+
+@pytest.fixture
+def site(router: str, processes: Processes, tmp_path: Path) -> Site:
+    return Site(router, processes, tmp_path / "supervisor.sqlite3")
+
+
+def test_sigkill_with_orders_in_flight_loses_nothing_and_resumes(site: Site) -> None:
+    site.start_supervisor()
+    site.start_executor()
+
+    async def body(bus: Bus) -> None:
+        client = Client(bus, "r1")
+        await client_wait_ready(client)
+        (done_before,) = await client.submit(order("mul", a=2, b=2))
+        await client.finished(done_before)
+        running, queued_1, queued_2 = await client.submit(
+            order("slow", seconds=2), order("mul", a=3, b=3), order("mul", a=4, b=4)
+        )
+        await client.wait_state(lambda s: s.current is not None, "the slow order to run")
+
+        site.kill_supervisor()
+        site.start_supervisor()
+        await client_wait_ready(client)
+        state = await client.state()
+        assert state.current is not None
+        assert state.current.id == running
+        assert [r.id for r in state.queue] == [queued_1, queued_2]
+
+        # The executor was still running it: resumed, not interrupted, then the queue runs.
+        assert (await client.finished(running)).status == OrderStatus.SUCCEEDED
+        assert (await client.finished(queued_2)).message == "4 x 4 = 16"
+        page = await client.history()
+        assert [r.id for r in page.records] == [queued_2, queued_1, running, done_before]
+
+    site.run(body)
+
+
+def test_running_order_is_interrupted_when_no_executor_runs_it(site: Site) -> None:
+    site.start_supervisor()
+    site.start_executor()
+
+    async def body(bus: Bus) -> None:
+        client = Client(bus, "r1")
+        await client_wait_ready(client)
+        running, sibling = await client.submit(order("slow"), order("mul", a=1, b=1))
+        (other,) = await client.submit(order("mul", a=5, b=5))
+        await client.wait_state(lambda s: s.current is not None, "the slow order to run")
+        site.kill_supervisor()
+        site.kill_executor()
+        site.start_supervisor()
+        await client_wait_ready(client, executor=False)
+
+        record = await client.finished(running)
+        assert record.status == OrderStatus.INTERRUPTED
+        assert (await client.finished(sibling)).status == OrderStatus.CANCELLED
+        state = await client.state()
+        assert [r.id for r in state.queue] == [other]  # paused, not drained
+        site.start_executor()
+        assert (await client.finished(other)).message == "5 x 5 = 25"
+
+    site.run(body)
+
+
+def test_burst_of_submits_killed_midway_keeps_every_acknowledged_order(site: Site) -> None:
+    site.start_supervisor()  # no executor: everything stays queued
+
+    async def body(bus: Bus) -> None:
+        client = Client(bus, "r1")
+        await client_wait_ready(client, executor=False)
+        acknowledged: list[str] = []
+        killed = False
+
+        async def submit(i: int) -> None:
+            nonlocal killed
+            reply = await client.ask(Submit(request_id=f"burst-{i}", orders=[order("mul")]))
+            if isinstance(reply, Submitted):
+                acknowledged.extend(reply.order_ids)
+            if len(acknowledged) >= 300 and not killed:
+                killed = True
+                site.kill_supervisor()  # while hundreds of submits are still in flight
+
+        async def worker(first: int) -> None:
+            # 50 submits in flight at any time, as many clients retrying would do
+            for i in range(first, 2000, 50):
+                await submit(i)
+
+        results = await asyncio.gather(*(worker(k) for k in range(50)), return_exceptions=True)
+        assert killed
+        assert 300 <= len(acknowledged) < 2000, len(acknowledged)
+        assert all(r is None or isinstance(r, BusError) for r in results), results
+
+        with sqlite3.connect(site.db) as db:
+            stored = {row[0] for row in db.execute("SELECT id FROM orders")}
+        assert set(acknowledged) <= stored
+
+        site.start_supervisor()
+        await client_wait_ready(client, executor=False)
+        assert (await client.state()).queue_length == len(stored)
+        # Every stored request is known after the restart: retrying all 2000 queues only
+        # those that never made it, so each request ends up queued exactly once.
+        for i in range(2000):
+            reply = await client.ask(Submit(request_id=f"burst-{i}", orders=[order("mul")]))
+            assert isinstance(reply, Submitted)
+        assert (await client.state()).queue_length == 2000
+
+    site.run(body)
+
+
+def test_ten_thousand_submits_are_all_accepted_and_kept(site: Site) -> None:
+    site.start_supervisor()
+
+    async def body(bus: Bus) -> None:
+        client = Client(bus, "r1")
+        await client_wait_ready(client, executor=False)
+        replies: list[object] = []
+
+        async def submit(batch: range) -> None:
+            for i in batch:
+                replies.append(await client.ask(Submit(request_id=f"n{i}", orders=[order("x")])))
+
+        await asyncio.gather(*(submit(range(k, 10_000, 50)) for k in range(50)))
+        assert all(isinstance(r, Submitted) for r in replies)
+        assert (await client.state()).queue_length == 10_000
+        site.kill_supervisor()
+        site.start_supervisor()
+        await client_wait_ready(client, executor=False)
+        assert (await client.state()).queue_length == 10_000
+
+    site.run(body)
+
+
+def test_reorder_is_served_and_survives_a_restart(site: Site) -> None:
+    site.start_supervisor()
+
+    async def body(bus: Bus) -> None:
+        client = Client(bus, "r1")
+        await client_wait_ready(client, executor=False)
+        a, b, c = await client.submit(order("mul", a=1, b=1), order("mul", a=2, b=2)) + (
+            await client.submit(order("mul", a=3, b=3))
+        )
+        assert isinstance(await client.ask(Reorder(order_id=c, position=0)), Done)
+        assert [r.id for r in (await client.state()).queue] == [c, a, b]
+        missing = await client.ask(Reorder(order_id="nope", position=0))
+        assert isinstance(missing, Failed)
+        assert "'nope' is not queued" in missing.reason
+
+        site.kill_supervisor()
+        site.start_supervisor()
+        await client_wait_ready(client, executor=False)
+        assert [r.id for r in (await client.state()).queue] == [c, a, b]
+        site.start_executor()
+        await client.finished(b)
+        assert [r.id for r in (await client.history()).records] == [b, a, c]
+
+    site.run(body)
+
+
+def test_cancel_racing_the_end_of_an_order_records_what_happened(site: Site) -> None:
+    site.start_supervisor()
+    site.start_executor()
+
+    async def body(bus: Bus) -> None:
+        client = Client(bus, "r1")
+        await client_wait_ready(client)
+        ids = []
+        for i in range(20):
+            (order_id,) = await client.submit(order("slow", seconds=0.2 + 0.01 * i))
+            ids.append(order_id)
+            await client.wait_state(lambda s: s.current is not None, "the order to run")
+            await asyncio.sleep(0.15 + 0.01 * i)
+            await client.ask(Cancel(order_id=order_id))
+            await client.finished(order_id)
+        records = {r.id: r for r in (await client.history()).records}
+        assert set(ids) <= set(records)
+        for order_id in ids:
+            record = records[order_id]
+            assert record.status in (OrderStatus.SUCCEEDED, OrderStatus.CANCELLED)
+            # a succeeded order carries the executor's own result message
+            assert record.message == ("slept" if record.status == "succeeded" else "cancelled")
+        state = await client.state()
+        assert state.current is None
+        assert not state.queue
+
+    site.run(body)
+
+
+def test_history_pages(site: Site) -> None:
+    site.start_supervisor()
+    site.start_executor()
+
+    async def body(bus: Bus) -> None:
+        client = Client(bus, "r1")
+        await client_wait_ready(client)
+        ids = await client.submit(*(order("mul", a=i, b=1) for i in range(25)))
+        await client.finished(ids[-1])
+        first = await client.history(0, 10)
+        assert first.total == 25
+        assert [r.id for r in first.records] == list(reversed(ids))[:10]
+        last = await client.history(20, 10)
+        assert [r.id for r in last.records] == list(reversed(ids))[20:]
+        assert all(r.started_at and r.ended_at and r.submitted_at for r in last.records)
+        bad = await client.ask(GetHistory(offset=-1, limit=0))
+        assert isinstance(bad, Failed)
+        assert "offset >= 0" in bad.reason
+
+    site.run(body)
+
+
+def test_each_robot_has_its_own_queue_and_executor(site: Site) -> None:
+    site.start_supervisor()
+    site.start_executor("r1")
+
+    async def body(bus: Bus) -> None:
+        one, two = Client(bus, "r1"), Client(bus, "r2")
+        await client_wait_ready(one)
+        (for_two,) = await two.submit(order("mul", a=2, b=2))  # r2 has no executor yet
+        (for_one,) = await one.submit(order("mul", a=1, b=1))
+        assert (await one.finished(for_one)).status == OrderStatus.SUCCEEDED
+        state_two = await two.state()
+        assert not state_two.executor_online
+        assert [r.id for r in state_two.queue] == [for_two]
+        assert for_two not in {r.id for r in (await one.history()).records}
+        site.start_executor("r2")
+        assert (await two.finished(for_two)).message == "2 x 2 = 4"
+        assert for_one not in {r.id for r in (await two.history()).records}
+
+    site.run(body)
+
+
+def test_emergency_stop_halts_a_moving_robot_at_once(site: Site) -> None:
+    site.processes.start("services.sim", "--connect", site.router)
+    site.start_supervisor()
+    site.start_executor()
+    codec = Ros2Codec(RosDistro.JAZZY)
+
+    async def body(bus: Bus) -> None:
+        odometry: list[tuple[float, Odometry]] = []
+        loop = asyncio.get_running_loop()
+        bus.subscribe(
+            BridgeKeys().odom,
+            codec.read_odometry,
+            lambda _key, odom: odometry.append((loop.time(), odom)),
+        )
+        client = Client(bus, "r1")
+        await client_wait_ready(client)
+        far = Order(
+            order="goal",
+            label="mbgoal",
+            description="reach far",
+            target_pose=TargetPose(frame="map", x=8.0, y=0.0),
+        )
+        (moving, queued) = await client.submit(far, order("mul", a=1, b=1))
+        await client.wait_state(lambda s: s.current is not None, "navigation to start")
+        await async_wait_until(
+            lambda: odometry and odometry[-1][1].linear_x > 0.3, 20.0, "the robot to drive"
+        )
+        stopped_at = loop.time()
+        assert isinstance(await client.ask(EmergencyStop()), Done)
+        await async_wait_until(
+            lambda: (
+                odometry[-1][0] > stopped_at
+                and odometry[-1][1].linear_x == 0.0
+                and odometry[-1][1].angular_z == 0.0
+            ),
+            5.0,
+            "zero velocity on odom",
+        )
+        halt_latency = (
+            next(t for t, odom in odometry if t > stopped_at and odom.linear_x == 0.0) - stopped_at
+        )
+        print(f"emergency stop to zero velocity on odom: {halt_latency * 1000:.0f} ms")
+        assert halt_latency < 1.0
+        assert (await client.finished(moving)).status == OrderStatus.CANCELLED
+        assert (await client.finished(queued)).message == "emergency stop"
+
+    site.run(body)
