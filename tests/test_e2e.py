@@ -126,6 +126,23 @@ def test_panel_api_needs_the_token_and_drives_the_robot(stack: Stack) -> None:
         assert unknown.status_code == 409
         assert "neither queued nor running" in unknown.json()["error"]
 
+        said = http.post(
+            "/api/say",
+            json={"text": "reach bathroom then reach kitchen then reach base"},
+            headers=auth,
+        )
+        _, kitchen, base = said.json()["order_ids"]
+        moved = http.post("/api/reorder", json={"order_id": base, "position": 0}, headers=auth)
+        assert moved.status_code == 200, moved.text
+        queued = [r["id"] for r in http.get("/api/state", headers=auth).json()["queue"]]
+        assert queued[0] == base  # next, ahead of kitchen (bathroom may still be queued too)
+        assert kitchen in queued
+        assert http.post("/api/cancel_all", headers=auth).status_code == 200
+        page = http.get("/api/history", params={"limit": 2}, headers=auth).json()
+        assert page["type"] == "historypage"
+        assert len(page["records"]) == 2
+        assert http.get("/api/history", params={"limit": "x"}, headers=auth).status_code == 400
+
 
 def test_up_stops_every_child_on_sigint(stack: Stack) -> None:
     stack.process.send_signal(signal.SIGINT)
@@ -136,3 +153,27 @@ def test_up_stops_every_child_on_sigint(stack: Stack) -> None:
         ["pgrep", "-f", f"--connect {stack.router}"], capture_output=True, text=True, check=False
     )
     assert leftovers.stdout.strip() == "", leftovers.stdout
+
+
+def test_supervisor_commands_from_the_cli(stack: Stack) -> None:
+    said = stack.voicectl("say", "--connect", stack.router, "multiply primes then turn back")
+    assert said.returncode == 0, said.stderr
+    first, second = json.loads(said.stdout)["order_ids"]
+    moved = stack.voicectl("reorder", "--connect", stack.router, second, "0")
+    # the first order may already have run; either way the answer is one clear line
+    assert moved.returncode in (0, 1), moved.stderr
+    unknown = stack.voicectl("cancel", "--connect", stack.router, "nope")
+    assert unknown.returncode == 1
+    assert unknown.stderr == "voicectl cancel: order 'nope' is neither queued nor running\n"
+    stopped = stack.voicectl("stop", "--connect", stack.router)
+    assert stopped.returncode == 0, stopped.stderr
+    assert json.loads(stopped.stdout)["type"] == "done"
+
+    def both_finished() -> bool:
+        page = json.loads(stack.voicectl("history", "--connect", stack.router).stdout)
+        return {first, second} <= {r["id"] for r in page["records"]}
+
+    wait_until(both_finished, 30.0, "both orders in the history")
+    page = json.loads(stack.voicectl("history", "--connect", stack.router, "--limit", "1").stdout)
+    assert page["total"] >= 2
+    assert len(page["records"]) == 1

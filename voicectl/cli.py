@@ -16,10 +16,16 @@ from shared.config import default_token_file, load_or_create_token
 from shared.errors import BusError, OrdersFileError
 from shared.keys import ConverterKeys, RobotKeys, check_chunk
 from shared.messages import (
+    Cancel,
+    CancelAll,
+    EmergencyStop,
     Failed,
+    GetHistory,
     GetState,
+    Message,
     ParseReply,
     ParseRequest,
+    Reorder,
     StateReply,
     Submit,
     Submitted,
@@ -75,9 +81,22 @@ def build_parser() -> argparse.ArgumentParser:
     add_bus_arguments(say)
     say.add_argument("text")
 
-    state = sub.add_parser("state", help="print the supervisor's state as JSON")
-    state.add_argument("--robot", type=_robot, default="robot")
-    add_bus_arguments(state)
+    def supervisor_command(name: str, help_text: str) -> argparse.ArgumentParser:
+        command = sub.add_parser(name, help=help_text)
+        command.add_argument("--robot", type=_robot, default="robot")
+        add_bus_arguments(command)
+        return command
+
+    supervisor_command("state", "print the supervisor's state as JSON")
+    history = supervisor_command("history", "print a page of finished orders as JSON")
+    history.add_argument("--offset", type=int, default=0)
+    history.add_argument("--limit", type=int, default=20)
+    supervisor_command("cancel", "cancel a queued or running order").add_argument("order_id")
+    supervisor_command("cancel-all", "cancel the queue and the running order")
+    supervisor_command("stop", "emergency stop: halt the robot now and clear the queue")
+    reorder = supervisor_command("reorder", "move a queued order (position 0 is next)")
+    reorder.add_argument("order_id")
+    reorder.add_argument("position", type=int)
 
     token = sub.add_parser("token", help="print the panel's API token (creating it if needed)")
     token.add_argument("--token-file", type=Path, default=None)
@@ -99,7 +118,20 @@ def main(argv: list[str] | None = None) -> int:
         case "say":
             return asyncio.run(_say(args))
         case "state":
-            return asyncio.run(_state(args))
+            return asyncio.run(_ask_supervisor(args, GetState()))
+        case "history":
+            return asyncio.run(
+                _ask_supervisor(args, GetHistory(offset=args.offset, limit=args.limit))
+            )
+        case "cancel":
+            return asyncio.run(_ask_supervisor(args, Cancel(order_id=args.order_id)))
+        case "cancel-all":
+            return asyncio.run(_ask_supervisor(args, CancelAll()))
+        case "stop":
+            return asyncio.run(_ask_supervisor(args, EmergencyStop()))
+        case "reorder":
+            request = Reorder(order_id=args.order_id, position=args.position)
+            return asyncio.run(_ask_supervisor(args, request))
         case "token":
             print(load_or_create_token(args.token_file or default_token_file()))
             return 0
@@ -178,20 +210,25 @@ async def _say(args: argparse.Namespace) -> int:
     return 0 if result.orders and not result.errors else 1
 
 
-async def _state(args: argparse.Namespace) -> int:
+async def _ask_supervisor(args: argparse.Namespace, request: Message) -> int:
+    """Send one request to the robot's supervisor and print the answer as JSON."""
     keys = RobotKeys(args.robot)
     with Bus.open(bus_options(args), asyncio.get_running_loop()) as bus:
         try:
             reply = await bus.request(
-                keys.supervisor, GetState(), json_decoder(SupervisorReply), timeout=5.0
+                keys.supervisor, request, json_decoder(SupervisorReply), timeout=10.0
             )
         except BusError as exc:
-            print(f"voicectl state: {exc}", file=sys.stderr)
+            print(f"voicectl {args.command}: {exc}", file=sys.stderr)
             return 3
-    if not isinstance(reply, StateReply):
-        print(f"voicectl state: unexpected reply {reply}", file=sys.stderr)
-        return 1
-    _print_json(reply.state)
+    match reply:
+        case Failed(reason=reason):
+            print(f"voicectl {args.command}: {reason}", file=sys.stderr)
+            return 1
+        case StateReply(state=state):
+            _print_json(state)
+        case _:
+            _print_json(reply)
     return 0
 
 

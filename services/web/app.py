@@ -30,12 +30,14 @@ from shared.messages import (
     Done,
     EmergencyStop,
     Failed,
+    GetHistory,
     GetState,
     Message,
     Order,
     ParseReply,
     ParseRequest,
     Proposal,
+    Reorder,
     StateReply,
     StateUpdate,
     Submit,
@@ -61,6 +63,11 @@ class TextBody(msgspec.Struct, forbid_unknown_fields=True):
 
 class CancelBody(msgspec.Struct, forbid_unknown_fields=True):
     order_id: str
+
+
+class ReorderBody(msgspec.Struct, forbid_unknown_fields=True):
+    order_id: str
+    position: int
 
 
 class ApiError(Exception):
@@ -117,7 +124,9 @@ class Panel:
             Route("/api/cancel", api(self._cancel), methods=["POST"]),
             Route("/api/cancel_all", api(self._cancel_all), methods=["POST"]),
             Route("/api/stop", api(self._stop), methods=["POST"]),
+            Route("/api/reorder", api(self._reorder), methods=["POST"]),
             Route("/api/state", api(self._state)),
+            Route("/api/history", api(self._history)),
             Route("/api/events", api(self._events)),
         ]
         return Starlette(routes=routes)
@@ -220,6 +229,19 @@ class Panel:
     async def _done(self, request: Message) -> object:
         reply = await self._ask_supervisor(request)
         return {"detail": reply.detail if isinstance(reply, Done) else ""}
+
+    async def _reorder(self, request: Request) -> object:
+        body = await self._body(request, ReorderBody)
+        assert isinstance(body, ReorderBody)
+        return await self._done(Reorder(order_id=body.order_id, position=body.position))
+
+    async def _history(self, request: Request) -> object:
+        try:
+            offset = int(request.query_params.get("offset", "0"))
+            limit = int(request.query_params.get("limit", "50"))
+        except ValueError as exc:
+            raise ApiError(400, "offset and limit must be integers") from exc
+        return await self._ask_supervisor(GetHistory(offset=offset, limit=limit))
 
     async def _state(self, _request: Request) -> object:
         reply = await self._ask_supervisor(GetState())

@@ -39,11 +39,18 @@ function showProposal(transcript, result) {
   $("send").disabled = result.orders.length === 0;
 }
 
-function orderLine(record) {
+function orderLine(record, index) {
   const item = el("li", `${record.order.description} `);
   const cancel = el("button", "cancel", "small");
   cancel.onclick = () => api("/api/cancel", { order_id: record.id }).catch((e) => setStatus(e.message));
   item.append(cancel);
+  if (index > 0) {
+    const up = el("button", "↑", "small");
+    up.title = "run earlier";
+    up.onclick = () => api("/api/reorder", { order_id: record.id, position: index - 1 })
+      .catch((e) => setStatus(e.message));
+    item.append(up);
+  }
   return item;
 }
 
@@ -55,7 +62,7 @@ function showState(state) {
   const current = state.current;
   if (current) {
     const box = el("div");
-    box.append(orderLine(current));
+    box.append(orderLine(current, 0));
     const p = current.progress;
     if (p) {
       box.append(el("div", p.text, "muted"));
@@ -74,6 +81,8 @@ function showState(state) {
     $("current").className = "muted";
   }
   $("queue").replaceChildren(...state.queue.map(orderLine));
+  const more = state.queue_length - state.queue.length;
+  if (more > 0) $("queue").append(el("li", `… and ${more} more`, "muted"));
   $("history").replaceChildren(...state.history.map((r) => {
     const row = el("tr");
     const ended = r.ended_at ? new Date(r.ended_at * 1000).toLocaleTimeString() : "";

@@ -1,0 +1,243 @@
+"""Supervisor overhead: submit round trip, submit-to-dispatch latency and orders accepted
+per second with durability on, beside a raw Zenoh request/reply measured in the same run.
+
+    .venv/bin/python bench/supervisor.py [--orders 10000] [--durability process|power]
+
+Everything runs on loopback: a router and the supervisor as their own processes, a raw
+echo queryable as its own process (the baseline), and this process as client and as the
+robot's executor (it accepts every order and reports it done at once).
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import zenoh
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from shared.bus import Bus, BusOptions, json_decoder  # noqa: E402
+from shared.errors import BusError  # noqa: E402
+from shared.keys import RobotKeys  # noqa: E402
+from shared.messages import (  # noqa: E402
+    Accepted,
+    Done,
+    Execute,
+    ExecutorRequest,
+    GetState,
+    Message,
+    Order,
+    OrderFinished,
+    OrderStatus,
+    StateReply,
+    Submit,
+    Submitted,
+    SupervisorReply,
+)
+
+ECHO = """
+import sys, time, zenoh
+conf = zenoh.Config()
+conf.insert_json5("mode", '"client"')
+conf.insert_json5("connect/endpoints", '["%s"]')
+conf.insert_json5("scouting/multicast/enabled", "false")
+conf.insert_json5("connect/timeout_ms", "-1")
+with zenoh.open(conf) as session:
+    def echo(query):
+        query.reply(query.key_expr, query.payload.to_bytes() if query.payload is not None else b"")
+    queryable = session.declare_queryable("bench/echo", echo)
+    print("ready", flush=True)
+    sys.stdin.read()
+"""
+
+
+def free_port() -> int:
+    import socket
+
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        port: int = sock.getsockname()[1]
+        return port
+
+
+def percentile(values: list[float], q: float) -> float:
+    ordered = sorted(values)
+    return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
+
+
+def describe(name: str, seconds: list[float]) -> tuple[float, float]:
+    p50, p99 = percentile(seconds, 0.5) * 1e3, percentile(seconds, 0.99) * 1e3
+    print(f"{name:<42} p50 {p50:7.3f} ms   p99 {p99:7.3f} ms   (n={len(seconds)})")
+    return p50, p99
+
+
+async def raw_round_trips(bus: Bus, count: int) -> list[float]:
+    payload = b"x" * 200
+    times = []
+    for _ in range(count):
+        start = time.perf_counter()
+        await bus.request_bytes("bench/echo", payload, 5.0)
+        times.append(time.perf_counter() - start)
+    return times
+
+
+class FakeExecutor:
+    """The robot's executor for the benchmark: takes every order, finishes it at once."""
+
+    def __init__(self, bus: Bus, robot: str) -> None:
+        self.bus = bus
+        self.keys = RobotKeys(robot)
+        self.arrivals: dict[str, float] = {}
+        self.arrived = asyncio.Event()
+
+    def start(self) -> None:
+        self.bus.serve(self.keys.executor_execute, json_decoder(ExecutorRequest), self.handle)
+        self.bus.serve(self.keys.executor_control, json_decoder(ExecutorRequest), self.handle)
+        self.bus.announce(self.keys.alive("executor"))
+
+    async def handle(self, request: ExecutorRequest) -> Message:
+        match request:
+            case Execute(order_id=order_id):
+                self.arrivals[order_id] = time.perf_counter()
+                self.arrived.set()
+                asyncio.get_running_loop().call_soon(self._finish, order_id)
+                return Accepted(order_id=order_id)
+        return Done()
+
+    def _finish(self, order_id: str) -> None:
+        self.bus.publish(
+            self.keys.executor_events,
+            OrderFinished(order_id=order_id, status=OrderStatus.SUCCEEDED, message="ok"),
+        )
+
+
+async def wait_for_executor(bus: Bus, keys: RobotKeys) -> None:
+    decode = json_decoder(SupervisorReply)
+    for _ in range(400):
+        try:
+            reply = await bus.request(keys.supervisor, GetState(), decode, 2.0)
+            if isinstance(reply, StateReply) and reply.state.executor_online:
+                return
+        except BusError:
+            pass
+        await asyncio.sleep(0.05)
+    raise SystemExit("the supervisor never saw the benchmark's executor")
+
+
+async def measure(router: str, orders: int, round_trips: int) -> None:
+    options = BusOptions(connect=[router])
+    order = Order(order="bench", label="bench", description="bench")
+    decode = json_decoder(SupervisorReply)
+    with Bus.open(options, asyncio.get_running_loop()) as bus:
+        for _ in range(100):  # until the echo's queryable has reached the router
+            try:
+                await bus.request_bytes("bench/echo", b"warm-up", 5.0)
+                break
+            except BusError:
+                await asyncio.sleep(0.1)
+        raw = await raw_round_trips(bus, round_trips)
+
+        executor = FakeExecutor(bus, "bench")
+        executor.start()
+        keys = RobotKeys("bench")
+        await wait_for_executor(bus, keys)
+
+        submit_times: list[float] = []
+        dispatch_times: list[float] = []
+        for i in range(round_trips):
+            start = time.perf_counter()
+            reply = await bus.request(
+                keys.supervisor, Submit(request_id=f"rt{i}", orders=[order]), decode, 5.0
+            )
+            submit_times.append(time.perf_counter() - start)
+            assert isinstance(reply, Submitted), reply
+            (order_id,) = reply.order_ids
+            while order_id not in executor.arrivals:
+                executor.arrived.clear()
+                await executor.arrived.wait()
+            dispatch_times.append(executor.arrivals[order_id] - start)
+            await asyncio.sleep(0.001)  # let the order finish before the next submit
+
+        # Throughput: a robot without an executor, so every order stays queued (and stored).
+        burst = RobotKeys("burst")
+        in_flight = 64
+        accepted = 0
+
+        async def worker(first: int) -> None:
+            nonlocal accepted
+            for i in range(first, orders, in_flight):
+                reply = await bus.request(
+                    burst.supervisor, Submit(request_id=f"b{i}", orders=[order]), decode, 10.0
+                )
+                assert isinstance(reply, Submitted), reply
+                accepted += 1
+
+        start = time.perf_counter()
+        await asyncio.gather(*(worker(k) for k in range(in_flight)))
+        elapsed = time.perf_counter() - start
+
+    print()
+    raw50, _ = describe("raw Zenoh request/reply (baseline)", raw)
+    sub50, _ = describe("supervisor submit round trip", submit_times)
+    dis50, _ = describe("submit to dispatch (order at the executor)", dispatch_times)
+    print(f"{'orders accepted per second (64 in flight)':<42} {accepted / elapsed:9.0f} /s")
+    print(f"{'submit / raw round trip (p50)':<42} {sub50 / raw50:9.2f} x")
+    print(f"{'submit-to-dispatch / raw round trip (p50)':<42} {dis50 / raw50:9.2f} x")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--orders", type=int, default=10_000, help="orders in the burst")
+    parser.add_argument("--round-trips", type=int, default=1000)
+    parser.add_argument("--durability", choices=["process", "power"], default="process")
+    args = parser.parse_args()
+    router = f"tcp/127.0.0.1:{free_port()}"
+    with tempfile.TemporaryDirectory() as tmp:
+        python = sys.executable
+        children = [
+            subprocess.Popen([python, "-m", "services.router", "--listen", router], cwd=REPO),
+            subprocess.Popen(
+                [
+                    python,
+                    "-m",
+                    "services.supervisor",
+                    "--connect",
+                    router,
+                    "--db",
+                    f"{tmp}/bench.sqlite3",
+                    "--durability",
+                    args.durability,
+                ],
+                cwd=REPO,
+                stderr=subprocess.DEVNULL,
+            ),
+        ]
+        echo = subprocess.Popen(
+            [python, "-c", ECHO % router], stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True
+        )
+        try:
+            assert echo.stdout is not None
+            echo.stdout.readline()
+            print(
+                f"zenoh {zenoh.__version__ if hasattr(zenoh, '__version__') else ''}, "
+                f"durability {args.durability}, {args.orders} orders in the burst"
+            )
+            asyncio.run(measure(router, args.orders, args.round_trips))
+        finally:
+            if echo.stdin is not None:
+                echo.stdin.close()
+            echo.wait(timeout=10)
+            for child in reversed(children):
+                child.terminate()
+                child.wait(timeout=10)
+
+
+if __name__ == "__main__":
+    main()
