@@ -88,3 +88,52 @@ def test_executors_doc_user_executor_runs_as_written(tmp_path: Path) -> None:
         stack.send_signal(2)
         output, _ = stack.communicate(timeout=30)
         assert stack.returncode == 0, output
+
+
+@pytest.mark.e2e
+def test_executors_doc_tutorials_run_as_written(tmp_path: Path) -> None:
+    doc = DOCS / "executors.md"
+    up_args = block_after(doc, "Start the stack with them", "sh").strip().split()[1:]
+    photo = block_after(doc, "**Take a photo.**", "sh").strip().split(" ", 2)[2]
+    multiply = block_after(doc, "**Parameters and cases.**", "sh").strip().split(" ", 2)[2]
+    router = f"tcp/127.0.0.1:{free_port()}"
+    env = {"VOICECTL_DATA": str(tmp_path / "data"), "PATH": "/usr/bin:/bin"}
+    stack = subprocess.Popen(
+        [sys.executable, "-m", "voicectl", *up_args, "--router", router, "--no-web"],
+        cwd=REPO,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        env=env,
+        start_new_session=True,
+    )
+
+    def voicectl(*args: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run(
+            [sys.executable, "-m", "voicectl", *args, "--connect", router],
+            capture_output=True,
+            text=True,
+            cwd=REPO,
+            env=env,
+            timeout=30,
+            check=False,
+        )
+
+    def messages() -> list[str]:
+        return [h["message"] for h in json.loads(voicectl("history").stdout)["records"]]
+
+    try:
+        wait_until(lambda: '"executor_online": true' in voicectl("state").stdout, 60.0, "stack")
+        for command in (photo, multiply):
+            text = json.loads(command)
+            said = voicectl("say", text)
+            assert said.returncode == 0, said.stderr
+        wait_until(lambda: len(messages()) == 2, 30.0, "both tutorial orders")
+        product, saved = messages()  # most recent first
+        assert product == "10 x 20 = 200"
+        assert saved.startswith("saved 64x48 photo to ")
+        assert Path(saved.removeprefix("saved 64x48 photo to ")).is_file()
+    finally:
+        stack.send_signal(2)
+        output, _ = stack.communicate(timeout=30)
+        assert stack.returncode == 0, output

@@ -7,8 +7,10 @@ import asyncio
 import logging
 import os
 import sys
+from pathlib import Path
 
 from shared.bus import Bus, add_bus_arguments, bus_options, setup_logging, wait_for_stop
+from shared.config import data_dir
 from shared.keys import BridgeKeys, RobotKeys, check_chunk
 from shared.ros2 import Ros2Codec, RosDistro
 
@@ -48,6 +50,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         help="bind a user executor class to labels (repeatable)",
     )
     parser.add_argument(
+        "--photo-dir",
+        type=Path,
+        default=None,
+        help="where the pic executor saves photos (default: data dir/photos)",
+    )
+    parser.add_argument(
         "--cancel-deadline",
         type=float,
         default=2.0,
@@ -61,7 +69,7 @@ async def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     setup_logging(args.debug)
     bindings = Bindings()
-    for executor in builtin_executors():
+    for executor in builtin_executors(args.photo_dir or data_dir() / "photos"):
         bindings.bind(executor, executor.labels)
     try:
         for spec in args.executor:

@@ -11,7 +11,15 @@ from shared.bus import Bus
 from shared.errors import BusError, OrderFailed
 from shared.keys import BridgeKeys
 from shared.messages import TargetPose
-from shared.ros2 import GoalStatus, NavigateFeedback, Odometry, Pose2D, Ros2Codec, new_goal_id
+from shared.ros2 import (
+    GoalStatus,
+    Image,
+    NavigateFeedback,
+    Odometry,
+    Pose2D,
+    Ros2Codec,
+    new_goal_id,
+)
 
 _LOGGER = logging.getLogger(__name__)
 
@@ -30,16 +38,47 @@ class RobotLink:
         self.codec = codec
         self.pose: Pose2D | None = None
         """Latest pose from odometry, None until the first message."""
+        self.image: Image | None = None
+        """Latest camera frame, None until the first one."""
         self._feedback: dict[bytes, Callable[[Pose2D, float], None]] = {}
+        self._odometry = asyncio.Event()
+        self._frame = asyncio.Event()
 
     def start(self) -> None:
         self.bus.subscribe(self.keys.odom, self.codec.read_odometry, self._on_odom)
         self.bus.subscribe(
             self.keys.action(NAVIGATE, "feedback"), self.codec.read_feedback, self._on_feedback
         )
+        self.bus.subscribe(self.keys.camera_image, self.codec.read_image, self._on_image)
 
     def _on_odom(self, _key: str, odometry: Odometry) -> None:
         self.pose = odometry.pose
+        self._odometry.set()
+
+    def _on_image(self, _key: str, image: Image) -> None:
+        self.image = image
+        self._frame.set()
+
+    async def next_pose(self, timeout: float = 5.0) -> Pose2D:
+        """The next odometry pose (fresher than any seen so far)."""
+        self._odometry.clear()
+        try:
+            await asyncio.wait_for(self._odometry.wait(), timeout)
+        except TimeoutError:
+            raise OrderFailed(f"no odometry on '{self.keys.odom}' for {timeout:g} s") from None
+        assert self.pose is not None
+        return self.pose
+
+    async def next_image(self, timeout: float = 5.0) -> Image:
+        """The next camera frame (taken after this call)."""
+        self._frame.clear()
+        try:
+            await asyncio.wait_for(self._frame.wait(), timeout)
+        except TimeoutError:
+            key = self.keys.camera_image
+            raise OrderFailed(f"no camera frame on '{key}' for {timeout:g} s") from None
+        assert self.image is not None
+        return self.image
 
     def _on_feedback(self, _key: str, feedback: NavigateFeedback) -> None:
         listener = self._feedback.get(feedback.goal_id)

@@ -72,6 +72,11 @@ class ExecutorService:
         self._robot.start()
         self._bus.serve(self._keys.executor_execute, json_decoder(ExecutorRequest), self.handle)
         self._bus.serve(self._keys.executor_control, json_decoder(ExecutorRequest), self.handle)
+        for label in self._bindings.labels:
+            try:
+                self._bus.announce(self._keys.label(label))
+            except ValueError as exc:  # still served; only not announced
+                _LOGGER.warning("label not announced: %s", exc)
         self._bus.announce(self._keys.alive("executor"))
 
     async def handle(self, request: ExecutorRequest) -> Message:

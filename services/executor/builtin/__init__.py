@@ -1,9 +1,13 @@
 """Executors shipped with voicectl, bound by default."""
 
+from pathlib import Path
+
 from ..framework import Executor
 from .mbgoal import NavigateToPose
+from .motion import Drive, Rotate
 from .mul import Multiply
+from .pic import TakePhoto
 
 
-def builtin_executors() -> list[Executor]:
-    return [NavigateToPose(), Multiply()]
+def builtin_executors(photo_directory: Path) -> list[Executor]:
+    return [NavigateToPose(), Drive(), Rotate(), Multiply(), TakePhoto(photo_directory)]

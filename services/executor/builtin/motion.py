@@ -1,0 +1,126 @@
+"""`drive` and `rotate`: closed loops on cmd_vel and odometry, for robots without Nav2.
+
+Distances come from the order's `distance` / `angle` parameters, or else from a
+`base_link` target pose (x for drive, yaw for rotate), so the seed's "move forward" and
+"turn left" orders work with either label. Speeds can be set per order (`speed` in m/s,
+`angular_speed` in rad/s). Each odometry message (20 Hz on the simulator) paces one
+command, well inside a base's cmd_vel watchdog.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+from collections.abc import Callable
+
+from shared.errors import OrderFailed
+from shared.messages import Order
+from shared.ros2 import Pose2D
+
+from ..framework import ExecutionContext, Executor
+
+STALL_S = 3.0
+"""No progress for this long while commanding motion: the robot is blocked."""
+
+
+class Drive(Executor):
+    """Drive straight by `distance` metres (negative: backwards)."""
+
+    labels = ("drive",)
+
+    async def execute(self, order: Order, ctx: ExecutionContext) -> str | None:
+        distance = _relative_target(order, "distance", "x")
+        speed = _number(order, "speed") or 0.3
+        start = await ctx.robot.next_pose()
+
+        def travelled(pose: Pose2D) -> float:
+            return (pose.x - start.x) * math.cos(start.yaw) + (pose.y - start.y) * math.sin(
+                start.yaw
+            )
+
+        def command(velocity: float, remaining: float) -> None:
+            ctx.robot.drive(velocity, 0.0)
+            ctx.progress(f"{abs(remaining):.2f} m to go", distance_linear=abs(remaining))
+
+        await _close_loop(ctx, distance, travelled, command, speed, gain=1.5, tolerance=0.02)
+        return f"drove {distance:g} m"
+
+
+class Rotate(Executor):
+    """Turn in place by `angle` radians (positive: counter-clockwise)."""
+
+    labels = ("rotate",)
+
+    async def execute(self, order: Order, ctx: ExecutionContext) -> str | None:
+        angle = _relative_target(order, "angle", "yaw")
+        speed = _number(order, "angular_speed") or 1.0
+        turned = _Unwrapped((await ctx.robot.next_pose()).yaw)
+
+        def command(velocity: float, remaining: float) -> None:
+            ctx.robot.drive(0.0, velocity)
+            ctx.progress(f"{abs(remaining):.2f} rad to go", distance_angular=abs(remaining))
+
+        await _close_loop(ctx, angle, turned.update, command, speed, gain=2.0, tolerance=0.02)
+        return f"turned {angle:g} rad"
+
+
+async def _close_loop(
+    ctx: ExecutionContext,
+    goal: float,
+    measure: Callable[[Pose2D], float],
+    command: Callable[[float, float], None],
+    max_speed: float,
+    gain: float,
+    tolerance: float,
+) -> None:
+    """Command a proportional, capped velocity until `measure` reaches `goal`; always
+    leave the robot stopped, whether it arrived, failed or was cancelled."""
+    best = math.inf
+    last_progress = asyncio.get_running_loop().time()
+    try:
+        while True:
+            remaining = goal - measure(await ctx.robot.next_pose())
+            if abs(remaining) <= tolerance:
+                return
+            now = asyncio.get_running_loop().time()
+            if abs(remaining) < best - tolerance / 2:
+                best, last_progress = abs(remaining), now
+            elif now - last_progress > STALL_S:
+                raise OrderFailed(f"no progress for {STALL_S:g} s, {abs(remaining):.2f} short")
+            speed = max(min(max_speed, gain * abs(remaining)), 0.05 * max_speed)
+            command(math.copysign(speed, remaining), remaining)
+    finally:
+        ctx.robot.drive(0.0, 0.0)
+
+
+class _Unwrapped:
+    """Total angle turned since the start, across the ±π wrap."""
+
+    def __init__(self, start_yaw: float) -> None:
+        self._last = start_yaw
+        self._total = 0.0
+
+    def update(self, pose: Pose2D) -> float:
+        step = pose.yaw - self._last
+        self._total += math.atan2(math.sin(step), math.cos(step))
+        self._last = pose.yaw
+        return self._total
+
+
+def _number(order: Order, key: str) -> float | None:
+    value = order.params.get(key)
+    if value is None:
+        return None
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        raise OrderFailed(f"'{order.description}': parameter '{key}' must be a number")
+    return float(value)
+
+
+def _relative_target(order: Order, key: str, pose_field: str) -> float:
+    explicit = _number(order, key)
+    if explicit is not None:
+        return explicit
+    pose = order.target_pose
+    if pose is not None and pose.frame == "base_link":
+        return float(getattr(pose, pose_field))
+    raise OrderFailed(f"'{order.description}' needs a '{key}' parameter or a base_link target pose")
