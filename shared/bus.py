@@ -280,10 +280,20 @@ class Bus:
 
     # --- liveliness ------------------------------------------------------------------------
 
-    def announce(self, key: str) -> None:
-        """Hold a liveliness token on `key` until the bus closes."""
+    def announce(self, key: str) -> Callable[[], None]:
+        """Hold a liveliness token on `key` until the bus closes, or until the returned
+        function withdraws it (a service going away says so before it stops serving)."""
         token = self._session.liveliness().declare_token(key)
-        self._closers.callback(token.undeclare)
+        held = True
+
+        def withdraw() -> None:
+            nonlocal held
+            if held:
+                held = False
+                token.undeclare()
+
+        self._closers.callback(withdraw)
+        return withdraw
 
     def watch(self, key: str, handler: Callable[[str, bool], None]) -> None:
         """Call `handler(token_key, alive)` on the loop as tokens under `key` come and go."""

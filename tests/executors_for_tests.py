@@ -46,6 +46,7 @@ class Stubborn(Executor):
     labels = ("stubborn",)
 
     async def execute(self, order: Order, ctx: ExecutionContext) -> str | None:
+        ctx.progress("running, deaf to cancel")
         for _ in range(600):
             try:
                 await asyncio.sleep(0.1)

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import signal
+import sqlite3
 import subprocess
 import time
 from pathlib import Path
@@ -145,6 +146,16 @@ def test_panel_api_needs_the_token_and_drives_the_robot(stack: Stack) -> None:
 
 
 def test_up_stops_every_child_on_sigint(stack: Stack) -> None:
+    said = stack.voicectl("say", "--connect", stack.router, "reach bathroom then reach base")
+    running, queued = json.loads(said.stdout)["order_ids"]
+    wait_until(
+        lambda: (
+            running in stack.voicectl("state", "--connect", stack.router).stdout
+            and '"progress": {' in stack.voicectl("state", "--connect", stack.router).stdout
+        ),
+        30.0,
+        "the first order to be under way",
+    )
     stack.process.send_signal(signal.SIGINT)
     assert stack.process.wait(timeout=30) == 0
     time.sleep(0.5)
@@ -153,6 +164,12 @@ def test_up_stops_every_child_on_sigint(stack: Stack) -> None:
         ["pgrep", "-f", f"--connect {stack.router}"], capture_output=True, text=True, check=False
     )
     assert leftovers.stdout.strip() == "", leftovers.stdout
+    # The executor stopped before the robot: the running order was cancelled, not lost,
+    # and the rest of the utterance stays queued for the next start.
+    database = Path(stack.env["VOICECTL_DATA"]) / "supervisor.sqlite3"
+    with sqlite3.connect(database) as db:
+        status = dict(db.execute("SELECT id, status FROM orders").fetchall())
+    assert status == {running: "cancelled", queued: "queued"}
 
 
 def test_supervisor_commands_from_the_cli(stack: Stack) -> None:

@@ -144,7 +144,10 @@ def test_cancel_running_and_queued_orders(robot: Robot) -> None:
 def test_an_executor_that_ignores_cancel_is_cut_off(robot: Robot) -> None:
     async def body(client: Client) -> None:
         (stubborn,) = await client.submit(order("stubborn"))
-        await client.wait_state(lambda s: s.current is not None, "the order to start")
+        await client.wait_state(
+            lambda s: s.current is not None and s.current.progress is not None,
+            "the order to be running",
+        )
         await client.ask(Cancel(order_id=stubborn))
         record = await client.finished(stubborn, timeout=10.0)
         assert record.status == OrderStatus.CANCELLED

@@ -74,7 +74,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     parse = sub.add_parser("parse", help="print the orders a text becomes, as JSON")
     parse.add_argument("--orders", type=Path, default=REPO_ORDERS, help="orders file or directory")
-    parse.add_argument("text")
+    parse.add_argument(
+        "--grammar",
+        action="store_true",
+        help="print the recogniser grammar (JSGF, phrases, words) as JSON instead",
+    )
+    parse.add_argument("text", nargs="?", help="what was said or typed")
 
     say = sub.add_parser("say", help="convert a text on the bus and submit its orders")
     say.add_argument("--robot", type=_robot, default="robot")
@@ -143,6 +148,9 @@ def _up(args: argparse.Namespace) -> int:
     robot = ["--robot", args.robot]
     children = [
         Child("router", ["services.router", "--listen", args.router]),
+        # The robot before the services that drive it, so that it stops after them: on
+        # Ctrl-C the executor cancels a running order while the robot still listens.
+        Child("sim", ["services.sim", "--time-scale", str(args.time_scale), *connect]),
         Child("converter", ["services.converter", "--orders", str(args.orders), *connect]),
         Child("supervisor", ["services.supervisor", *robot, *connect]),
         Child(
@@ -150,7 +158,6 @@ def _up(args: argparse.Namespace) -> int:
             ["services.executor", *robot, *connect]
             + [arg for spec in args.executor for arg in ("--executor", spec)],
         ),
-        Child("sim", ["services.sim", "--time-scale", str(args.time_scale), *connect]),
     ]
     web = None
     if not args.no_web:
@@ -164,15 +171,22 @@ def _up(args: argparse.Namespace) -> int:
 
 
 def _parse(args: argparse.Namespace) -> int:
+    from services.converter.grammar import build_grammar
     from services.converter.orders import OrderSet
     from services.converter.parser import Parser
 
+    if args.text is None and not args.grammar:
+        print("voicectl parse: give a TEXT to parse, or --grammar", file=sys.stderr)
+        return 2
     try:
         orders = OrderSet.load(args.orders)
     except OrdersFileError as exc:
         print(f"voicectl parse: {exc}", file=sys.stderr)
         return 2
-    _print_json(Parser(orders).parse(args.text))
+    if args.grammar:
+        _print_json(build_grammar(orders))
+    else:
+        _print_json(Parser(orders).parse(args.text))
     return 0
 
 

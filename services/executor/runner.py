@@ -5,6 +5,7 @@ from __future__ import annotations
 import asyncio
 import collections
 import logging
+from collections.abc import Callable
 
 from shared.bus import Bus, json_decoder
 from shared.errors import OrderFailed
@@ -63,6 +64,7 @@ class ExecutorService:
         self._bindings = bindings
         self._cancel_deadline = cancel_deadline
         self._running: _Running | None = None
+        self._withdraw: Callable[[], None] = lambda: None
         self._recent: collections.OrderedDict[str, OrderFinished] = collections.OrderedDict()
         """The last results, to answer a cancel that crossed its order's end."""
         self.abandoned: set[asyncio.Task[None]] = set()
@@ -77,7 +79,7 @@ class ExecutorService:
                 self._bus.announce(self._keys.label(label))
             except ValueError as exc:  # still served; only not announced
                 _LOGGER.warning("label not announced: %s", exc)
-        self._bus.announce(self._keys.alive("executor"))
+        self._withdraw = self._bus.announce(self._keys.alive("executor"))
 
     async def handle(self, request: ExecutorRequest) -> Message:
         match request:
@@ -110,6 +112,8 @@ class ExecutorService:
                 return Running(order_id=running.order_id if running is not None else None)
 
     async def shutdown(self) -> None:
+        # Offline first, so the supervisor holds its queue instead of sending the next order.
+        self._withdraw()
         if self._running is not None:
             await self._cancel(self._running, "executor shutting down")
 

@@ -55,6 +55,8 @@ EXECUTOR_TIMEOUT = 5.0
 RESUME_GRACE = 3.0
 """After a restart, how long to wait for the executor before calling a restored running
 order interrupted."""
+LOST_GRACE = 0.5
+"""After the executor's token goes, how long its running order may still report a result."""
 PUBLISH_INTERVAL = 0.02
 MAX_HISTORY_PAGE = 500
 
@@ -217,11 +219,17 @@ class RobotSupervisor:
         _LOGGER.info("%s: executor %s", self.robot, "online" if alive else "lost")
         self._queue.executor_online = alive
         current = self._queue.current
+        loop = asyncio.get_running_loop()
         if alive and current is not None and not self._queue.current_verified:
-            self._tasks.append(asyncio.get_running_loop().create_task(self._verify(current.id)))
+            self._tasks.append(loop.create_task(self._verify(current.id)))
         elif not alive and current is not None and self._queue.current_verified:
-            self._finish(current.id, OrderStatus.FAILED, "executor lost")
+            # Its last result may still be on the way: a token's end travels ahead of data.
+            loop.call_later(LOST_GRACE, self._lost, current.id)
         self._changed()
+
+    def _lost(self, order_id: str) -> None:
+        if not self._queue.executor_online:
+            self._finish(order_id, OrderStatus.FAILED, "executor lost")
 
     async def _verify(self, order_id: str) -> None:
         """After a restart: resume the restored order if the executor still runs it."""
