@@ -177,7 +177,10 @@ def test_executor_lost_mid_order_pauses_the_queue(robot: Robot) -> None:
             order("slow"), order("mul", a=3, b=3), request_id="a"
         )
         (other,) = await client.submit(order("mul", a=4, b=4), request_id="b")
-        await client.wait_state(lambda s: s.current is not None, "the order to start")
+        await client.wait_state(
+            lambda s: s.current is not None and s.current.progress is not None,
+            "the executor to be running the order",
+        )
         executor = robot.processes.started[-1][1]
         executor.send_signal(signal.SIGKILL)
         executor.wait()
