@@ -2,10 +2,13 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import re
+import signal
 import subprocess
 import sys
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
@@ -40,67 +43,19 @@ def test_orders_doc_parse_example_prints_what_it_shows() -> None:
     assert json.loads(done.stdout) == shown
 
 
-@pytest.mark.e2e
-def test_executors_doc_user_executor_runs_as_written(tmp_path: Path) -> None:
-    doc = DOCS / "executors.md"
-    (tmp_path / "my_executors.py").write_text(
-        block_after(doc, "Save this as `my_executors.py`", "python")
-    )
-    (tmp_path / "my_orders.yaml").write_text(block_after(doc, "this as `my_orders.yaml`", "yaml"))
-    up_line = block_after(doc, "Start the stack with both", "sh").strip()
-    up_args = up_line.removeprefix(".venv/bin/voicectl ").split()
+Voicectl = Callable[..., subprocess.CompletedProcess[str]]
+
+
+@contextlib.contextmanager
+def documented_stack(up_args: list[str], cwd: Path, data: Path) -> Iterator[Voicectl]:
+    """`voicectl up` with a documented command line (plus a private router, no panel);
+    yields a function that runs other voicectl commands against it. Stops it with Ctrl-C
+    and checks it stopped cleanly."""
     router = f"tcp/127.0.0.1:{free_port()}"
-    env_dir = tmp_path / "data"
+    env = {"VOICECTL_DATA": str(data), "PATH": "/usr/bin:/bin", "PYTHONUNBUFFERED": "1"}
     stack = subprocess.Popen(
         [sys.executable, "-m", "voicectl", *up_args, "--router", router, "--no-web"],
-        cwd=tmp_path,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-        env={"VOICECTL_DATA": str(env_dir), "PATH": "/usr/bin:/bin", "PYTHONUNBUFFERED": "1"},
-        start_new_session=True,
-    )
-    try:
-
-        def say(*args: str) -> subprocess.CompletedProcess[str]:
-            return subprocess.run(
-                [sys.executable, "-m", "voicectl", *args, "--connect", router],
-                capture_output=True,
-                text=True,
-                cwd=tmp_path,
-                timeout=30,
-                check=False,
-            )
-
-        def ready() -> bool:
-            return '"executor_online": true' in say("state").stdout
-
-        wait_until(ready, 60.0, "the documented stack")
-        said = say("say", "pause")
-        assert said.returncode == 0, said.stderr
-
-        def waited() -> bool:
-            history = json.loads(say("state").stdout)["history"]
-            return any(h["message"] == "waited 3 s" for h in history)
-
-        wait_until(waited, 30.0, "the documented Wait executor to finish")
-    finally:
-        stack.send_signal(2)
-        output, _ = stack.communicate(timeout=30)
-        assert stack.returncode == 0, output
-
-
-@pytest.mark.e2e
-def test_executors_doc_tutorials_run_as_written(tmp_path: Path) -> None:
-    doc = DOCS / "executors.md"
-    up_args = block_after(doc, "Start the stack with them", "sh").strip().split()[1:]
-    photo = block_after(doc, "**Take a photo.**", "sh").strip().split(" ", 2)[2]
-    multiply = block_after(doc, "**Parameters and cases.**", "sh").strip().split(" ", 2)[2]
-    router = f"tcp/127.0.0.1:{free_port()}"
-    env = {"VOICECTL_DATA": str(tmp_path / "data"), "PATH": "/usr/bin:/bin"}
-    stack = subprocess.Popen(
-        [sys.executable, "-m", "voicectl", *up_args, "--router", router, "--no-web"],
-        cwd=REPO,
+        cwd=cwd,
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
         text=True,
@@ -113,27 +68,57 @@ def test_executors_doc_tutorials_run_as_written(tmp_path: Path) -> None:
             [sys.executable, "-m", "voicectl", *args, "--connect", router],
             capture_output=True,
             text=True,
-            cwd=REPO,
+            cwd=cwd,
             env=env,
             timeout=30,
             check=False,
         )
 
-    def messages() -> list[str]:
-        return [h["message"] for h in json.loads(voicectl("history").stdout)["records"]]
-
     try:
         wait_until(lambda: '"executor_online": true' in voicectl("state").stdout, 60.0, "stack")
+        yield voicectl
+    finally:
+        stack.send_signal(signal.SIGINT)
+        output, _ = stack.communicate(timeout=30)
+        assert stack.returncode == 0, output
+
+
+@pytest.mark.e2e
+def test_executors_doc_user_executor_runs_as_written(tmp_path: Path) -> None:
+    doc = DOCS / "executors.md"
+    (tmp_path / "my_executors.py").write_text(
+        block_after(doc, "Save this as `my_executors.py`", "python")
+    )
+    (tmp_path / "my_orders.yaml").write_text(block_after(doc, "this as `my_orders.yaml`", "yaml"))
+    up_line = block_after(doc, "Start the stack with both", "sh").strip()
+    up_args = up_line.removeprefix(".venv/bin/voicectl ").split()
+    with documented_stack(up_args, tmp_path, tmp_path / "data") as voicectl:
+        said = voicectl("say", "pause")
+        assert said.returncode == 0, said.stderr
+
+        def waited() -> bool:
+            history = json.loads(voicectl("state").stdout)["history"]
+            return any(h["message"] == "waited 3 s" for h in history)
+
+        wait_until(waited, 30.0, "the documented Wait executor to finish")
+
+
+@pytest.mark.e2e
+def test_executors_doc_tutorials_run_as_written(tmp_path: Path) -> None:
+    doc = DOCS / "executors.md"
+    up_args = block_after(doc, "Start the stack with them", "sh").strip().split()[1:]
+    photo = block_after(doc, "**Take a photo.**", "sh").strip().split(" ", 2)[2]
+    multiply = block_after(doc, "**Parameters and cases.**", "sh").strip().split(" ", 2)[2]
+    with documented_stack(up_args, REPO, tmp_path / "data") as voicectl:
+
+        def messages() -> list[str]:
+            return [h["message"] for h in json.loads(voicectl("history").stdout)["records"]]
+
         for command in (photo, multiply):
-            text = json.loads(command)
-            said = voicectl("say", text)
+            said = voicectl("say", json.loads(command))
             assert said.returncode == 0, said.stderr
         wait_until(lambda: len(messages()) == 2, 30.0, "both tutorial orders")
         product, saved = messages()  # most recent first
         assert product == "10 x 20 = 200"
         assert saved.startswith("saved 64x48 photo to ")
         assert Path(saved.removeprefix("saved 64x48 photo to ")).is_file()
-    finally:
-        stack.send_signal(2)
-        output, _ = stack.communicate(timeout=30)
-        assert stack.returncode == 0, output
