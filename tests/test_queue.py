@@ -105,3 +105,13 @@ def test_snapshot_lists_history_most_recent_first(queue: RobotQueue) -> None:
     assert [r.id for r in state.history] == list(reversed(ids))
     assert state.executor_online
     assert state.current is None
+
+
+def test_a_submit_that_could_not_be_stored_is_withdrawn(queue: RobotQueue) -> None:
+    (kept,) = queue.submit("req-1", [order("a")], "")
+    queue.submit("req-2", [order("b"), order("c")], "")
+    queue.withdraw("req-2")
+    assert [r.id for r in queue.queue] == [kept]
+    again = queue.submit("req-2", [order("b")], "")  # the retry is a new submit
+    assert len(again) == 1
+    assert [r.id for r in queue.queue] == [kept, *again]

@@ -113,6 +113,13 @@ class RobotQueue:
         self._new_requests.append((request_id, ids))
         return ids
 
+    def withdraw(self, request_id: str) -> None:
+        """Undo a submit whose orders could not be stored: they were never accepted."""
+        ids = set(self._requests.pop(request_id, []))
+        for record in [r for r in self.queue if r.id in ids]:
+            self.queue.remove(record)
+            self._positions.pop(record.id, None)
+
     def start_next(self) -> OrderRecord | None:
         """The next order to hand to the executor, now marked running; None if not now."""
         if self.current is not None or not self.queue or not self.executor_online:

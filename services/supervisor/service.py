@@ -107,6 +107,8 @@ class RobotSupervisor:
                         # Acknowledge only what is on disk: a SIGKILL from now on loses nothing.
                         await asyncio.shield(stored)
                     except sqlite3.Error as exc:
+                        self._queue.withdraw(request_id)
+                        self._changed()
                         return Failed(reason=f"could not store the orders: {exc}")
                 return Submitted(order_ids=ids)
             case Cancel(order_id=order_id):

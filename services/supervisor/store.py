@@ -68,6 +68,8 @@ class SavedRobot:
 
 
 Operation = Callable[[sqlite3.Connection], Any]
+Call = tuple[Operation, "asyncio.Future[Any]", asyncio.AbstractEventLoop]
+"""An operation, the future that gets its result, and the loop that future lives on."""
 
 
 class OrderStore:
@@ -76,9 +78,8 @@ class OrderStore:
     def __init__(self, path: Path, durability: Durability = Durability.PROCESS) -> None:
         self.path = path
         self._durability = durability
-        self._inbox: queue.SimpleQueue[
-            tuple[Operation, asyncio.Future[Any] | None, asyncio.AbstractEventLoop | None] | None
-        ] = queue.SimpleQueue()
+        self._inbox: queue.SimpleQueue[Call | None] = queue.SimpleQueue()
+        """Calls in order; None stops the writer thread."""
         self._thread: threading.Thread | None = None
         self._encoder = msgspec.json.Encoder()
         self._decoder = msgspec.json.Decoder(OrderRecord)
@@ -237,7 +238,7 @@ class OrderStore:
     def _run_batch(
         self,
         db: sqlite3.Connection,
-        batch: list[tuple[Operation, asyncio.Future[Any] | None, asyncio.AbstractEventLoop | None]],
+        batch: list[Call],
     ) -> None:
         results: list[tuple[bool, Any]] = []
         try:
@@ -259,8 +260,6 @@ class OrderStore:
                 db.rollback()
             results = [(False, exc)] * len(batch)
         for (_, future, loop), (ok, value) in zip(batch, results, strict=True):
-            if future is None or loop is None:
-                continue
             with contextlib.suppress(RuntimeError):  # the loop closed: nobody is waiting
                 loop.call_soon_threadsafe(_settle, future, ok, value)
 
