@@ -119,7 +119,14 @@ class Bus:
     # --- publish / subscribe -----------------------------------------------------------
 
     def publish(self, key: str, message: Message) -> None:
-        self._session.put(key, self._encoder.encode(message), encoding=JSON)
+        """Publish a voicectl message. These are few and matter (an order's result), so
+        they wait for room under congestion instead of Zenoh's default of dropping."""
+        self._session.put(
+            key,
+            self._encoder.encode(message),
+            encoding=JSON,
+            congestion_control=zenoh.CongestionControl.BLOCK,
+        )
 
     def publish_bytes(self, key: str, payload: bytes, encoding: zenoh.Encoding = CDR) -> None:
         self._session.put(key, payload, encoding=encoding)

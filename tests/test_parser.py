@@ -2,13 +2,16 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
-from hypothesis import given
+import pytest
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from services.converter.orders import OrderSet
 from services.converter.parser import MAX_TEXT_CHARS, Parser, normalise
+from shared.messages import ParseError
 
 DEMO = Parser(OrderSet.load(Path(__file__).resolve().parents[1] / "orders" / "demo.yaml"))
 
@@ -108,3 +111,148 @@ def test_parser_never_raises_and_accounts_for_every_segment(text: str) -> None:
 @given(st.binary(max_size=300))
 def test_binary_junk_decoded_loosely_never_raises(junk: bytes) -> None:
     DEMO.parse(junk.decode("utf-8", "replace"))
+
+
+# --- spoken numbers ---------------------------------------------------------------------------
+
+ALL = Parser(OrderSet.load(Path(__file__).resolve().parents[1] / "orders"))
+"""Every shipped file: demo, tutorial and the spoken-number orders together."""
+
+
+@pytest.mark.parametrize(
+    ("text", "order", "case", "pose", "description"),
+    [
+        ("move forward 2.5 meters", "drive", "forward", (2.5, 0.0), "move forward 2.5 m"),
+        ("go forward two point five meters", "drive", "forward", (2.5, 0.0), "move forward 2.5 m"),
+        ("Go ahead zero point five metres.", "drive", "forward", (0.5, 0.0), "move forward 0.5 m"),
+        ("drive back a hundred and one meters", None, None, None, None),
+        ("move back 1 meter", "drive", "back", (-1.0, 0.0), "move back 1 m"),
+        ("turn left 45 degrees", "turn_by", "left", (0.0, math.pi / 4), "turn left 45 degrees"),
+        ("turn left forty-five degrees", "turn_by", "left", (0.0, math.pi / 4), None),
+        ("rotate right ninety degrees", "turn_by", "right", (0.0, -math.pi / 2), None),
+    ],
+)
+def test_spoken_numbers_fill_the_target_pose_in_base_units(
+    text: str,
+    order: str | None,
+    case: str | None,
+    pose: tuple[float, float] | None,
+    description: str | None,
+) -> None:
+    result = ALL.parse(text)
+    if order is None:
+        assert result.orders == []
+        return
+    assert result.errors == []
+    (made,) = result.orders
+    assert (made.order, made.case) == (order, case)
+    assert made.target_pose is not None
+    assert made.target_pose.frame == "base_link"
+    assert (made.target_pose.x, made.target_pose.yaw) == pytest.approx(pose)
+    if description:
+        assert made.description == description
+
+
+def test_wait_ten_seconds_is_a_parameter_in_seconds() -> None:
+    (made,) = ALL.parse("wait ten seconds").orders
+    assert (made.order, made.label, made.params, made.target_pose) == (
+        "wait",
+        "wait",
+        {"seconds": 10.0},
+        None,
+    )
+    assert made.description == "wait 10 s"
+
+
+def test_out_of_range_and_non_numbers_are_errors_naming_the_range() -> None:
+    result = ALL.parse("move forward 7 meters then turn left 45 degrees then wait one two seconds")
+    assert [(o.order, o.case) for o in result.orders] == [("turn_by", "left")]
+    assert [(e.text, e.reason) for e in result.errors] == [
+        ("move forward 7 meters", "distance 7 is out of range: 0.1 to 5 m"),
+        ("wait one two seconds", "duration: 'one two' is not one number"),
+    ]
+    assert ALL.parse("wait -3 seconds").errors[0].reason == (
+        "duration -3 is out of range: 0.5 to 60 s"
+    )
+
+
+def test_a_number_makes_the_order_more_specific_than_the_demo_one() -> None:
+    assert names("move forward", ALL) == [("local_goal", "forward")]
+    assert names("move forward 2 meters", ALL) == [("drive", "forward")]
+    assert names("turn left then turn left 90 degrees", ALL) == [
+        ("rotation", "left"),
+        ("turn_by", "left"),
+    ]
+    # Out of range is an error, never the less specific "move forward" (1 m).
+    assert ALL.parse("move forward 9 meters").orders == []
+
+
+def test_normalise_keeps_a_minus_sign_starting_a_number() -> None:
+    assert normalise("Wait -3 seconds, x-ray") == "wait -3 seconds x ray"
+
+
+# --- bad input -------------------------------------------------------------------------------
+
+
+def test_bad_input_is_one_clear_error() -> None:
+    assert ALL.parse("").errors == [ParseError(text="", reason="empty text")]
+    huge = ALL.parse("x" * 100_000)
+    assert huge.errors[0].reason == f"text too long: 100000 characters, at most {MAX_TEXT_CHARS}"
+    assert len(huge.errors[0].text) <= 80
+    junk = ALL.parse(bytes(range(256)).decode("latin-1"))
+    assert junk.orders == []
+    assert all(e.reason for e in junk.errors)
+    assert names("\x00turn\x00left\ufeff", ALL) == [("rotation", "left")]
+
+
+# --- the word index gives the same answers as trying every regex -----------------------------
+
+BRUTE = Parser(ALL.orders, use_index=False)
+_VOCABULARY = sorted(
+    {w for c in ALL.orders.commands for t in c.expansion.templates for w in t if isinstance(w, str)}
+    | {"then", "two", "point", "five", "forty", "a", "hundred", "minus", "2.5", "-3", "please"}
+)
+
+
+@settings(max_examples=300)
+@given(st.lists(st.sampled_from(_VOCABULARY) | st.text(max_size=6), max_size=12))
+def test_the_index_never_changes_a_result(words: list[str]) -> None:
+    text = " ".join(words)
+    assert ALL.parse(text) == BRUTE.parse(text)
+
+
+@given(st.text(max_size=300))
+def test_parser_with_slots_never_raises_on_any_text(text: str) -> None:
+    result = ALL.parse(text)
+    assert all(e.reason for e in result.errors)
+
+
+@given(st.lists(st.sampled_from(_VOCABULARY), max_size=20))
+def test_parser_with_slots_never_raises_on_command_words(words: list[str]) -> None:
+    result = ALL.parse(" ".join(words))
+    assert all(e.reason for e in result.errors)
+    for order in result.orders:
+        if order.target_pose is not None:
+            assert math.isfinite(order.target_pose.x)
+            assert math.isfinite(order.target_pose.yaw)
+
+
+def test_a_slot_in_an_optional_part_may_go_unsaid() -> None:
+    parser = Parser(
+        OrderSet.from_yaml(
+            """
+orders:
+  pause:
+    voice_alias: "pause( for {n} seconds?)?"
+    description: "pause {n}"
+    label: wait
+    seconds: 3
+    slots:
+      n: {min: 1, max: 60, unit: s, to: seconds}
+"""
+        )
+    )
+    (short,) = parser.parse("pause").orders
+    assert (short.params, short.description) == ({"seconds": 3}, "pause")
+    (longer,) = parser.parse("pause for twenty seconds").orders
+    assert (longer.params, longer.description) == ({"seconds": 20.0}, "pause 20")

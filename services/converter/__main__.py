@@ -11,9 +11,8 @@ from pathlib import Path
 from shared.bus import Bus, add_bus_arguments, bus_options, setup_logging, wait_for_stop
 from shared.errors import OrdersFileError
 
-from .orders import OrderSet
-from .parser import Parser
-from .service import ConverterService
+from .service import POLL_SECONDS, ConverterService, errors_of, load
+from .watch import signature
 
 _LOGGER = logging.getLogger(__name__)
 DEFAULT_ORDERS = Path(__file__).resolve().parents[2] / "orders" / "demo.yaml"
@@ -25,7 +24,15 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "--orders",
         type=Path,
         default=DEFAULT_ORDERS,
-        help="orders YAML file or directory of them (default: the shipped demo orders)",
+        help="orders YAML file or directory of them (default: the shipped demo orders); "
+        "edits apply while running",
+    )
+    parser.add_argument(
+        "--poll",
+        type=float,
+        default=POLL_SECONDS,
+        metavar="SECONDS",
+        help=f"how often to check the orders files for changes (default {POLL_SECONDS})",
     )
     add_bus_arguments(parser)
     return parser.parse_args(argv)
@@ -35,15 +42,28 @@ async def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     setup_logging(args.debug)
     try:
-        orders = OrderSet.load(args.orders)
+        before = await asyncio.to_thread(signature, args.orders)
+        loaded = await asyncio.to_thread(load, args.orders, before)
     except OrdersFileError as exc:
+        # Never start with half a configuration: a bad file at start is fatal. The log
+        # has every problem with its line; the last line says the first one.
+        for error in errors_of(exc):
+            _LOGGER.error("%s", error)
         print(f"voicectl converter: {exc}", file=sys.stderr)
         return 2
     loop = asyncio.get_running_loop()
-    with Bus.open(bus_options(args), loop) as bus:
-        ConverterService(bus, Parser(orders)).start()
-        _LOGGER.info("converter ready with %d orders from %s", len(orders.orders), args.orders)
-        await wait_for_stop()
+    with (
+        Bus.open(bus_options(args), loop) as bus,
+        ConverterService(bus, args.orders, loaded, args.poll) as service,
+    ):
+        _LOGGER.info(
+            "converter ready with %d orders from %s; grammar %s (%d phrases)",
+            len(loaded.orders.orders),
+            args.orders,
+            loaded.grammar.version,
+            len(loaded.grammar.phrases),
+        )
+        await wait_for_stop(service.watch())
     return 0
 
 

@@ -1,4 +1,4 @@
-"""Orders files: YAML in, a validated `OrderSet` out, or one clear error.
+"""Orders files: YAML in, a validated `OrderSet` out, or errors that each fit on a line.
 
 The shape (the ``orders_list`` wrapper is optional)::
 
@@ -11,6 +11,9 @@ The shape (the ``orders_list`` wrapper is optional)::
           frame: "base_link"       # frame/x/y/yaw make the target pose
           cases:
             left: {voice_alias: "left", yaw: 1.57}
+            by:                    # a typed slot: "turn by 45 degrees"
+              voice_alias: "by {angle} degrees?"
+              slots: {angle: {type: number, unit: deg, min: 1, max: 180, to: yaw}}
 
 Any other key of an order or case is a parameter of the order: unknown keys are
 meaningful here, so they are kept rather than refused.
@@ -19,6 +22,7 @@ meaningful here, so they are kept rather than refused.
 from __future__ import annotations
 
 import re
+from collections.abc import Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -26,11 +30,43 @@ from typing import Any
 import yaml
 
 from shared.errors import OrdersFileError
-from shared.messages import ParamValue, TargetPose
+from shared.messages import Order, ParamValue, TargetPose
 
-RESERVED_KEYS = frozenset({"voice_alias", "label", "description", "cases"})
+from .expand import Expansion, SlotRef, expand
+from .slots import NUMBER_PATTERN, SlotSpec, format_value
+from .text import normalise
+
+RESERVED_KEYS = frozenset({"voice_alias", "label", "description", "cases", "slots"})
 POSE_KEYS = ("x", "y", "yaw")
 DEFAULT_SEPARATOR = "then"
+
+PLACEHOLDER = re.compile(r"(?<!\\)\{([A-Za-z_]\w*)\}")
+"""A slot inside an alias or description: ``{distance}`` (a quantifier has digits only)."""
+SLOT_GROUP = "slot_"
+"""Prefix of the named regex group a slot becomes."""
+_SLOT_STUB = "#"
+"""Stands for a number when an alias is only checked or expanded."""
+
+
+Problem = tuple[str, int | None]
+"""One thing wrong, as 'FILE: order NAME: what' and its YAML line when known."""
+
+
+class OrdersInvalid(OrdersFileError):
+    """Orders files that do not validate, with every problem found.
+
+    Its text is the first problem (the one line the CLI prints); `errors` lists them all
+    with their YAML lines, for the status a running converter publishes.
+    """
+
+    def __init__(self, problems: list[Problem]) -> None:
+        self.problems = tuple(problems)
+        more = f" (and {len(problems) - 1} more)" if len(problems) > 1 else ""
+        super().__init__(problems[0][0] + more)
+
+    @property
+    def errors(self) -> tuple[str, ...]:
+        return tuple(f"{message}{_at(line)}" for message, line in self.problems)
 
 
 @dataclass(frozen=True)
@@ -41,6 +77,8 @@ class CaseSpec:
     alias: str
     description: str
     values: dict[str, ParamValue]
+    slots: dict[str, SlotSpec] = field(default_factory=dict)
+    line: int | None = None
 
 
 @dataclass(frozen=True)
@@ -55,26 +93,84 @@ class OrderSpec:
     cases: tuple[CaseSpec, ...] = ()
     source: str = ""
     """The file it came from, for error messages."""
+    slots: dict[str, SlotSpec] = field(default_factory=dict)
+    line: int | None = None
 
-    def target_pose(self, case: CaseSpec | None) -> TargetPose | None:
-        merged = self.merged_values(case)
+    def target_pose(
+        self, case: CaseSpec | None, filled: dict[str, ParamValue] | None = None
+    ) -> TargetPose | None:
+        merged = self.merged_values(case, filled)
         frame = merged.get("frame")
         if not isinstance(frame, str):
             return None
         pose = {k: float(merged.get(k, 0.0)) for k in POSE_KEYS}
         return TargetPose(frame=frame, **pose)
 
-    def params(self, case: CaseSpec | None) -> dict[str, ParamValue]:
-        merged = self.merged_values(case)
+    def params(
+        self, case: CaseSpec | None, filled: dict[str, ParamValue] | None = None
+    ) -> dict[str, ParamValue]:
+        merged = self.merged_values(case, filled)
         if "frame" in merged:
             return {k: v for k, v in merged.items() if k != "frame" and k not in POSE_KEYS}
         return merged
 
-    def merged_values(self, case: CaseSpec | None) -> dict[str, ParamValue]:
-        return {**self.values, **(case.values if case else {})}
+    def merged_values(
+        self, case: CaseSpec | None, filled: dict[str, ParamValue] | None = None
+    ) -> dict[str, ParamValue]:
+        """The order's values, overridden by the case's, overridden by slot values."""
+        return {**self.values, **(case.values if case else {}), **(filled or {})}
 
     def full_description(self, case: CaseSpec | None) -> str:
         return f"{self.description} {case.description}" if case else self.description
+
+
+@dataclass(frozen=True)
+class Command:
+    """Something a person can say: an order without cases, or an order and one case.
+
+    Also used for the alias of an order with cases alone, which is not a whole command
+    but lets the parser say which cases are missing.
+    """
+
+    order: OrderSpec
+    case: CaseSpec | None
+    pattern: str
+    """The alias regex with slots as named groups, not yet restricted to whole words."""
+    slots: dict[str, SlotSpec]
+    """The slots of the pattern, by name."""
+    expansion: Expansion
+
+    @property
+    def name(self) -> str:
+        return f"{self.order.name}/{self.case.name}" if self.case else self.order.name
+
+    def to_order(self, spoken: dict[str, str | None]) -> Order:
+        """The order this command makes with the slot texts `spoken` (by slot name; None
+        for a slot in an optional part that was not said, which then sets nothing).
+
+        Raises SlotValueError when a value is not a number or is out of its bounds.
+        """
+        filled: dict[str, ParamValue] = {}
+        said: dict[str, str] = {}
+        for name, slot in self.slots.items():
+            text = spoken.get(name)
+            if text is None:
+                continue
+            value = slot.value(text)
+            filled[slot.to] = slot.stored(value)
+            said[name] = format_value(value)
+        description = PLACEHOLDER.sub(
+            lambda m: said.get(m[1], ""), self.order.full_description(self.case)
+        )
+        description = " ".join(description.split())
+        return Order(
+            order=self.order.name,
+            case=self.case.name if self.case else None,
+            label=self.order.label,
+            description=description,
+            params=self.order.params(self.case, filled),
+            target_pose=self.order.target_pose(self.case, filled),
+        )
 
 
 @dataclass(frozen=True)
@@ -84,6 +180,11 @@ class OrderSet:
     orders: tuple[OrderSpec, ...]
     separator: str = DEFAULT_SEPARATOR
     sources: tuple[str, ...] = field(default=())
+    commands: tuple[Command, ...] = ()
+    """Every whole command, in file order."""
+    prefixes: tuple[Command, ...] = ()
+    """The aliases of orders with cases, alone."""
+    separator_expansion: Expansion = field(default_factory=Expansion)
 
     @staticmethod
     def load(path: Path) -> OrderSet:
@@ -92,7 +193,18 @@ class OrderSet:
             files = sorted([*path.glob("*.yaml"), *path.glob("*.yml")])
             if not files:
                 raise OrdersFileError(f"{path}: no *.yaml orders files in this directory")
-            return OrderSet.merge([OrderSet.load(f) for f in files])
+            sets: list[OrderSet] = []
+            problems: list[Problem] = []
+            for file in files:
+                try:
+                    sets.append(OrderSet.load(file))
+                except OrdersInvalid as exc:
+                    problems.extend(exc.problems)
+                except OrdersFileError as exc:
+                    problems.append((str(exc), None))
+            if problems:
+                raise OrdersInvalid(problems)
+            return OrderSet.merge(sets)
         try:
             text = path.read_text(encoding="utf-8")
         except (OSError, UnicodeDecodeError) as exc:
@@ -102,7 +214,7 @@ class OrderSet:
     @staticmethod
     def from_yaml(text: str, source: str = "<text>") -> OrderSet:
         try:
-            data = yaml.safe_load(text)
+            data = yaml.load(text, Loader=_LineLoader)  # a SafeLoader that adds line numbers
         except yaml.YAMLError as exc:
             mark = getattr(exc, "problem_mark", None)
             where = f"{source}:{mark.line + 1}" if mark is not None else source
@@ -125,119 +237,323 @@ class OrderSet:
         separator = data.get("separator", DEFAULT_SEPARATOR)
         if not isinstance(separator, str) or not separator.strip():
             raise OrdersFileError(f"{source}: 'separator' must be a non-empty string (regex)")
-        _check_regex(separator, f"{source}: separator")
-        orders = tuple(
-            _order_from_dict(str(name), spec, source) for name, spec in data["orders"].items()
-        )
+        try:
+            _check_regex(separator)
+        except _Problem as exc:
+            where = f"{source}: separator: {exc}"
+            raise OrdersInvalid([(where, _line(data, "separator"))]) from exc
+        orders: list[OrderSpec] = []
+        commands: list[Command] = []
+        problems: list[Problem] = []
+        for name, spec in data["orders"].items():
+            try:
+                order = _order_from_dict(str(name), spec, source)
+                commands.extend(_commands(order))
+                orders.append(order)
+            except _Problem as exc:
+                line = exc.line or _line(data["orders"], name)
+                problems.append((f"{source}: order '{name}'{exc.where}: {exc}", line))
+        if problems:
+            raise OrdersInvalid(problems)
         if not orders:
             raise OrdersFileError(f"{source}: 'orders' is empty")
-        return OrderSet(orders=orders, separator=separator, sources=(source,))
+        return OrderSet.build(tuple(orders), commands, separator, (source,))
+
+    @staticmethod
+    def build(
+        orders: tuple[OrderSpec, ...],
+        commands: list[Command],
+        separator: str,
+        sources: tuple[str, ...],
+    ) -> OrderSet:
+        return OrderSet(
+            orders=orders,
+            separator=separator,
+            sources=sources,
+            commands=tuple(c for c in commands if c.case or not c.order.cases),
+            prefixes=tuple(c for c in commands if c.order.cases and not c.case),
+            separator_expansion=expand(separator),
+        )
 
     @staticmethod
     def merge(sets: list[OrderSet]) -> OrderSet:
         """Join several files; the same order name twice is an error naming both files."""
         seen: dict[str, str] = {}
+        problems: list[Problem] = []
         for order_set in sets:
             for order in order_set.orders:
                 if order.name in seen:
-                    raise OrdersFileError(
-                        f"{order.source}: order '{order.name}' is already defined in "
-                        f"{seen[order.name]}"
+                    problems.append(
+                        (
+                            f"{order.source}: order '{order.name}' is already defined in "
+                            f"{seen[order.name]}",
+                            order.line,
+                        )
                     )
-                seen[order.name] = order.source
+                else:
+                    seen[order.name] = order.source
+        if problems:
+            raise OrdersInvalid(problems)
         separators = {s.separator for s in sets}
         if len(separators) > 1:
             raise OrdersFileError(
                 "orders files disagree on the separator: " + ", ".join(sorted(separators))
             )
-        return OrderSet(
-            orders=tuple(o for s in sets for o in s.orders),
-            separator=separators.pop(),
-            sources=tuple(src for s in sets for src in s.sources),
+        return OrderSet.build(
+            tuple(o for s in sets for o in s.orders),
+            [c for s in sets for c in (*s.prefixes, *s.commands)],
+            separators.pop(),
+            tuple(src for s in sets for src in s.sources),
         )
 
 
+# --- validation ---------------------------------------------------------------------------
+
+
+class _Problem(Exception):
+    """One thing wrong inside an order; the caller adds the file and order names."""
+
+    def __init__(self, message: str, line: int | None = None, where: str = "") -> None:
+        super().__init__(message)
+        self.line = line
+        self.where = where
+        """' case NAME' when the problem is inside a case."""
+
+
+def _at(line: int | None) -> str:
+    return f" (line {line})" if line else ""
+
+
 def _order_from_dict(name: str, spec: Any, source: str) -> OrderSpec:
-    where = f"{source}: order '{name}'"
     if not isinstance(spec, dict):
-        raise OrdersFileError(f"{where}: expected a mapping, got {type(spec).__name__}")
-    alias = _required_str(spec, "voice_alias", where)
-    label = _required_str(spec, "label", where)
+        raise _Problem(f"expected a mapping, got {type(spec).__name__}")
+    alias = _required_str(spec, "voice_alias")
+    label = _required_str(spec, "label")
     description = spec.get("description", alias)
     if not isinstance(description, str):
-        raise OrdersFileError(f"{where}: 'description' must be a string")
-    values = _values(spec, where)
+        raise _Problem("'description' must be a string", _line(spec, "description"))
+    slots = _slots(spec)
+    values = _values(spec)
     raw_cases = spec.get("cases", {})
     if raw_cases is None:
         raw_cases = {}
     if not isinstance(raw_cases, dict):
-        raise OrdersFileError(f"{where}: 'cases' must be a mapping of case name to case")
-    cases = tuple(_case_from_dict(str(n), c, f"{where} case '{n}'") for n, c in raw_cases.items())
+        raise _Problem("'cases' must be a mapping of case name to case", _line(spec, "cases"))
+    cases = []
+    for case_name, case_spec in raw_cases.items():
+        try:
+            cases.append(_case_from_dict(str(case_name), case_spec))
+        except _Problem as exc:
+            line = exc.line or _line(raw_cases, case_name)
+            raise _Problem(str(exc), line, f" case '{case_name}'") from exc
     order = OrderSpec(
         name=name,
         alias=alias,
         label=label,
         description=description,
         values=values,
-        cases=cases,
+        cases=tuple(cases),
         source=source,
+        slots=slots,
+        line=_line(spec),
     )
-    for case in cases or (None,):
+    for case in order.cases or (None,):
+        at = f" case '{case.name}'" if case else ""
+        line = case.line if case else order.line
         merged = order.merged_values(case)
         if "frame" in merged:
             for key in POSE_KEYS:
                 value = merged.get(key, 0.0)
                 if isinstance(value, bool) or not isinstance(value, int | float):
-                    at = f" case '{case.name}'" if case else ""
-                    raise OrdersFileError(f"{where}{at}: '{key}' must be a number, got {value!r}")
+                    raise _Problem(f"'{key}' must be a number, got {value!r}", line, at)
     return order
 
 
-def _case_from_dict(name: str, spec: Any, where: str) -> CaseSpec:
+def _case_from_dict(name: str, spec: Any) -> CaseSpec:
     if not isinstance(spec, dict):
-        raise OrdersFileError(f"{where}: expected a mapping, got {type(spec).__name__}")
+        raise _Problem(f"expected a mapping, got {type(spec).__name__}")
     if "cases" in spec:
-        raise OrdersFileError(f"{where}: cases cannot have cases of their own")
+        raise _Problem("cases cannot have cases of their own", _line(spec, "cases"))
     if "label" in spec:
-        raise OrdersFileError(f"{where}: 'label' belongs to the order, not to a case")
-    alias = _required_str(spec, "voice_alias", where)
+        raise _Problem("'label' belongs to the order, not to a case", _line(spec, "label"))
+    alias = _required_str(spec, "voice_alias")
     description = spec.get("description", alias)
     if not isinstance(description, str):
-        raise OrdersFileError(f"{where}: 'description' must be a string")
-    return CaseSpec(name=name, alias=alias, description=description, values=_values(spec, where))
+        raise _Problem("'description' must be a string", _line(spec, "description"))
+    return CaseSpec(
+        name=name,
+        alias=alias,
+        description=description,
+        values=_values(spec),
+        slots=_slots(spec),
+        line=_line(spec),
+    )
 
 
-def _required_str(spec: dict[str, Any], key: str, where: str) -> str:
+def _required_str(spec: dict[str, Any], key: str) -> str:
     if key not in spec:
-        raise OrdersFileError(f"{where}: missing mandatory key '{key}'")
+        raise _Problem(f"missing mandatory key '{key}'", _line(spec))
     value = spec[key]
     if not isinstance(value, str) or not value.strip():
-        raise OrdersFileError(f"{where}: '{key}' must be a non-empty string, got {value!r}")
+        raise _Problem(f"'{key}' must be a non-empty string, got {value!r}", _line(spec, key))
     if key == "voice_alias":
-        _check_regex(value, f"{where}: 'voice_alias'")
+        names = PLACEHOLDER.findall(value)
+        for name in names:
+            if names.count(name) > 1:
+                raise _Problem(f"slot '{{{name}}}' appears twice in one command", _line(spec, key))
+        try:
+            _check_regex(_with_slots(value, _SLOT_STUB))
+        except _Problem as exc:
+            raise _Problem(f"'voice_alias': {exc}", _line(spec, key)) from exc
     return value.strip()
 
 
-def _values(spec: dict[str, Any], where: str) -> dict[str, ParamValue]:
+def _slots(spec: dict[str, Any]) -> dict[str, SlotSpec]:
+    raw = spec.get("slots") or {}
+    if not isinstance(raw, dict):
+        raise _Problem("'slots' must be a mapping of slot name to slot", _line(spec, "slots"))
+    slots: dict[str, SlotSpec] = {}
+    for name, slot in raw.items():
+        try:
+            slots[str(name)] = SlotSpec.from_dict(str(name), slot)
+        except ValueError as exc:
+            raise _Problem(str(exc), _line(raw, name)) from exc
+    return slots
+
+
+def _values(spec: dict[str, Any]) -> dict[str, ParamValue]:
     values: dict[str, ParamValue] = {}
     for key, value in spec.items():
         if key in RESERVED_KEYS:
             continue
         if not isinstance(key, str):
-            raise OrdersFileError(f"{where}: parameter names must be strings, got {key!r}")
+            raise _Problem(f"parameter names must be strings, got {key!r}", _line(spec, key))
         if not isinstance(value, str | int | float | bool):
-            raise OrdersFileError(
-                f"{where}: parameter '{key}' must be a string, number or boolean, "
-                f"got {type(value).__name__}"
+            raise _Problem(
+                f"parameter '{key}' must be a string, number or boolean, "
+                f"got {type(value).__name__}",
+                _line(spec, key),
             )
         values[key] = value
     return values
 
 
-def _check_regex(pattern: str, where: str) -> None:
+def _check_regex(pattern: str) -> None:
     try:
         compiled = re.compile(pattern)
     except re.error as exc:
-        raise OrdersFileError(f"{where}: invalid regex {pattern!r}: {exc}") from exc
+        raise _Problem(f"invalid regex {_plain(pattern)!r}: {exc}") from exc
     if compiled.match(""):
-        raise OrdersFileError(f"{where}: regex {pattern!r} matches empty text")
+        raise _Problem(f"regex {_plain(pattern)!r} matches empty text")
+
+
+def _plain(pattern: str) -> str:
+    """The pattern as the user wrote it, slots back in braces."""
+    return re.sub(rf"\(\?P<{SLOT_GROUP}(\w+)>{re.escape(_SLOT_STUB)}\)", r"{\1}", pattern)
+
+
+def _with_slots(alias: str, body: str = NUMBER_PATTERN) -> str:
+    """The alias with each ``{name}`` replaced by a named group matching one number.
+
+    Checks and expansion use a one-character `body`: the number pattern is long, and
+    parsing it for every alias made loading a 200-order file take a second.
+    """
+    return PLACEHOLDER.sub(lambda m: f"(?P<{SLOT_GROUP}{m[1]}>{body})", alias)
+
+
+def _commands(order: OrderSpec) -> list[Command]:
+    """The order's commands: itself, or its alias alone and with each case."""
+    order_used = set(PLACEHOLDER.findall(order.alias))
+    case_used: set[str] = set()
+    commands = [_command(order, None)]
+    for case in order.cases:
+        commands.append(_command(order, case))
+        case_used.update(PLACEHOLDER.findall(case.alias))
+        unused = set(case.slots) - order_used - set(PLACEHOLDER.findall(case.alias))
+        if unused:
+            raise _Problem(
+                f"slot(s) {', '.join(sorted(unused))} declared but not in any alias",
+                case.line,
+                f" case '{case.name}'",
+            )
+    unused = set(order.slots) - order_used - case_used
+    if unused:
+        raise _Problem(
+            f"slot(s) {', '.join(sorted(unused))} declared but not in any alias", order.line
+        )
+    return commands
+
+
+def _command(order: OrderSpec, case: CaseSpec | None) -> Command:
+    at = f" case '{case.name}'" if case else ""
+    line = case.line if case else order.line
+    available = {**order.slots, **(case.slots if case else {})}
+    aliases = [order.alias, *([case.alias] if case else [])]
+    used = [name for alias in aliases for name in PLACEHOLDER.findall(alias)]
+    for name in used:
+        if used.count(name) > 1:
+            raise _Problem(f"slot '{{{name}}}' appears twice in one command", line, at)
+        if name not in available:
+            declared = ", ".join(sorted(available)) or "none"
+            raise _Problem(f"slot '{{{name}}}' is not declared; declared: {declared}", line, at)
+    slots = {name: available[name] for name in used}
+    targets = [slot.to for slot in slots.values()]
+    for target in targets:
+        if targets.count(target) > 1:
+            raise _Problem(f"two slots write to '{target}'", line, at)
+
+    def combined(body: str) -> str:
+        return r"\s+".join(f"(?:{_with_slots(alias, body)})" for alias in aliases)
+
+    try:
+        expansion = expand(combined(_SLOT_STUB), {f"{SLOT_GROUP}{n}": n for n in slots})
+    except re.error as exc:  # each alias compiled alone: e.g. a group name in both
+        raise _Problem(f"the aliases do not combine into one regex: {exc}", line, at) from exc
+    for template in expansion.templates:
+        for word in template:
+            if isinstance(word, SlotRef) or normalise(word) == word:
+                continue
+            raise _Problem(
+                f"alias can never match '{word}': text is matched without punctuation "
+                f"(write '{normalise(word)}')",
+                line,
+                at,
+            )
+    return Command(order, case, combined(NUMBER_PATTERN), slots, expansion)
+
+
+def _line(mapping: Any, key: Any = None) -> int | None:
+    """The YAML line of `mapping` or of its `key`, when it was read from YAML."""
+    if not isinstance(mapping, _LineMapping):
+        return None
+    if key is None:
+        return mapping.line
+    return mapping.key_lines.get(key, mapping.line)
+
+
+class _LineMapping(dict[Any, Any]):
+    """A YAML mapping that remembers the line it starts on and the lines of its keys."""
+
+    line: int | None = None
+    key_lines: dict[Any, int]
+
+
+class _LineLoader(getattr(yaml, "CSafeLoader", yaml.SafeLoader)):  # type: ignore[misc]
+    """yaml's safe loader (libyaml's when installed), with line numbers on mappings."""
+
+
+def _construct_mapping(loader: yaml.SafeLoader, node: yaml.MappingNode) -> Iterator[_LineMapping]:
+    mapping = _LineMapping()
+    mapping.line = node.start_mark.line + 1
+    mapping.key_lines = {}
+    yield mapping
+    mapping.update(loader.construct_mapping(node))
+    for key_node, _ in node.value:
+        key = loader.construct_object(key_node)
+        try:
+            mapping.key_lines.setdefault(key, key_node.start_mark.line + 1)
+        except TypeError:  # an unhashable key; construct_mapping has refused it already
+            continue
+
+
+_LineLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)

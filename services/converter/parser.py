@@ -1,72 +1,110 @@
-"""Text to orders: whole-word alias matching, most specific match wins, ties are errors."""
+"""Text to orders: whole-word alias matching, most specific match wins, ties are errors.
+
+Each segment of an utterance (between separators) becomes exactly one order or one error.
+Only the commands whose key word is in the segment are tried: an index built from the
+expanded aliases keeps a parse of a 200-order file to a handful of regex searches.
+"""
 
 from __future__ import annotations
 
 import re
+from collections import Counter
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 from shared.messages import Order, ParseError, ParseResult
 
-from .orders import CaseSpec, OrderSet, OrderSpec
+from .expand import SlotRef
+from .orders import SLOT_GROUP, Command, OrderSet
+from .slots import NUMBER_WORDS, SIGN_WORDS, SlotValueError
+from .suggest import Suggester
+from .text import normalise, whole_words
+
+__all__ = ["MAX_TEXT_CHARS", "Parser", "normalise"]
 
 MAX_TEXT_CHARS = 4096
 """Longer input is refused whole: no spoken command is that long."""
 
-# Punctuation becomes a space; a dot between digits stays ("2.5").
-_PUNCTUATION = re.compile(r"(?<!\d)\.|\.(?!\d)|[^\w\s.]")
-_SPACES = re.compile(r"\s+")
-
-
-def normalise(text: str) -> str:
-    """Lower-case, punctuation-free, single-spaced text."""
-    return _SPACES.sub(" ", _PUNCTUATION.sub(" ", text.lower())).strip()
-
-
-def _words(pattern: str) -> str:
-    """Wrap an alias regex so that it only matches whole words."""
-    return rf"(?<!\w)(?:{pattern})(?!\w)"
+_NUMBER = "\x00number"
+"""Index key of commands that start with a slot."""
+_NUMERIC = re.compile(r"-?\d")
+_NUMBER_STARTS = NUMBER_WORDS | SIGN_WORDS | {"a"}
 
 
 @dataclass(frozen=True)
-class _Candidate:
-    order: OrderSpec
-    case: CaseSpec | None
-    pattern: re.Pattern[str]
+class _Matcher:
+    command: Command
+    regex: re.Pattern[str]
 
-    @property
-    def name(self) -> str:
-        return f"{self.order.name}/{self.case.name}" if self.case else self.order.name
 
-    def to_order(self) -> Order:
-        return Order(
-            order=self.order.name,
-            case=self.case.name if self.case else None,
-            label=self.order.label,
-            description=self.order.full_description(self.case),
-            params=self.order.params(self.case),
-            target_pose=self.order.target_pose(self.case),
-        )
+class _Index:
+    """Commands by a word they cannot match without; the others are always tried.
+
+    A command is filed under its rarest mandatory word (one in every phrase of its alias,
+    such as "box" in "(please )?fetch (the )?box"), or else under every first word of its
+    phrases: a segment without that word cannot match it.
+    """
+
+    def __init__(self, commands: Sequence[Command], enabled: bool) -> None:
+        self.matchers = [
+            _Matcher(c, re.compile(whole_words(c.pattern), re.IGNORECASE)) for c in commands
+        ]
+        self._by_word: dict[str, list[int]] = {}
+        self._always: list[int] = []
+        keys = [_keys(m) if enabled else ([], False) for m in self.matchers]
+        frequency = Counter(k for words, mandatory in keys if mandatory for k in words)
+        for position, (words, mandatory) in enumerate(keys):
+            if not words:
+                self._always.append(position)
+                continue
+            if mandatory:
+                words = [min(words, key=lambda k: (k == _NUMBER, frequency[k], k))]
+            for word in words:
+                # Casefolded on both sides, as close as words get to re.IGNORECASE.
+                self._by_word.setdefault(word.casefold(), []).append(position)
+
+    def candidates(self, words: list[str]) -> list[_Matcher]:
+        """The matchers worth trying on a segment of `words`, in file order."""
+        positions = set(self._always)
+        for word in words:
+            positions.update(self._by_word.get(word.casefold(), ()))
+            if word in _NUMBER_STARTS or _NUMERIC.match(word):
+                positions.update(self._by_word.get(_NUMBER, ()))
+        return [self.matchers[p] for p in sorted(positions)]
+
+
+def _keys(matcher: _Matcher) -> tuple[list[str], bool]:
+    """A command's index keys, and whether each is mandatory (else they are the first
+    words). No keys when the alias cannot be expanded, or when a phrase of the expansion
+    does not match the regex (a safety net: the expander reads a private module)."""
+    templates = matcher.command.expansion.templates
+    if not matcher.command.expansion.finite or not templates:
+        return [], False
+    for template in templates:
+        sample = " ".join("1" if isinstance(w, SlotRef) else w for w in template)
+        if not matcher.regex.fullmatch(sample):
+            return [], False
+    sets = [{_NUMBER if isinstance(w, SlotRef) else w for w in t} for t in templates]
+    mandatory = set.intersection(*sets)
+    if mandatory:
+        return sorted(mandatory), True
+    firsts = {_NUMBER if isinstance(t[0], SlotRef) else t[0] for t in templates}
+    return sorted(firsts), False
 
 
 class Parser:
-    """Turns utterances into orders with one `OrderSet`; build once, parse many."""
+    """Turns utterances into orders with one `OrderSet`; build once, parse many.
 
-    def __init__(self, orders: OrderSet) -> None:
+    `use_index=False` tries every command on every segment: the same results, slower; the
+    benchmark and the tests compare the two.
+    """
+
+    def __init__(self, orders: OrderSet, use_index: bool = True) -> None:
         self.orders = orders
-        self._separator = re.compile(_words(orders.separator), re.IGNORECASE)
-        self._candidates: list[_Candidate] = []
-        self._caseless: list[tuple[OrderSpec, re.Pattern[str]]] = []
-        for order in orders.orders:
-            if not order.cases:
-                pattern = re.compile(_words(order.alias), re.IGNORECASE)
-                self._candidates.append(_Candidate(order, None, pattern))
-                continue
-            self._caseless.append((order, re.compile(_words(order.alias), re.IGNORECASE)))
-            for case in order.cases:
-                pattern = re.compile(
-                    _words(rf"(?:{order.alias})\s+(?:{case.alias})"), re.IGNORECASE
-                )
-                self._candidates.append(_Candidate(order, case, pattern))
+        self._separator = re.compile(whole_words(orders.separator), re.IGNORECASE)
+        self._commands = _Index(orders.commands, use_index)
+        self._prefixes = _Index(orders.prefixes, use_index)
+        self._suggester = Suggester(orders.commands, self._parse_alone)
 
     def parse(self, text: str) -> ParseResult:
         if len(text) > MAX_TEXT_CHARS:
@@ -80,40 +118,58 @@ class Parser:
             segment = segment.strip()
             if not segment:
                 continue
-            match self._parse_segment(segment):
+            match self._parse_segment(segment, suggest=True):
                 case Order() as order:
                     result.orders.append(order)
                 case ParseError() as error:
                     result.errors.append(error)
         return result
 
-    def _parse_segment(self, segment: str) -> Order | ParseError:
-        best: list[_Candidate] = []
+    def _parse_alone(self, phrase: str) -> Order | None:
+        """The order `phrase` makes as one segment, if it makes one."""
+        parsed = self._parse_segment(phrase, suggest=False)
+        return parsed if isinstance(parsed, Order) else None
+
+    def _parse_segment(self, segment: str, suggest: bool) -> Order | ParseError:
+        words = segment.split(" ")
+        best: list[tuple[_Matcher, re.Match[str]]] = []
         best_words = 0
-        for candidate in self._candidates:
-            found = candidate.pattern.search(segment)
-            if found is None:
-                continue
-            words = len(found.group(0).split())
-            if words > best_words:
-                best, best_words = [candidate], words
-            elif words == best_words:
-                best.append(candidate)
+        for matcher in self._commands.candidates(words):
+            for found in matcher.regex.finditer(segment):
+                covered = len(found.group(0).split())
+                if covered > best_words:
+                    best, best_words = [(matcher, found)], covered
+                elif covered == best_words and best[-1][0] is not matcher:
+                    best.append((matcher, found))
         if len(best) == 1:
-            return best[0].to_order()
+            matcher, found = best[0]
+            spoken = {name: found.group(f"{SLOT_GROUP}{name}") for name in matcher.command.slots}
+            try:
+                return matcher.command.to_order(spoken)
+            except SlotValueError as exc:
+                return ParseError(text=segment, reason=str(exc))
         if best:
-            names = [c.name for c in best]
+            names = [m.command.name for m, _ in best]
             return ParseError(
                 text=segment,
                 reason="ambiguous: matches " + ", ".join(names),
                 candidates=names,
             )
-        for order, pattern in self._caseless:
-            if pattern.search(segment):
+        suggestions = self._suggester.suggest(segment) if suggest else []
+        for matcher in self._prefixes.candidates(words):
+            if matcher.regex.search(segment):
+                order = matcher.command.order
                 cases = ", ".join(c.description for c in order.cases)
+                reason = f"'{order.description}' needs one of: {cases}"
+                if suggestions:
+                    return ParseError(
+                        text=segment,
+                        reason=f"{reason}; did you mean: {' or '.join(suggestions)}?",
+                        candidates=suggestions,
+                    )
                 return ParseError(
                     text=segment,
-                    reason=f"'{order.description}' needs one of: {cases}",
+                    reason=reason,
                     candidates=[f"{order.name}/{c.name}" for c in order.cases],
                 )
-        return ParseError(text=segment, reason="no order matches")
+        return ParseError(text=segment, reason="no order matches", candidates=suggestions)

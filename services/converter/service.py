@@ -1,52 +1,207 @@
-"""The converter on the bus: parse requests, transcripts to proposals."""
+"""The converter on the bus: parse requests, transcripts to proposals, grammar, hot reload."""
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import logging
+from dataclasses import dataclass
+from pathlib import Path
+from types import TracebackType
+from typing import Any
 
-from shared.bus import Bus, json_decoder
+import zenoh
+
+from shared.bus import JSON, Bus, json_decoder
+from shared.errors import OrdersFileError
 from shared.keys import ConverterKeys, RobotKeys, robot_of
 from shared.messages import (
     ConverterRequest,
-    Failed,
     GetGrammar,
+    Grammar,
     Message,
+    OrdersStatus,
     ParseReply,
     ParseRequest,
     Proposal,
     Transcript,
 )
 
+from .grammar import build_grammar
+from .orders import OrderSet, OrdersInvalid
 from .parser import Parser
+from .watch import Signature, signature
 
 _LOGGER = logging.getLogger(__name__)
 
+POLL_SECONDS = 0.25
+"""How often the orders files are checked for changes; a change applies within a second."""
+
+
+@dataclass(frozen=True)
+class Loaded:
+    """One consistent configuration: the orders, their parser and their grammar."""
+
+    orders: OrderSet
+    parser: Parser
+    grammar: Grammar
+    signature: Signature
+    """The files' metadata as it was just before they were read."""
+
+
+def load(path: Path, before: Signature) -> Loaded:
+    """Read, validate and compile the orders at `path` (blocking: run it in a thread).
+
+    `before` is the files' signature taken just before. Raises OrdersFileError; nothing is
+    half-loaded.
+    """
+    orders = OrderSet.load(path)
+    return Loaded(orders, Parser(orders), build_grammar(orders), before)
+
+
+def errors_of(exc: OrdersFileError) -> list[str]:
+    return list(exc.errors) if isinstance(exc, OrdersInvalid) else [str(exc)]
+
+
+class Latest:
+    """Publishes on one key and sends the last message again whenever a subscriber appears.
+
+    A session that has just opened does not yet know the subscribers and drops what it
+    publishes; the matching listener tells when one is there, and then the status and the
+    grammar go out again (a recogniser that starts later asks for the grammar instead).
+    Zenoh drops puts under congestion by default, and the status follows a grammar of some
+    100 kB: these rare messages block for room instead.
+    """
+
+    def __init__(self, bus: Bus, key: str, loop: asyncio.AbstractEventLoop) -> None:
+        self._bus = bus
+        self._loop = loop
+        self._message: Message | None = None
+        self._publisher = bus.session.declare_publisher(
+            key, encoding=JSON, congestion_control=zenoh.CongestionControl.BLOCK
+        )
+        self._listener = self._publisher.declare_matching_listener(self._on_matching)
+
+    def publish(self, message: Message) -> None:
+        self._message = message
+        self._put()
+
+    def close(self) -> None:
+        self._listener.undeclare()
+        self._publisher.undeclare()
+
+    def _on_matching(self, status: Any) -> None:  # on a Zenoh thread
+        if status.matching:
+            with contextlib.suppress(RuntimeError):  # the loop is closing
+                self._loop.call_soon_threadsafe(self._put)
+
+    def _put(self) -> None:
+        if self._message is not None:
+            self._publisher.put(self._bus.encode(self._message))
+
 
 class ConverterService:
-    """Answers parse queries and turns every robot's final transcripts into proposals."""
+    """Answers parse and grammar queries, turns final transcripts into proposals, and
+    reloads the orders when their files change, keeping the last good ones on errors.
 
-    def __init__(self, bus: Bus, parser: Parser) -> None:
+    Use it as a context manager: entering starts it on the bus, leaving undeclares its
+    publishers.
+    """
+
+    def __init__(
+        self, bus: Bus, path: Path, loaded: Loaded, poll_seconds: float = POLL_SECONDS
+    ) -> None:
         self._bus = bus
-        self._parser = parser
+        self._path = path
+        self._loaded = loaded
+        self._poll_seconds = poll_seconds
         self._keys = ConverterKeys()
+        self._failed: Signature | None = None
+        """The signature of files that did not load, so that they are not re-read each poll."""
+        self._closers = contextlib.ExitStack()
+        self._grammar: Latest | None = None
+        self._status: Latest | None = None
 
-    def start(self) -> None:
+    @property
+    def loaded(self) -> Loaded:
+        return self._loaded
+
+    def __enter__(self) -> ConverterService:
+        loop = asyncio.get_running_loop()
+        self._grammar = self._closers.enter_context(
+            contextlib.closing(Latest(self._bus, self._keys.grammar, loop))
+        )
+        self._status = self._closers.enter_context(
+            contextlib.closing(Latest(self._bus, self._keys.status, loop))
+        )
         self._bus.serve(self._keys.parse, json_decoder(ConverterRequest), self._on_request)
         self._bus.subscribe(
             self._keys.all_transcripts, json_decoder(Transcript), self._on_transcript
         )
+        self._publish_loaded()
         self._bus.announce(self._keys.alive)
+        return self
+
+    def __exit__(
+        self,
+        kind: type[BaseException] | None,
+        error: BaseException | None,
+        traceback: TracebackType | None,
+    ) -> None:
+        self._closers.close()
+
+    async def watch(self) -> None:
+        """Reload whenever the files' signature changes; runs until cancelled."""
+        while True:
+            await asyncio.sleep(self._poll_seconds)
+            current = await asyncio.to_thread(signature, self._path)
+            if current not in (self._loaded.signature, self._failed):
+                await self.reload(current)
+
+    async def reload(self, current: Signature) -> None:
+        """Load the files as they are now (`current`); on errors keep the previous orders."""
+        try:
+            loaded = await asyncio.to_thread(load, self._path, current)
+        except OrdersFileError as exc:
+            self._failed = current
+            errors = errors_of(exc)
+            _LOGGER.warning("orders not reloaded, keeping the previous ones: %s", errors[0])
+            self._publish_status(
+                OrdersStatus(
+                    ok=False,
+                    sources=list(self._loaded.orders.sources),
+                    errors=errors,
+                    orders=len(self._loaded.orders.orders),
+                )
+            )
+            return
+        self._loaded = loaded
+        self._failed = None
+        _LOGGER.info("orders reloaded: %d orders from %s", len(loaded.orders.orders), self._path)
+        self._publish_loaded()
+
+    def _publish_loaded(self) -> None:
+        orders = self._loaded.orders
+        assert self._grammar is not None, "publishing before the service started"
+        self._grammar.publish(self._loaded.grammar)
+        self._publish_status(
+            OrdersStatus(ok=True, sources=list(orders.sources), orders=len(orders.orders))
+        )
+
+    def _publish_status(self, status: OrdersStatus) -> None:
+        assert self._status is not None, "publishing before the service started"
+        self._status.publish(status)
 
     async def _on_request(self, request: ConverterRequest) -> Message:
         match request:
             case ParseRequest(text=text):
-                return ParseReply(result=self._parser.parse(text))
+                return ParseReply(result=self._loaded.parser.parse(text))
             case GetGrammar():
-                return Failed(reason="this converter does not build grammars yet")
+                return self._loaded.grammar
 
     def _on_transcript(self, key: str, transcript: Transcript) -> None:
         robot = robot_of(key)
-        result = self._parser.parse(transcript.text)
+        result = self._loaded.parser.parse(transcript.text)
         _LOGGER.info(
             "%s: %r -> %d order(s), %d error(s)",
             robot,

@@ -1,0 +1,134 @@
+"""The recogniser's grammar: every phrase the orders can produce, as JSGF and as lists.
+
+The JSGF is exact for every expandable alias: slots become rules listing their values as
+words ("two point five"), so a 180-value angle costs one rule, not 180 phrases per alias.
+The phrase list spells everything out, up to `MAX_PHRASES` per command; a command with
+more, or whose alias cannot be expanded at all, is listed in `unexpandable` and gives its
+words instead. In the JSGF such an alias becomes "one or more of its words".
+"""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import math
+from collections.abc import Iterable
+
+from shared.messages import Grammar
+
+from .expand import SlotRef, Template
+from .orders import Command, OrderSet
+from .slots import say_number
+from .text import normalise
+
+MAX_PHRASES = 5000
+"""Per command; beyond this the phrase list gives the command's words instead."""
+GRAMMAR_NAME = "voicectl"
+
+
+def build_grammar(orders: OrderSet) -> Grammar:
+    """The grammar of `orders`; a pure function of them (its version is a digest)."""
+    builder = _Builder()
+    for command in orders.commands:
+        builder.add(command)
+    separator = orders.separator_expansion
+    separator_phrases = [" ".join(str(w) for w in t) for t in separator.templates]
+    builder.words.update(w for t in separator_phrases for w in t.split())
+    if separator.finite:
+        separator_rule = " | ".join(separator_phrases)
+    else:
+        builder.unexpandable.append(f"separator {orders.separator!r}: {separator.problem}")
+        separator_rule = _word_loop(separator.words) or "<VOID>"
+        builder.words.update(_clean(separator.words))
+    jsgf = builder.jsgf(separator_rule)
+    phrases = list(dict.fromkeys(builder.phrases))
+    digest = hashlib.sha256("\n".join([jsgf, *phrases]).encode()).hexdigest()
+    return Grammar(
+        jsgf=jsgf,
+        phrases=phrases,
+        words=sorted(builder.words),
+        separator_phrases=separator_phrases,
+        unexpandable=builder.unexpandable,
+        version=digest[:16],
+    )
+
+
+class _Builder:
+    def __init__(self) -> None:
+        self.rules: list[tuple[str, str, str]] = []
+        """(rule name, body, command name)."""
+        self.number_rules: dict[tuple[str, ...], str] = {}
+        self.phrases: list[str] = []
+        self.words: set[str] = set()
+        self.unexpandable: list[str] = []
+
+    def add(self, command: Command) -> None:
+        rule = f"c{len(self.rules)}"
+        expansion = command.expansion
+        if not expansion.finite:
+            self.unexpandable.append(f"{command.name}: {expansion.problem}")
+            self.words.update(_clean(expansion.words))
+            loop = _word_loop(expansion.words)
+            if loop:
+                self.rules.append((rule, loop, command.name))
+            return
+        values = {name: [say_number(v) for v in s.grid()] for name, s in command.slots.items()}
+        alternatives = [self._jsgf_template(t, values) for t in expansion.templates]
+        self.rules.append((rule, " | ".join(alternatives), command.name))
+        for template in expansion.templates:
+            self.words.update(w for w in template if isinstance(w, str))
+        for spoken in values.values():
+            self.words.update(w for value in spoken for w in value.split())
+        count = sum(_count(t, values) for t in expansion.templates)
+        if count > MAX_PHRASES:
+            self.unexpandable.append(
+                f"{command.name}: {count} phrases, more than {MAX_PHRASES}; "
+                "its words are listed instead"
+            )
+            return
+        for template in expansion.templates:
+            self.phrases.extend(_phrases(template, values))
+
+    def _jsgf_template(self, template: Template, values: dict[str, list[str]]) -> str:
+        words = []
+        for word in template:
+            if isinstance(word, SlotRef):
+                spoken = tuple(values[word.name])
+                name = self.number_rules.setdefault(spoken, f"n{len(self.number_rules)}")
+                words.append(f"<{name}>")
+            else:
+                words.append(word)
+        return " ".join(words)
+
+    def jsgf(self, separator_rule: str) -> str:
+        lines = [
+            "#JSGF V1.0;",
+            f"grammar {GRAMMAR_NAME};",
+            "public <command> = <order> ( <separator> <order> )*;",
+            f"<separator> = {separator_rule};",
+        ]
+        names = " | ".join(f"<{name}>" for name, _, _ in self.rules)
+        lines.append(f"<order> = {names or '<VOID>'};")
+        lines.extend(f"<{name}> = {body}; // {command}" for name, body, command in self.rules)
+        for spoken, name in self.number_rules.items():
+            lines.append(f"<{name}> = {' | '.join(spoken)};")
+        return "\n".join(lines) + "\n"
+
+
+def _count(template: Template, values: dict[str, list[str]]) -> int:
+    return math.prod(len(values[w.name]) for w in template if isinstance(w, SlotRef))
+
+
+def _phrases(template: Template, values: dict[str, list[str]]) -> Iterable[str]:
+    choices = [values[w.name] if isinstance(w, SlotRef) else [w] for w in template]
+    return (" ".join(words) for words in itertools.product(*choices))
+
+
+def _clean(words: Iterable[str]) -> list[str]:
+    """The words a recogniser could say: those already in normal form."""
+    return [w for w in words if w and normalise(w) == w]
+
+
+def _word_loop(words: Iterable[str]) -> str:
+    clean = _clean(words)
+    return f"( {' | '.join(clean)} )+" if clean else ""
