@@ -147,6 +147,10 @@ class BridgeKeys:
         return self.topic("odom")
 
     @property
+    def tf(self) -> str:
+        return self.topic("tf")
+
+    @property
     def camera_image(self) -> str:
         return self.topic("camera/image_raw")
 

@@ -282,6 +282,36 @@ class Ros2Codec:
         )
         return self._encode(msg, "nav_msgs/msg/Odometry")
 
+    def transform(self, pose: Pose2D, stamp_s: float) -> bytes:
+        """tf2_msgs/TFMessage with the odom -> base_link transform of `pose`, as a base's
+        driver publishes it on /tf next to odometry."""
+        t = self._types
+        msg = t["tf2_msgs/msg/TFMessage"](
+            transforms=[
+                t["geometry_msgs/msg/TransformStamped"](
+                    header=self._header(stamp_s, "odom"),
+                    child_frame_id="base_link",
+                    transform=t["geometry_msgs/msg/Transform"](
+                        translation=t["geometry_msgs/msg/Vector3"](x=pose.x, y=pose.y, z=0.0),
+                        rotation=self._pose(pose).orientation,
+                    ),
+                )
+            ]
+        )
+        return self._encode(msg, "tf2_msgs/msg/TFMessage")
+
+    def read_transform(self, raw: bytes) -> list[tuple[str, str, Pose2D]]:
+        """(parent, child, planar pose) of each transform in a TFMessage."""
+        msg = self._decode(raw, "tf2_msgs/msg/TFMessage")
+        found = []
+        for stamped in msg.transforms:
+            q = stamped.transform.rotation
+            yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+            v = stamped.transform.translation
+            pose = Pose2D(x=float(v.x), y=float(v.y), yaw=yaw)
+            found.append((str(stamped.header.frame_id), str(stamped.child_frame_id), pose))
+        return found
+
     def read_odometry(self, raw: bytes) -> Odometry:
         """Pose, velocity and stamp of an Odometry message."""
         msg = self._decode(raw, "nav_msgs/msg/Odometry")

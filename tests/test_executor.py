@@ -225,6 +225,36 @@ def test_executor_announces_its_labels(robot: tuple[str, Path]) -> None:
     async def body(harness: Harness) -> None:
         replies = harness.bus.session.liveliness().get("voice/r1/labels/*", timeout=2)
         labels = sorted(str(r.ok.key_expr).rsplit("/", 1)[1] for r in replies if r.ok)
-        assert labels == ["drive", "mbgoal", "mul", "pic", "rotate"]
+        assert labels == ["drive", "mbgoal", "mul", "pic", "rotate", "wait"]
+
+    run(robot[0], body)
+
+
+def test_sim_publishes_tf_that_agrees_with_odometry(robot: tuple[str, Path]) -> None:
+    async def body(harness: Harness) -> None:
+        codec = Ros2Codec(RosDistro.JAZZY)
+        transforms: list[list[tuple[str, str, object]]] = []
+        harness.bus.subscribe(
+            BridgeKeys().tf, codec.read_transform, lambda _key, tf: transforms.append(tf)
+        )
+        await harness.finished(await harness.execute(order("drive", distance=0.3)))
+        await async_wait_until(lambda: len(transforms) > 2, 5.0, "tf messages")
+        ((parent, child, pose),) = transforms[-1]
+        assert (parent, child) == ("odom", "base_link")
+        odom = harness.pose().pose
+        assert pose == odom  # the robot stands still: the latest of each agree exactly
+
+    run(robot[0], body)
+
+
+def test_wait_pauses_for_the_spoken_seconds(robot: tuple[str, Path]) -> None:
+    async def body(harness: Harness) -> None:
+        loop = asyncio.get_running_loop()
+        started = loop.time()
+        result = await harness.finished(await harness.execute(order("wait", seconds=1.5)))
+        assert (result.status, result.message) == (OrderStatus.SUCCEEDED, "waited 1.5 s")
+        assert loop.time() - started >= 1.5
+        bad = await harness.finished(await harness.execute(order("wait", seconds=-1)))
+        assert bad.status == OrderStatus.FAILED
 
     run(robot[0], body)

@@ -88,7 +88,7 @@ def test_results_of_builtin_and_user_executors(robot: Robot) -> None:
         assert record.status == OrderStatus.REJECTED
         assert record.message == (
             "unknown label 'dance'; bound labels: boom, drive, mbgoal, mul, pic, refuse, "
-            "rotate, slow, slow2, stubborn"
+            "rotate, slow, slow2, stubborn, wait"
         )
 
         # the executor survived all of that

@@ -369,3 +369,36 @@ def test_readers_raise_only_cdr_error_on_arbitrary_bytes(
     read: Callable[[bytes], object] = getattr(CODECS[distro], reader)
     with contextlib.suppress(CdrError):  # anything else fails the test
         read(payload)
+
+
+@pytest.mark.parametrize("distro", list(RosDistro))
+def test_transform_carries_the_pose_as_rosbags_would_encode_it(distro: RosDistro) -> None:
+    codec = Ros2Codec(distro)
+    pose = Pose2D(x=1.5, y=-2.0, yaw=2.5)
+    raw = codec.transform(pose, 12.25)
+    ((parent, child, read),) = codec.read_transform(raw)
+    assert (parent, child) == ("odom", "base_link")
+    assert (read.x, read.y) == (1.5, -2.0)
+    assert read.yaw == pytest.approx(2.5)
+
+    store = typestore(distro)
+    t = store.types
+    message = t["tf2_msgs/msg/TFMessage"](
+        transforms=[
+            t["geometry_msgs/msg/TransformStamped"](
+                header=t["std_msgs/msg/Header"](
+                    stamp=t["builtin_interfaces/msg/Time"](sec=12, nanosec=250_000_000),
+                    frame_id="odom",
+                ),
+                child_frame_id="base_link",
+                transform=t["geometry_msgs/msg/Transform"](
+                    translation=t["geometry_msgs/msg/Vector3"](x=1.5, y=-2.0, z=0.0),
+                    rotation=t["geometry_msgs/msg/Quaternion"](
+                        x=0.0, y=0.0, z=math.sin(1.25), w=math.cos(1.25)
+                    ),
+                ),
+            )
+        ]
+    )
+    expected = bytes(store.serialize_cdr(message, "tf2_msgs/msg/TFMessage", little_endian=True))
+    assert raw == expected

@@ -191,6 +191,7 @@ class SimNode:
             self._keys.odom,
             self._codec.odometry(robot.pose, robot.linear, robot.angular, stamp),
         )
+        self._bus.publish_bytes(self._keys.tf, self._codec.transform(robot.pose, stamp))
         goal = self._active
         if goal is not None and tick % FEEDBACK_EVERY == 0:
             self._bus.publish_bytes(

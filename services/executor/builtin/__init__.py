@@ -7,7 +7,15 @@ from .mbgoal import NavigateToPose
 from .motion import Drive, Rotate
 from .mul import Multiply
 from .pic import TakePhoto
+from .wait import Wait
 
 
 def builtin_executors(photo_directory: Path) -> list[Executor]:
-    return [NavigateToPose(), Drive(), Rotate(), Multiply(), TakePhoto(photo_directory)]
+    return [
+        NavigateToPose(),
+        Drive(),
+        Rotate(),
+        Multiply(),
+        TakePhoto(photo_directory),
+        Wait(),
+    ]
