@@ -154,6 +154,12 @@ class BridgeKeys:
     def camera_image(self) -> str:
         return self.topic("camera/image_raw")
 
+    @property
+    def simulator(self) -> str:
+        """Liveliness token of `voicectl sim` once it serves this namespace (the real
+        bridge announces itself under ``@/<zid>/@ros2_lv/...`` instead)."""
+        return self.topic("voicectl_sim/alive")
+
     def action(self, action: str, member: str) -> str:
         """One of an action's five routes: send_goal, get_result, cancel_goal, feedback, status."""
         if member not in {"send_goal", "get_result", "cancel_goal", "feedback", "status"}:

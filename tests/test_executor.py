@@ -226,6 +226,8 @@ def test_executor_announces_its_labels(robot: tuple[str, Path]) -> None:
         replies = harness.bus.session.liveliness().get("voice/r1/labels/*", timeout=2)
         labels = sorted(str(r.ok.key_expr).rsplit("/", 1)[1] for r in replies if r.ok)
         assert labels == ["drive", "mbgoal", "mul", "pic", "rotate", "wait"]
+        simulator = harness.bus.session.liveliness().get(BridgeKeys().simulator, timeout=2)
+        assert [str(r.ok.key_expr) for r in simulator if r.ok] == ["voicectl_sim/alive"]
 
     run(robot[0], body)
 

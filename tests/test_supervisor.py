@@ -317,6 +317,7 @@ def test_emergency_stop_halts_a_moving_robot_at_once(site: Site) -> None:
         )
         client = Client(bus, "r1")
         await client_wait_ready(client)
+        await async_wait_until(lambda: odometry, 20.0, "odometry from the simulator")
         far = Order(
             order="goal",
             label="mbgoal",

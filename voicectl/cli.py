@@ -14,7 +14,7 @@ import msgspec
 from shared.bus import DEFAULT_ROUTER, Bus, BusOptions, add_bus_arguments, bus_options, json_decoder
 from shared.config import default_token_file, load_or_create_token
 from shared.errors import BusError, OrdersFileError
-from shared.keys import ConverterKeys, RobotKeys, check_chunk
+from shared.keys import BridgeKeys, ConverterKeys, RobotKeys, check_chunk
 from shared.messages import (
     Cancel,
     CancelAll,
@@ -166,7 +166,12 @@ def _up(args: argparse.Namespace) -> int:
         children.append(Child("web", ["services.web", *robot, *port, *connect]))
         web = (args.host, args.port)
     keys = RobotKeys(args.robot)
-    ready = [ConverterKeys().alive, keys.alive("supervisor"), keys.alive("executor")]
+    ready = [
+        ConverterKeys().alive,
+        keys.alive("supervisor"),
+        keys.alive("executor"),
+        BridgeKeys().simulator,
+    ]
     return run_stack(children, web, args.router, ready)
 
 

@@ -104,6 +104,7 @@ async def main(argv: list[str] | None = None) -> int:
     with Bus.open(bus_options(args), loop) as bus:
         node = SimNode(bus, codec, config)
         node.declare()
+        bus.announce(BridgeKeys(args.namespace).simulator)
         ticking = asyncio.create_task(node.run())
         try:
             await wait_for_stop()
