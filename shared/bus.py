@@ -22,6 +22,7 @@ import msgspec
 import zenoh
 
 from .errors import BusError
+from .keys import check_chunk
 from .messages import Failed, Message
 
 _LOGGER = logging.getLogger(__name__)
@@ -60,6 +61,14 @@ class BusOptions:
         return conf
 
 
+def robot_name(text: str) -> str:
+    """argparse type for a robot name: a clear message instead of 'invalid value'."""
+    try:
+        return check_chunk(text, "robot name")
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from exc
+
+
 def add_bus_arguments(parser: argparse.ArgumentParser) -> None:
     """The Zenoh flags every voicectl process shares."""
     parser.add_argument(
@@ -91,7 +100,7 @@ class Bus:
         self._loop = loop
         self._closers = contextlib.ExitStack()
         self._encoder = msgspec.json.Encoder()
-        self._running: set[asyncio.Task[Message]] = set()
+        self._running: set[asyncio.Task[tuple[bytes, zenoh.Encoding]]] = set()
         """Handler tasks in flight (the loop keeps only weak references to tasks)."""
 
     @classmethod
@@ -215,72 +224,66 @@ class Bus:
         handler: Callable[[str, T], Awaitable[Message]],
     ) -> None:
         """Like `serve`, for a key expression with wildcards: the handler also gets the
-        query's key (``voice/r1/...`` for a queryable on ``voice/*/...``)."""
+        query's key (``voice/r1/...`` for a queryable on ``voice/*/...``). A request that
+        does not decode, or a handler that raises, is answered with `Failed`."""
 
-        def reply(query: zenoh.Query, done: asyncio.Task[Message]) -> None:
-            self._running.discard(done)
-            try:
-                answer = done.result()
-            except asyncio.CancelledError:
-                query.drop()
-                return
-            except Exception as exc:
-                _LOGGER.exception("handler for %s failed", key)
-                answer = Failed(reason=f"internal error: {exc}")
-            try:
-                query.reply(query.key_expr, self._encoder.encode(answer), encoding=JSON)
-            finally:
-                query.drop()
-
-        def start(query: zenoh.Query, query_key: str, request: T) -> None:
-            # On the loop: run the handler as a task and reply from the loop when it ends.
-            task = self._loop.create_task(_awaitable(handler(query_key, request)))
-            self._running.add(task)
-            task.add_done_callback(lambda done: reply(query, done))
-
-        def on_query(query: zenoh.Query) -> None:
-            raw = query.payload.to_bytes() if query.payload is not None else b""
-            query_key = str(query.key_expr)
+        async def respond(query_key: str, raw: bytes) -> tuple[bytes, zenoh.Encoding]:
             try:
                 request = decode(raw)
             except Exception as exc:
                 _LOGGER.warning("rejected undecodable request on %s: %s", query_key, exc)
-                query.reply(
-                    query.key_expr,
-                    self._encoder.encode(Failed(reason=f"undecodable request: {exc}")),
-                    encoding=JSON,
-                )
-                query.drop()
-                return
-            try:
-                self._loop.call_soon_threadsafe(start, query, query_key, request)
-            except RuntimeError:  # loop closed: the process is stopping
-                query.drop()
+                answer: Message = Failed(reason=f"undecodable request: {exc}")
+            else:
+                try:
+                    answer = await handler(query_key, request)
+                except Exception as exc:
+                    _LOGGER.exception("handler for %s failed", key)
+                    answer = Failed(reason=f"internal error: {exc}")
+            return self._encoder.encode(answer), JSON
 
-        queryable = self._session.declare_queryable(key, _direct(on_query))
-        self._closers.callback(queryable.undeclare)
+        self._answer_queries(key, respond)
 
     def serve_bytes(self, key: str, handler: Callable[[bytes], Awaitable[bytes]]) -> None:
-        """Answer queries whose payloads are raw bytes (CDR), for ROS-side services."""
+        """Answer queries whose payloads are raw bytes (CDR), for ROS-side services; a
+        handler that raises is answered with a Zenoh error reply."""
 
-        def on_query(query: zenoh.Query) -> None:
-            raw = query.payload.to_bytes() if query.payload is not None else b""
+        async def respond(_query_key: str, raw: bytes) -> tuple[bytes, zenoh.Encoding]:
+            return await handler(raw), CDR
 
-            def reply(done: Any) -> None:
-                try:
-                    query.reply(query.key_expr, done.result(), encoding=CDR)
-                except Exception as exc:
-                    _LOGGER.warning("query on %s failed: %s", key, exc)
-                    query.reply_err(str(exc))
-                finally:
-                    query.drop()
+        self._answer_queries(key, respond)
 
+    def _answer_queries(
+        self, key: str, respond: Callable[[str, bytes], Awaitable[tuple[bytes, zenoh.Encoding]]]
+    ) -> None:
+        """Declare a queryable on `key` whose answers `respond(query_key, payload)` makes,
+        run as a task on the loop; the reply leaves from the loop when the task ends."""
+
+        def reply(query: zenoh.Query, done: asyncio.Task[tuple[bytes, zenoh.Encoding]]) -> None:
+            self._running.discard(done)
             try:
-                future = asyncio.run_coroutine_threadsafe(_awaitable(handler(raw)), self._loop)
-            except RuntimeError:
+                if done.cancelled():
+                    return
+                error = done.exception()
+                if error is None:
+                    payload, encoding = done.result()
+                    query.reply(query.key_expr, payload, encoding=encoding)
+                else:
+                    _LOGGER.warning("query on %s failed: %s", key, error)
+                    query.reply_err(str(error))
+            finally:
                 query.drop()
-                return
-            future.add_done_callback(reply)
+
+        def start(query: zenoh.Query, query_key: str, raw: bytes) -> None:
+            task = self._loop.create_task(_awaitable(respond(query_key, raw)))
+            self._running.add(task)
+            task.add_done_callback(lambda done: reply(query, done))
+
+        def on_query(query: zenoh.Query) -> None:  # on Zenoh's thread: hand over at once
+            raw = query.payload.to_bytes() if query.payload is not None else b""
+            try:
+                self._loop.call_soon_threadsafe(start, query, str(query.key_expr), raw)
+            except RuntimeError:  # loop closed: the process is stopping
+                query.drop()
 
         queryable = self._session.declare_queryable(key, _direct(on_query))
         self._closers.callback(queryable.undeclare)

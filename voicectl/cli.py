@@ -11,10 +11,18 @@ from pathlib import Path
 
 import msgspec
 
-from shared.bus import DEFAULT_ROUTER, Bus, BusOptions, add_bus_arguments, bus_options, json_decoder
+from shared.bus import (
+    DEFAULT_ROUTER,
+    Bus,
+    BusOptions,
+    add_bus_arguments,
+    bus_options,
+    json_decoder,
+    robot_name,
+)
 from shared.config import default_token_file, load_or_create_token
 from shared.errors import BusError, OrdersFileError
-from shared.keys import BridgeKeys, ConverterKeys, RobotKeys, check_chunk
+from shared.keys import BridgeKeys, ConverterKeys, RobotKeys
 from shared.messages import (
     Cancel,
     CancelAll,
@@ -43,10 +51,6 @@ def _print_json(value: object) -> None:
     print(msgspec.json.format(_ENCODER.encode(value), indent=2).decode())
 
 
-def _robot(name: str) -> str:
-    return check_chunk(name, "robot name")
-
-
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="voicectl",
@@ -60,7 +64,7 @@ def build_parser() -> argparse.ArgumentParser:
     up.add_argument("--router", default=DEFAULT_ROUTER, help="Zenoh endpoint of the router")
     up.add_argument("--host", default="127.0.0.1", help="panel address")
     up.add_argument("--port", type=int, default=8000, help="panel port")
-    up.add_argument("--robot", type=_robot, default="robot")
+    up.add_argument("--robot", type=robot_name, default="robot")
     up.add_argument("--orders", type=Path, default=REPO_ORDERS, help="orders file or directory")
     up.add_argument("--time-scale", type=float, default=1.0, help="simulator speed-up")
     up.add_argument("--no-web", action="store_true", help="do not start the panel")
@@ -82,13 +86,13 @@ def build_parser() -> argparse.ArgumentParser:
     parse.add_argument("text", nargs="?", help="what was said or typed")
 
     say = sub.add_parser("say", help="convert a text on the bus and submit its orders")
-    say.add_argument("--robot", type=_robot, default="robot")
+    say.add_argument("--robot", type=robot_name, default="robot")
     add_bus_arguments(say)
     say.add_argument("text")
 
     def supervisor_command(name: str, help_text: str) -> argparse.ArgumentParser:
         command = sub.add_parser(name, help=help_text)
-        command.add_argument("--robot", type=_robot, default="robot")
+        command.add_argument("--robot", type=robot_name, default="robot")
         add_bus_arguments(command)
         return command
 

@@ -9,9 +9,9 @@ import os
 import sys
 from pathlib import Path
 
-from shared.bus import Bus, add_bus_arguments, bus_options, setup_logging, wait_for_stop
+from shared.bus import Bus, add_bus_arguments, bus_options, robot_name, setup_logging, wait_for_stop
 from shared.config import data_dir
-from shared.keys import BridgeKeys, RobotKeys, check_chunk
+from shared.keys import BridgeKeys, RobotKeys
 from shared.ros2 import Ros2Codec, RosDistro
 
 from .builtin import builtin_executors
@@ -27,7 +27,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument(
         "--robot",
         default="robot",
-        type=lambda name: check_chunk(name, "robot name"),
+        type=robot_name,
         help="robot name on the voice bus (default: robot)",
     )
     parser.add_argument(

@@ -10,9 +10,8 @@ import sqlite3
 import sys
 from pathlib import Path
 
-from shared.bus import Bus, add_bus_arguments, bus_options, setup_logging, wait_for_stop
+from shared.bus import Bus, add_bus_arguments, bus_options, robot_name, setup_logging, wait_for_stop
 from shared.config import data_dir
-from shared.keys import check_chunk
 
 from .service import SupervisorService
 from .store import Durability, OrderStore
@@ -26,7 +25,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "--robot",
         action="append",
         default=[],
-        type=lambda name: check_chunk(name, "robot name"),
+        type=robot_name,
         help="a robot to serve from the start and announce (repeatable); any other robot "
         "is served as soon as a request, event or executor names it",
     )

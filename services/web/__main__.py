@@ -12,9 +12,8 @@ from pathlib import Path
 
 import uvicorn
 
-from shared.bus import Bus, add_bus_arguments, bus_options, setup_logging, wait_for_stop
+from shared.bus import Bus, add_bus_arguments, bus_options, robot_name, setup_logging, wait_for_stop
 from shared.config import default_token_file, load_or_create_token
-from shared.keys import check_chunk
 
 from .app import Panel
 
@@ -31,7 +30,7 @@ class _QuietServer(uvicorn.Server):
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="voicectl web", description=__doc__)
-    parser.add_argument("--robot", default="robot", type=lambda n: check_chunk(n, "robot name"))
+    parser.add_argument("--robot", default="robot", type=robot_name)
     parser.add_argument("--host", default="127.0.0.1", help="address to serve on")
     parser.add_argument("--port", type=int, default=8000)
     parser.add_argument(
