@@ -12,7 +12,7 @@ COPY services ./services
 COPY voicectl ./voicectl
 COPY orders ./orders
 # Editable, like scripts/up: the services find the shipped orders next to the code.
-RUN pip install --no-cache-dir -e . \
+RUN pip install --no-cache-dir -e ".[stt]" \
     && useradd --create-home --uid 1000 voicectl \
     && mkdir -p /data && chown voicectl /data
 USER voicectl

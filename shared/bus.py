@@ -127,15 +127,32 @@ class Bus:
 
     # --- publish / subscribe -----------------------------------------------------------
 
-    def publish(self, key: str, message: Message) -> None:
-        """Publish a voicectl message. These are few and matter (an order's result), so
-        they wait for room under congestion instead of Zenoh's default of dropping."""
+    def publish(self, key: str, message: Message, superseded: bool = False) -> None:
+        """Publish a voicectl message. Most are few and matter (an order's result), so
+        they wait for room under congestion instead of Zenoh's default of dropping; a
+        `superseded` one (a partial transcript, which the next one replaces) is dropped
+        instead, so that it never stalls the loop."""
         self._session.put(
             key,
             self._encoder.encode(message),
             encoding=JSON,
-            congestion_control=zenoh.CongestionControl.BLOCK,
+            congestion_control=zenoh.CongestionControl.DROP
+            if superseded
+            else zenoh.CongestionControl.BLOCK,
         )
+
+    def stream(self, key: str) -> Stream:
+        """A publisher declared once for many messages on one key (an audio session)."""
+        stream = Stream(self, key)
+        self._closers.callback(stream.close)
+        return stream
+
+    def latest(self, key: str) -> Latest:
+        """A publisher on `key` that sends its last message again to every new subscriber
+        (a status, a grammar): what a late starter needs without asking."""
+        latest = Latest(self, key)
+        self._closers.callback(latest.close)
+        return latest
 
     def publish_bytes(self, key: str, payload: bytes, encoding: zenoh.Encoding = CDR) -> None:
         self._session.put(key, payload, encoding=encoding)
@@ -316,6 +333,77 @@ class Bus:
             key, _direct(on_sample), history=True
         )
         self._closers.callback(subscriber.undeclare)
+
+
+class Stream:
+    """Many messages on one key through one declared publisher, in order and reliably.
+
+    `matched()` waits until a subscriber is known: what is published before that can be
+    lost, so a sender that starts a session waits for it first.
+    """
+
+    def __init__(self, bus: Bus, key: str) -> None:
+        self._bus = bus
+        self._publisher = bus.session.declare_publisher(
+            key, encoding=JSON, congestion_control=zenoh.CongestionControl.BLOCK
+        )
+        self._closed = False
+
+    def send(self, message: Message) -> None:
+        if not self._closed:
+            self._publisher.put(self._bus.encode(message))
+
+    async def matched(self, timeout: float) -> bool:
+        """Whether a subscriber is there, waiting up to `timeout` seconds for one."""
+        deadline = asyncio.get_running_loop().time() + timeout
+        # The stubs say bool; zenoh 1.10 returns a MatchingStatus with `matching`.
+        while not getattr(self._publisher.matching_status, "matching", False):
+            if asyncio.get_running_loop().time() > deadline:
+                return False
+            await asyncio.sleep(0.02)
+        return True
+
+    def close(self) -> None:
+        if not self._closed:
+            self._closed = True
+            self._publisher.undeclare()
+
+
+class Latest:
+    """Publishes on one key and sends the last message again whenever a subscriber appears.
+
+    A session that has just opened does not yet know the subscribers and drops what it
+    publishes; the matching listener tells when one is there, and then the last message
+    goes out again. These rare messages (a status, a grammar of some 100 kB) block for room
+    under congestion rather than being dropped.
+    """
+
+    def __init__(self, bus: Bus, key: str) -> None:
+        self._bus = bus
+        self._message: Message | None = None
+        self._publisher = bus.session.declare_publisher(
+            key, encoding=JSON, congestion_control=zenoh.CongestionControl.BLOCK
+        )
+        self._listener = self._publisher.declare_matching_listener(_direct(self._on_matching))
+        self._closed = False
+
+    def publish(self, message: Message) -> None:
+        self._message = message
+        self._put()
+
+    def close(self) -> None:
+        if not self._closed:
+            self._closed = True
+            self._listener.undeclare()
+            self._publisher.undeclare()
+
+    def _on_matching(self, status: Any) -> None:  # on a Zenoh thread
+        if status.matching:
+            self._bus._call_soon(self._put)
+
+    def _put(self) -> None:
+        if self._message is not None and not self._closed:
+            self._publisher.put(self._bus.encode(self._message))
 
 
 def _direct(callback: Callable[[T], None]) -> zenoh.handlers.Callback[T]:

@@ -23,6 +23,11 @@ def robot_of(key: str) -> str:
     return key.split("/")[1]
 
 
+def last_chunk(key: str) -> str:
+    """The last chunk of a key: the session of ``voice/<robot>/stt/audio/<session>``."""
+    return key.rsplit("/", 1)[-1]
+
+
 def check_chunk(name: str, what: str) -> str:
     """Return `name` if it is usable as one key chunk, else raise ValueError naming `what`."""
     if not _CHUNK.match(name):
@@ -53,6 +58,24 @@ class RobotKeys:
     def transcript(self) -> str:
         """Final transcripts from the speech recogniser."""
         return f"{self.prefix}/stt/transcript"
+
+    def stt_audio(self, session: str) -> str:
+        """One recognition session's audio: start, chunks, stop."""
+        return f"{self.prefix}/stt/audio/{check_chunk(session, 'session id')}"
+
+    @property
+    def stt_audio_any(self) -> str:
+        return f"{self.prefix}/stt/audio/*"
+
+    @property
+    def partial(self) -> str:
+        """Growing partial transcripts while someone speaks."""
+        return f"{self.prefix}/stt/partial"
+
+    @property
+    def stt_status(self) -> str:
+        """The recogniser's status: engine, grammar in use, what it cannot hear."""
+        return f"{self.prefix}/stt/status"
 
     @property
     def proposal(self) -> str:

@@ -10,6 +10,7 @@ that older and newer services can talk.
 from __future__ import annotations
 
 from enum import StrEnum
+from typing import Annotated, Literal
 
 import msgspec
 
@@ -69,11 +70,89 @@ class ParseResult(Data):
     errors: list[ParseError] = msgspec.field(default_factory=list)
 
 
+# --- speech ---------------------------------------------------------------------------------
+
+SAMPLE_RATE: Literal[16000] = 16000
+"""Audio on the bus is 16 kHz mono signed 16-bit little-endian PCM..."""
+FRAME_BYTES = 640
+"""...in frames of 20 ms (320 samples); a chunk carries whole frames."""
+MAX_CHUNK_FRAMES = 50
+"""At most one second of audio per chunk."""
+
+
+class AudioStart(Message):
+    """Open a recognition session; its key names it (``voice/<robot>/stt/audio/<session>``).
+
+    A session is one person speaking from one device: it may hold several utterances, each
+    ended by a pause, and it ends with `AudioStop` (or when it goes quiet for too long).
+    """
+
+    sample_rate: Literal[16000] = SAMPLE_RATE
+    channels: Literal[1] = 1
+
+
+class AudioChunk(Message):
+    """Whole 20 ms frames of PCM, in order; `seq` counts chunks from 0 to spot gaps."""
+
+    seq: Annotated[int, msgspec.Meta(ge=0)]
+    pcm: Annotated[bytes, msgspec.Meta(min_length=FRAME_BYTES)]
+
+    def __post_init__(self) -> None:
+        frames, rest = divmod(len(self.pcm), FRAME_BYTES)
+        if rest or frames > MAX_CHUNK_FRAMES:
+            raise ValueError(
+                f"pcm must be whole {FRAME_BYTES}-byte frames (20 ms), at most "
+                f"{MAX_CHUNK_FRAMES} of them; got {len(self.pcm)} bytes"
+            )
+
+
+class AudioStop(Message):
+    """End the session: the utterance in progress, if any, is finished now."""
+
+
+AudioMessage = AudioStart | AudioChunk | AudioStop
+
+
+class PartialTranscript(Message):
+    """What the recogniser hears so far in the current utterance; superseded by the next."""
+
+    session: str
+    utterance: int
+    """Counts the session's utterances from 0."""
+    text: str
+
+
 class Transcript(Message):
-    """A final transcript from the speech recogniser."""
+    """A final transcript: one per utterance, from the recogniser or typed by a person."""
 
     text: str
     confidence: float | None = None
+    """0 to 1; the recogniser rejects an utterance below its threshold (0.5 by default)."""
+    session: str = ""
+    """The audio session it came from; empty for text that was not spoken."""
+    utterance: int = 0
+    rejected: bool = False
+    """True when the speech was not a command: it must never become orders."""
+    reason: str = ""
+    """Why it was rejected, in one line."""
+    speech_start: float | None = None
+    """Seconds from the start of the session's audio to where the speech began..."""
+    speech_end: float | None = None
+    """...and ended, as the recogniser found it."""
+
+
+class SttStatus(Message):
+    """The speech recogniser's state, published on change and re-sent to late subscribers."""
+
+    engine: str
+    ready: bool = False
+    """True once a grammar is in use: before that every utterance is rejected."""
+    grammar_version: str = ""
+    detail: str = ""
+    """One line for a person: what it listens for, or what is missing."""
+    sessions: int = 0
+    unpronounceable: list[str] = msgspec.field(default_factory=list)
+    """Grammar words without a pronunciation: commands that use them cannot be heard."""
 
 
 class Proposal(Message):
@@ -82,6 +161,11 @@ class Proposal(Message):
     transcript: str
     orders: list[Order] = msgspec.field(default_factory=list)
     errors: list[ParseError] = msgspec.field(default_factory=list)
+    session: str = ""
+    """The audio session of the transcript, so that a panel knows its own utterances."""
+    utterance: int = 0
+    rejected: bool = False
+    """The recogniser rejected the speech: no orders, one error saying why."""
 
 
 class ParseRequest(Message):
@@ -112,6 +196,8 @@ class Grammar(Message):
     words: list[str] = msgspec.field(default_factory=list)
     """Every word that can occur in a command, sorted."""
     separator_phrases: list[str] = msgspec.field(default_factory=list)
+    skip_words: list[str] = msgspec.field(default_factory=list)
+    """Small words that may stand between and around the words of a command."""
     unexpandable: list[str] = msgspec.field(default_factory=list)
     """Orders whose alias cannot be expanded to a finite set, one line each saying why."""
     version: str = ""

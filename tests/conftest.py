@@ -18,6 +18,7 @@ from pathlib import Path
 import pytest
 import zenoh
 
+from bench.speech_set import speak
 from shared.bus import BusOptions
 
 REPO = Path(__file__).resolve().parents[1]
@@ -28,6 +29,21 @@ def free_port() -> int:
         sock.bind(("127.0.0.1", 0))
         port: int = sock.getsockname()[1]
         return port
+
+
+Speak = Callable[..., Path]
+
+
+@pytest.fixture(scope="session")
+def speech(tmp_path_factory: pytest.TempPathFactory) -> Speak:
+    """`speech(text, voice="en-us", speed=160)`: a WAV file of `text` spoken by espeak-ng,
+    16 kHz mono with silence around it, made once per test run."""
+    directory = tmp_path_factory.mktemp("speech")
+
+    def make(text: str, voice: str = "en-us", speed: int = 160) -> Path:
+        return directory / speak(text, voice, speed, directory).file
+
+    return make
 
 
 @pytest.fixture

@@ -19,7 +19,6 @@ NEAR_MISSES = [
     ("reach kitchn", "reach kitchen"),
     ("teach kitchen", "reach kitchen"),
     ("rich kitchen", "reach kitchen"),
-    ("reach the kitchen", "reach kitchen"),
     ("kitchen reach", "reach kitchen"),
     ("reach dumpsters", "reach dumpster"),
     ("return left", "turn left"),

@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 from services.converter.expand import MAX_PHRASES, SlotRef, expand
 from services.converter.grammar import build_grammar
-from services.converter.orders import OrderSet
+from services.converter.orders import DEFAULT_SKIP_WORDS, OrderSet
 from services.converter.parser import Parser
 from shared.messages import Grammar
 
@@ -130,7 +130,10 @@ def test_every_phrase_of_the_grammar_parses_to_exactly_one_order() -> None:
 def test_jsgf_has_one_rule_per_command_and_shared_number_rules() -> None:
     jsgf = GRAMMAR.jsgf
     assert jsgf.startswith("#JSGF V1.0;\ngrammar voicectl;\n")
-    assert "public <command> = <order> ( <separator> <order> )*;" in jsgf
+    assert (
+        "public <command> = <skip> <order> <skip> ( <separator> <skip> <order> <skip> )*;" in jsgf
+    )
+    assert "<skip> = ( a | an | the | to | please | now )*;" in jsgf
     assert "<separator> = then;" in jsgf
     assert "// turn_by/left" in jsgf
     # left and right turns share the same 180 values
@@ -160,7 +163,7 @@ def test_unexpandable_aliases_are_reported_and_give_words() -> None:
         "count: has a character class with more than 8 members; repeats without a small "
         "bound (*, +, {n,} or more than 4 times)",
     ]
-    assert grammar.words == ["count", "say", "stop", "then", "to"]
+    assert set(grammar.words) == {"count", "say", "stop", "then", "to", *DEFAULT_SKIP_WORDS}
     assert "<c0> = ( say )+; // say" in grammar.jsgf
 
 
@@ -180,7 +183,7 @@ def test_too_many_phrases_fall_back_to_words() -> None:
         "go: 120000 phrases, more than 5000; its words are listed instead"
     ]
     assert {"walk", "ninety", "by"} <= set(grammar.words)
-    assert "<c0> = go <n0> by <n0>" in grammar.jsgf
+    assert "<c0> = go <skip> <n0> <skip> by <skip> <n0>" in grammar.jsgf
 
 
 def test_expansion_is_bounded() -> None:

@@ -11,6 +11,7 @@ from hypothesis import strategies as st
 
 from services.converter.orders import OrderSet
 from services.converter.parser import MAX_TEXT_CHARS, Parser, normalise
+from shared.errors import OrdersFileError
 from shared.messages import ParseError
 
 DEMO = Parser(OrderSet.load(Path(__file__).resolve().parents[1] / "orders" / "demo.yaml"))
@@ -41,8 +42,10 @@ def test_aliases_match_whole_words_only() -> None:
     assert result.orders == []
     assert result.errors[0].reason == "no order matches"
     assert names("turn leftover") == []
-    # 'then' inside a word does not split
-    assert names("turn left thenceforth") == [("rotation", "left")]
+    # 'then' inside a word does not split: the word is left over, and refused
+    error = DEMO.parse("turn left thenceforth").errors[0]
+    assert error.reason == "words not understood: 'thenceforth'; did you mean: turn left?"
+    assert error.candidates == ["turn left"]
 
 
 def test_regex_alternatives_and_optionals() -> None:
@@ -256,3 +259,109 @@ orders:
     assert (short.params, short.description) == ({"seconds": 3}, "pause")
     (longer,) = parser.parse("pause for twenty seconds").orders
     assert (longer.params, longer.description) == ({"seconds": 20.0}, "pause 20")
+
+
+# --- skip words and leftover words ------------------------------------------------------------
+
+ALL = Parser(OrderSet.load(Path(__file__).resolve().parents[1] / "orders"))
+
+
+@pytest.mark.parametrize(
+    ("said", "meant"),
+    [
+        ("reach the kitchen", [("goal", "kitchen")]),
+        ("turn to the left", [("rotation", "left")]),
+        (
+            "please turn left then go to the kitchen now",
+            [("rotation", "left"), ("goal", "kitchen")],
+        ),
+        ("take a picture", [("take_photo", None)]),
+        ("now please move the forward", [("local_goal", "forward")]),
+        ("turn left to forty five degrees", [("turn_by", "left")]),
+    ],
+)
+def test_skip_words_may_stand_around_and_between_the_words_of_a_command(
+    said: str, meant: list[tuple[str, str | None]]
+) -> None:
+    result = ALL.parse(said)
+    assert [(o.order, o.case) for o in result.orders] == meant
+    assert result.errors == []
+
+
+def test_words_left_over_are_an_error_that_suggests_the_command_matched() -> None:
+    result = DEMO.parse("move forward two point five meters then turn left 45 degrees")
+    assert result.orders == []
+    assert [(e.text, e.reason, e.candidates) for e in result.errors] == [
+        (
+            "move forward two point five meters",
+            "words not understood: 'two point five meters'; did you mean: move forward?",
+            ["move forward"],
+        ),
+        (
+            "turn left 45 degrees",
+            "words not understood: '45 degrees'; did you mean: turn left?",
+            ["turn left"],
+        ),
+    ]
+    # With the spoken orders loaded the numbers are part of the command.
+    assert [o.description for o in ALL.parse("turn left 45 degrees").orders] == [
+        "turn left 45 degrees"
+    ]
+
+
+def test_an_alias_that_names_a_skip_word_still_needs_it() -> None:
+    assert names("go to the kitchen", ALL) == [("goal", "kitchen")]
+    result = ALL.parse("go kitchen")
+    assert result.orders == []
+    assert result.errors[0].candidates == ["go to kitchen"]
+
+
+def test_skip_words_can_be_changed_or_turned_off() -> None:
+    yaml = (
+        "orders_list:\n  skip_words: {words}\n  orders:\n"
+        "    fetch: {{voice_alias: 'fetch box', label: x}}\n"
+    )
+    off = Parser(OrderSet.from_yaml(yaml.format(words="[]")))
+    assert off.parse("fetch the box").orders == []
+    assert [o.order for o in off.parse("fetch box").orders] == ["fetch"]
+    own = Parser(OrderSet.from_yaml(yaml.format(words="[that, please]")))
+    assert [o.order for o in own.parse("please fetch that box").orders] == ["fetch"]
+    assert own.parse("fetch the box").orders == []
+
+
+@pytest.mark.parametrize(
+    ("words", "message"),
+    [
+        ("the", "<text>: 'skip_words' must be a list of words (line 2)"),
+        (
+            "[The]",
+            "<text>: skip_words: 'The' must be one lower-case word without punctuation (line 2)",
+        ),
+        ("['two words']", "skip_words: 'two words' must be one lower-case word"),
+        ("[3]", "skip_words: 3 must be one lower-case word"),
+    ],
+)
+def test_bad_skip_words_are_one_line_errors_with_their_line(words: str, message: str) -> None:
+    yaml = f"orders_list:\n  skip_words: {words}\n  orders:\n    a: {{voice_alias: a, label: x}}\n"
+    with pytest.raises(OrdersFileError) as raised:
+        OrderSet.from_yaml(yaml)
+    assert message in "\n".join(getattr(raised.value, "errors", [str(raised.value)]))
+
+
+def test_files_that_disagree_on_skip_words_are_an_error_naming_them(tmp_path: Path) -> None:
+    for name, words in (("a.yaml", "[the]"), ("b.yaml", "[a]")):
+        (tmp_path / name).write_text(
+            f"skip_words: {words}\norders:\n  {name[0]}: {{voice_alias: {name[0]}, label: x}}\n"
+        )
+    (tmp_path / "c.yaml").write_text("orders:\n  c: {voice_alias: c, label: x}\n")
+    with pytest.raises(OrdersFileError, match="disagree on skip_words") as raised:
+        OrderSet.load(tmp_path)
+    assert "a.yaml" in str(raised.value)
+    assert "b.yaml" in str(raised.value)
+    assert "c.yaml" not in str(raised.value)  # a file that says nothing agrees with any
+
+
+@given(st.lists(st.sampled_from(["the", "please", "now", "to", "a"]), max_size=3))
+def test_any_skip_words_around_a_command_leave_its_order(extra: list[str]) -> None:
+    said = " ".join([*extra, "reach", *extra, "kitchen", *extra])
+    assert names(said, ALL) == [("goal", "kitchen")]

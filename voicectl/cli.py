@@ -11,6 +11,7 @@ from pathlib import Path
 
 import msgspec
 
+from services.stt.__main__ import add_engine_arguments, engine_options
 from shared.bus import (
     DEFAULT_ROUTER,
     Bus,
@@ -42,8 +43,8 @@ from shared.messages import (
 
 from .stack import Child, run_stack
 
-SERVICES = ("router", "converter", "supervisor", "executor", "sim", "web")
-REPO_ORDERS = Path(__file__).resolve().parents[1] / "orders" / "demo.yaml"
+SERVICES = ("router", "converter", "stt", "supervisor", "executor", "sim", "web")
+REPO_ORDERS = Path(__file__).resolve().parents[1] / "orders"
 _ENCODER = msgspec.json.Encoder()
 
 
@@ -65,9 +66,16 @@ def build_parser() -> argparse.ArgumentParser:
     up.add_argument("--host", default="127.0.0.1", help="panel address")
     up.add_argument("--port", type=int, default=8000, help="panel port")
     up.add_argument("--robot", type=robot_name, default="robot")
-    up.add_argument("--orders", type=Path, default=REPO_ORDERS, help="orders file or directory")
+    up.add_argument(
+        "--orders",
+        type=Path,
+        default=REPO_ORDERS,
+        help="orders file or directory (default: every shipped file in orders/)",
+    )
     up.add_argument("--time-scale", type=float, default=1.0, help="simulator speed-up")
     up.add_argument("--no-web", action="store_true", help="do not start the panel")
+    up.add_argument("--no-stt", action="store_true", help="do not start speech recognition")
+    add_engine_arguments(up)
     up.add_argument(
         "--executor",
         action="append",
@@ -77,13 +85,31 @@ def build_parser() -> argparse.ArgumentParser:
     )
 
     parse = sub.add_parser("parse", help="print the orders a text becomes, as JSON")
-    parse.add_argument("--orders", type=Path, default=REPO_ORDERS, help="orders file or directory")
+    parse.add_argument(
+        "--orders",
+        type=Path,
+        default=REPO_ORDERS,
+        help="orders file or directory (default: orders/)",
+    )
     parse.add_argument(
         "--grammar",
         action="store_true",
         help="print the recogniser grammar (JSGF, phrases, words) as JSON instead",
     )
     parse.add_argument("text", nargs="?", help="what was said or typed")
+
+    transcribe = sub.add_parser(
+        "transcribe",
+        help="recognise WAV files offline with a grammar from orders; one JSON line per file",
+    )
+    transcribe.add_argument(
+        "--orders",
+        type=Path,
+        default=REPO_ORDERS,
+        help="orders file or directory (default: orders/)",
+    )
+    add_engine_arguments(transcribe)
+    transcribe.add_argument("audio", type=Path, nargs="+", metavar="AUDIO.wav")
 
     say = sub.add_parser("say", help="convert a text on the bus and submit its orders")
     say.add_argument("--robot", type=robot_name, default="robot")
@@ -124,6 +150,8 @@ def main(argv: list[str] | None = None) -> int:
             return _up(args)
         case "parse":
             return _parse(args)
+        case "transcribe":
+            return _transcribe(args)
         case "say":
             return asyncio.run(_say(args))
         case "state":
@@ -163,6 +191,11 @@ def _up(args: argparse.Namespace) -> int:
             + [arg for spec in args.executor for arg in ("--executor", spec)],
         ),
     ]
+    if not args.no_stt:
+        engine = ["--engine", args.engine, "--min-confidence", str(args.min_confidence)]
+        if args.vosk_model is not None:
+            engine += ["--vosk-model", str(args.vosk_model)]
+        children.insert(3, Child("stt", ["services.stt", *robot, *engine, *connect]))
     web = None
     if not args.no_web:
         load_or_create_token(default_token_file())
@@ -175,7 +208,7 @@ def _up(args: argparse.Namespace) -> int:
         keys.alive("supervisor"),
         keys.alive("executor"),
         BridgeKeys().simulator,
-    ]
+    ] + ([] if args.no_stt else [keys.alive("stt")])
     return run_stack(children, web, args.router, ready)
 
 
@@ -197,6 +230,28 @@ def _parse(args: argparse.Namespace) -> int:
     else:
         _print_json(Parser(orders).parse(args.text))
     return 0
+
+
+def _transcribe(args: argparse.Namespace) -> int:
+    from services.converter.grammar import build_grammar
+    from services.converter.orders import OrderSet
+    from services.converter.parser import Parser
+    from services.stt.engine import EngineError, load_engine
+
+    from .transcribe import Unreadable, transcribe
+
+    try:
+        orders = OrderSet.load(args.orders)
+        engine = load_engine(engine_options(args))
+        engine.use_grammar(build_grammar(orders))
+    except (OrdersFileError, EngineError) as exc:
+        print(f"voicectl transcribe: {exc}", file=sys.stderr)
+        return 2
+    unreadable = 0
+    for line in transcribe(engine, Parser(orders).parse, args.audio):
+        unreadable += isinstance(line, Unreadable)
+        print(_ENCODER.encode(line).decode(), flush=True)
+    return 1 if unreadable else 0
 
 
 async def _say(args: argparse.Namespace) -> int:

@@ -15,7 +15,7 @@ from .service import POLL_SECONDS, ConverterService, errors_of, load
 from .watch import signature
 
 _LOGGER = logging.getLogger(__name__)
-DEFAULT_ORDERS = Path(__file__).resolve().parents[2] / "orders" / "demo.yaml"
+DEFAULT_ORDERS = Path(__file__).resolve().parents[2] / "orders"
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -24,7 +24,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "--orders",
         type=Path,
         default=DEFAULT_ORDERS,
-        help="orders YAML file or directory of them (default: the shipped demo orders); "
+        help="orders YAML file or directory of them (default: every shipped file in orders/); "
         "edits apply while running",
     )
     parser.add_argument(

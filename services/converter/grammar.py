@@ -5,6 +5,9 @@ words ("two point five"), so a 180-value angle costs one rule, not 180 phrases p
 The phrase list spells everything out, up to `MAX_PHRASES` per command; a command with
 more, or whose alias cannot be expanded at all, is listed in `unexpandable` and gives its
 words instead. In the JSGF such an alias becomes "one or more of its words".
+
+Skip words are optional wherever the parser lets them stand: between the words of a
+command and around it (`<skip>` is any number of them), never inside a spoken number.
 """
 
 from __future__ import annotations
@@ -28,7 +31,7 @@ GRAMMAR_NAME = "voicectl"
 
 def build_grammar(orders: OrderSet) -> Grammar:
     """The grammar of `orders`; a pure function of them (its version is a digest)."""
-    builder = _Builder()
+    builder = _Builder(orders.skip_words)
     for command in orders.commands:
         builder.add(command)
     separator = orders.separator_expansion
@@ -48,18 +51,22 @@ def build_grammar(orders: OrderSet) -> Grammar:
         phrases=phrases,
         words=sorted(builder.words),
         separator_phrases=separator_phrases,
+        skip_words=list(orders.skip_words),
         unexpandable=builder.unexpandable,
         version=digest[:16],
     )
 
 
 class _Builder:
-    def __init__(self) -> None:
+    def __init__(self, skip_words: tuple[str, ...]) -> None:
+        self.skip_words = skip_words
+        self.gap = " <skip> " if skip_words else " "
+        """What stands between two words of a command in the JSGF."""
         self.rules: list[tuple[str, str, str]] = []
         """(rule name, body, command name)."""
         self.number_rules: dict[tuple[str, ...], str] = {}
         self.phrases: list[str] = []
-        self.words: set[str] = set()
+        self.words: set[str] = set(skip_words)
         self.unexpandable: list[str] = []
 
     def add(self, command: Command) -> None:
@@ -98,15 +105,18 @@ class _Builder:
                 words.append(f"<{name}>")
             else:
                 words.append(word)
-        return " ".join(words)
+        return self.gap.join(words)
 
     def jsgf(self, separator_rule: str) -> str:
+        order = "<skip> <order> <skip>" if self.skip_words else "<order>"
         lines = [
             "#JSGF V1.0;",
             f"grammar {GRAMMAR_NAME};",
-            "public <command> = <order> ( <separator> <order> )*;",
+            f"public <command> = {order} ( <separator> {order} )*;",
             f"<separator> = {separator_rule};",
         ]
+        if self.skip_words:
+            lines.append(f"<skip> = ( {' | '.join(self.skip_words)} )*;")
         names = " | ".join(f"<{name}>" for name, _, _ in self.rules)
         lines.append(f"<order> = {names or '<VOID>'};")
         lines.extend(f"<{name}> = {body}; // {command}" for name, body, command in self.rules)

@@ -4,6 +4,7 @@ The shape (the ``orders_list`` wrapper is optional)::
 
     orders_list:
       separator: "then"            # regex between the orders of one utterance
+      skip_words: [the, please]    # small words people add; default DEFAULT_SKIP_WORDS
       orders:
         rotation:                  # order name
           voice_alias: "turn"      # regex, mandatory
@@ -39,9 +40,13 @@ from .text import normalise
 RESERVED_KEYS = frozenset({"voice_alias", "label", "description", "cases", "slots"})
 POSE_KEYS = ("x", "y", "yaw")
 DEFAULT_SEPARATOR = "then"
+DEFAULT_SKIP_WORDS = ("a", "an", "the", "to", "please", "now")
+"""Words people add around and inside commands ("please reach the kitchen now"): the
+parser ignores them there and the recogniser's grammar makes them optional there."""
 
 PLACEHOLDER = re.compile(r"(?<!\\)\{([A-Za-z_]\w*)\}")
 """A slot inside an alias or description: ``{distance}`` (a quantifier has digits only)."""
+_QUANTIFIER = re.compile(r"[*+?]|\{\d*(?:,\d*)?\}")
 SLOT_GROUP = "slot_"
 """Prefix of the named regex group a slot becomes."""
 _SLOT_STUB = "#"
@@ -134,8 +139,8 @@ class Command:
 
     order: OrderSpec
     case: CaseSpec | None
-    pattern: str
-    """The alias regex with slots as named groups, not yet restricted to whole words."""
+    aliases: tuple[str, ...]
+    """The order's alias, then the case's: said one after the other."""
     slots: dict[str, SlotSpec]
     """The slots of the pattern, by name."""
     expansion: Expansion
@@ -143,6 +148,11 @@ class Command:
     @property
     def name(self) -> str:
         return f"{self.order.name}/{self.case.name}" if self.case else self.order.name
+
+    def pattern(self, skip_words: tuple[str, ...] = ()) -> str:
+        """The aliases as one regex with slots as named groups, not yet restricted to whole
+        words; `skip_words` may stand wherever the aliases have a space."""
+        return _combined(self.aliases, NUMBER_PATTERN, skip_words)
 
     def to_order(self, spoken: dict[str, str | None]) -> Order:
         """The order this command makes with the slot texts `spoken` (by slot name; None
@@ -179,12 +189,21 @@ class OrderSet:
 
     orders: tuple[OrderSpec, ...]
     separator: str = DEFAULT_SEPARATOR
+    declared_skip_words: tuple[str, ...] | None = None
+    """The files' `skip_words`; None when no file says, and `DEFAULT_SKIP_WORDS` apply."""
     sources: tuple[str, ...] = field(default=())
     commands: tuple[Command, ...] = ()
     """Every whole command, in file order."""
     prefixes: tuple[Command, ...] = ()
     """The aliases of orders with cases, alone."""
     separator_expansion: Expansion = field(default_factory=Expansion)
+
+    @property
+    def skip_words(self) -> tuple[str, ...]:
+        """The small words the parser ignores between and around a command's words."""
+        if self.declared_skip_words is None:
+            return DEFAULT_SKIP_WORDS
+        return self.declared_skip_words
 
     @staticmethod
     def load(path: Path) -> OrderSet:
@@ -228,11 +247,11 @@ class OrderSet:
             data = data["orders_list"]
         if not isinstance(data, dict) or not isinstance(data.get("orders"), dict):
             raise OrdersFileError(f"{source}: expected a mapping with an 'orders' mapping")
-        unknown = set(data) - {"orders", "separator"}
+        unknown = set(data) - {"orders", "separator", "skip_words"}
         if unknown:
             raise OrdersFileError(
                 f"{source}: unknown top-level key(s) {', '.join(sorted(map(str, unknown)))}; "
-                "allowed: orders, separator"
+                "allowed: orders, separator, skip_words"
             )
         separator = data.get("separator", DEFAULT_SEPARATOR)
         if not isinstance(separator, str) or not separator.strip():
@@ -242,6 +261,7 @@ class OrderSet:
         except _Problem as exc:
             where = f"{source}: separator: {exc}"
             raise OrdersInvalid([(where, _line(data, "separator"))]) from exc
+        skip_words = _skip_words(data, source)
         orders: list[OrderSpec] = []
         commands: list[Command] = []
         problems: list[Problem] = []
@@ -257,18 +277,20 @@ class OrderSet:
             raise OrdersInvalid(problems)
         if not orders:
             raise OrdersFileError(f"{source}: 'orders' is empty")
-        return OrderSet.build(tuple(orders), commands, separator, (source,))
+        return OrderSet.build(tuple(orders), commands, separator, skip_words, (source,))
 
     @staticmethod
     def build(
         orders: tuple[OrderSpec, ...],
         commands: list[Command],
         separator: str,
+        skip_words: tuple[str, ...] | None,
         sources: tuple[str, ...],
     ) -> OrderSet:
         return OrderSet(
             orders=orders,
             separator=separator,
+            declared_skip_words=skip_words,
             sources=sources,
             commands=tuple(c for c in commands if c.case or not c.order.cases),
             prefixes=tuple(c for c in commands if c.order.cases and not c.case),
@@ -299,10 +321,21 @@ class OrderSet:
             raise OrdersFileError(
                 "orders files disagree on the separator: " + ", ".join(sorted(separators))
             )
+        declared = {s.declared_skip_words for s in sets} - {None}
+        if len(declared) > 1:
+            raise OrdersFileError(
+                "orders files disagree on skip_words: "
+                + "; ".join(
+                    f"{', '.join(s.sources)}: {list(s.declared_skip_words)}"
+                    for s in sets
+                    if s.declared_skip_words is not None
+                )
+            )
         return OrderSet.build(
             tuple(o for s in sets for o in s.orders),
             [c for s in sets for c in (*s.prefixes, *s.commands)],
             separators.pop(),
+            declared.pop() if declared else None,
             tuple(src for s in sets for src in s.sources),
         )
 
@@ -438,6 +471,30 @@ def _values(spec: dict[str, Any]) -> dict[str, ParamValue]:
     return values
 
 
+def _skip_words(data: dict[str, Any], source: str) -> tuple[str, ...] | None:
+    """The file's `skip_words`: a list of single words in normal form, or None if absent."""
+    if "skip_words" not in data:
+        return None
+    words = data["skip_words"]
+    line = _line(data, "skip_words")
+    if words is None:
+        words = []
+    if not isinstance(words, list):
+        raise OrdersInvalid([(f"{source}: 'skip_words' must be a list of words", line)])
+    for word in words:
+        if not isinstance(word, str) or not word or normalise(word) != word or " " in word:
+            raise OrdersInvalid(
+                [
+                    (
+                        f"{source}: skip_words: {word!r} must be one lower-case word "
+                        "without punctuation",
+                        line,
+                    )
+                ]
+            )
+    return tuple(dict.fromkeys(words))
+
+
 def _check_regex(pattern: str) -> None:
     try:
         compiled = re.compile(pattern)
@@ -502,11 +559,10 @@ def _command(order: OrderSpec, case: CaseSpec | None) -> Command:
         if targets.count(target) > 1:
             raise _Problem(f"two slots write to '{target}'", line, at)
 
-    def combined(body: str) -> str:
-        return r"\s+".join(f"(?:{_with_slots(alias, body)})" for alias in aliases)
-
     try:
-        expansion = expand(combined(_SLOT_STUB), {f"{SLOT_GROUP}{n}": n for n in slots})
+        expansion = expand(
+            _combined(tuple(aliases), _SLOT_STUB, ()), {f"{SLOT_GROUP}{n}": n for n in slots}
+        )
     except re.error as exc:  # each alias compiled alone: e.g. a group name in both
         raise _Problem(f"the aliases do not combine into one regex: {exc}", line, at) from exc
     for template in expansion.templates:
@@ -519,7 +575,49 @@ def _command(order: OrderSpec, case: CaseSpec | None) -> Command:
                 line,
                 at,
             )
-    return Command(order, case, combined(NUMBER_PATTERN), slots, expansion)
+    return Command(order, case, tuple(aliases), slots, expansion)
+
+
+def _combined(aliases: tuple[str, ...], slot_body: str, skip_words: tuple[str, ...]) -> str:
+    """Aliases said one after the other, as one regex; `skip_words` may stand wherever
+    there is a space between words (none for the recogniser's expansion)."""
+    gap = r"\s+"
+    if skip_words:
+        gap += r"(?:(?:" + "|".join(map(re.escape, skip_words)) + r")\s+)*"
+    return gap.join(f"(?:{_with_slots(_spaced(alias, gap), slot_body)})" for alias in aliases)
+
+
+def _spaced(alias: str, gap: str) -> str:
+    """`alias` with each run of plain spaces between words replaced by the regex `gap`.
+
+    Spaces inside a character class, escaped, or under a quantifier (" ?") stay as written.
+    """
+    if gap == r"\s+":
+        return alias
+    out: list[str] = []
+    position = 0
+    in_class = False
+    while position < len(alias):
+        char = alias[position]
+        if char == "\\":
+            out.append(alias[position : position + 2])
+            position += 2
+            continue
+        if in_class:
+            in_class = char != "]"
+        elif char == "[":
+            in_class = True
+        elif char == " ":
+            end = position
+            while end < len(alias) and alias[end] == " ":
+                end += 1
+            if not _QUANTIFIER.match(alias, end):
+                out.append(gap)
+                position = end
+                continue
+        out.append(char)
+        position += 1
+    return "".join(out)
 
 
 def _line(mapping: Any, key: Any = None) -> int | None:

@@ -1,6 +1,8 @@
 """Text to orders: whole-word alias matching, most specific match wins, ties are errors.
 
 Each segment of an utterance (between separators) becomes exactly one order or one error.
+Skip words ("the", "please") may stand between and around a command's words; any other
+word outside the matched command makes the segment an error, never a silent drop.
 Only the commands whose key word is in the segment are tried: an index built from the
 expanded aliases keeps a parse of a 200-order file to a handful of regex searches.
 """
@@ -45,9 +47,12 @@ class _Index:
     phrases: a segment without that word cannot match it.
     """
 
-    def __init__(self, commands: Sequence[Command], enabled: bool) -> None:
+    def __init__(
+        self, commands: Sequence[Command], skip_words: tuple[str, ...], enabled: bool
+    ) -> None:
         self.matchers = [
-            _Matcher(c, re.compile(whole_words(c.pattern), re.IGNORECASE)) for c in commands
+            _Matcher(c, re.compile(whole_words(c.pattern(skip_words)), re.IGNORECASE))
+            for c in commands
         ]
         self._by_word: dict[str, list[int]] = {}
         self._always: list[int] = []
@@ -102,8 +107,9 @@ class Parser:
     def __init__(self, orders: OrderSet, use_index: bool = True) -> None:
         self.orders = orders
         self._separator = re.compile(whole_words(orders.separator), re.IGNORECASE)
-        self._commands = _Index(orders.commands, use_index)
-        self._prefixes = _Index(orders.prefixes, use_index)
+        self._skip_words = frozenset(orders.skip_words)
+        self._commands = _Index(orders.commands, orders.skip_words, use_index)
+        self._prefixes = _Index(orders.prefixes, orders.skip_words, use_index)
         self._suggester = Suggester(orders.commands, self._parse_alone)
 
     def parse(self, text: str) -> ParseResult:
@@ -145,9 +151,22 @@ class Parser:
             matcher, found = best[0]
             spoken = {name: found.group(f"{SLOT_GROUP}{name}") for name in matcher.command.slots}
             try:
-                return matcher.command.to_order(spoken)
+                made = matcher.command.to_order(spoken)
             except SlotValueError as exc:
                 return ParseError(text=segment, reason=str(exc))
+            extra = [
+                word
+                for word in (segment[: found.start()] + " " + segment[found.end() :]).split()
+                if word not in self._skip_words
+            ]
+            if extra:
+                said = found.group(0)
+                return ParseError(
+                    text=segment,
+                    reason=f"words not understood: '{' '.join(extra)}'; did you mean: {said}?",
+                    candidates=[said],
+                )
+            return made
         if best:
             names = [m.command.name for m, _ in best]
             return ParseError(

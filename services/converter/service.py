@@ -8,11 +8,8 @@ import logging
 from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
-from typing import Any
 
-import zenoh
-
-from shared.bus import JSON, Bus, json_decoder
+from shared.bus import Bus, Latest, json_decoder
 from shared.errors import OrdersFileError
 from shared.keys import ConverterKeys, RobotKeys, robot_of
 from shared.messages import (
@@ -21,6 +18,7 @@ from shared.messages import (
     Grammar,
     Message,
     OrdersStatus,
+    ParseError,
     ParseReply,
     ParseRequest,
     Proposal,
@@ -63,43 +61,6 @@ def errors_of(exc: OrdersFileError) -> list[str]:
     return list(exc.errors) if isinstance(exc, OrdersInvalid) else [str(exc)]
 
 
-class Latest:
-    """Publishes on one key and sends the last message again whenever a subscriber appears.
-
-    A session that has just opened does not yet know the subscribers and drops what it
-    publishes; the matching listener tells when one is there, and then the status and the
-    grammar go out again (a recogniser that starts later asks for the grammar instead).
-    Zenoh drops puts under congestion by default, and the status follows a grammar of some
-    100 kB: these rare messages block for room instead.
-    """
-
-    def __init__(self, bus: Bus, key: str, loop: asyncio.AbstractEventLoop) -> None:
-        self._bus = bus
-        self._loop = loop
-        self._message: Message | None = None
-        self._publisher = bus.session.declare_publisher(
-            key, encoding=JSON, congestion_control=zenoh.CongestionControl.BLOCK
-        )
-        self._listener = self._publisher.declare_matching_listener(self._on_matching)
-
-    def publish(self, message: Message) -> None:
-        self._message = message
-        self._put()
-
-    def close(self) -> None:
-        self._listener.undeclare()
-        self._publisher.undeclare()
-
-    def _on_matching(self, status: Any) -> None:  # on a Zenoh thread
-        if status.matching:
-            with contextlib.suppress(RuntimeError):  # the loop is closing
-                self._loop.call_soon_threadsafe(self._put)
-
-    def _put(self) -> None:
-        if self._message is not None:
-            self._publisher.put(self._bus.encode(self._message))
-
-
 class ConverterService:
     """Answers parse and grammar queries, turns final transcripts into proposals, and
     reloads the orders when their files change, keeping the last good ones on errors.
@@ -127,12 +88,11 @@ class ConverterService:
         return self._loaded
 
     def __enter__(self) -> ConverterService:
-        loop = asyncio.get_running_loop()
         self._grammar = self._closers.enter_context(
-            contextlib.closing(Latest(self._bus, self._keys.grammar, loop))
+            contextlib.closing(self._bus.latest(self._keys.grammar))
         )
         self._status = self._closers.enter_context(
-            contextlib.closing(Latest(self._bus, self._keys.status, loop))
+            contextlib.closing(self._bus.latest(self._keys.status))
         )
         self._bus.serve(self._keys.parse, json_decoder(ConverterRequest), self._on_request)
         self._bus.subscribe(
@@ -201,13 +161,31 @@ class ConverterService:
 
     def _on_transcript(self, key: str, transcript: Transcript) -> None:
         robot = robot_of(key)
-        result = self._loaded.parser.parse(transcript.text)
-        _LOGGER.info(
-            "%s: %r -> %d order(s), %d error(s)",
-            robot,
-            transcript.text,
-            len(result.orders),
-            len(result.errors),
-        )
-        proposal = Proposal(transcript=transcript.text, orders=result.orders, errors=result.errors)
+        if transcript.rejected:
+            # Speech that is not a command never becomes orders, however it would parse.
+            reason = f"not a command: {transcript.reason}" if transcript.reason else "not a command"
+            proposal = Proposal(
+                transcript=transcript.text,
+                errors=[ParseError(text=transcript.text, reason=reason)],
+                rejected=True,
+                session=transcript.session,
+                utterance=transcript.utterance,
+            )
+            _LOGGER.info("%s: %r rejected by the recogniser", robot, transcript.text)
+        else:
+            result = self._loaded.parser.parse(transcript.text)
+            _LOGGER.info(
+                "%s: %r -> %d order(s), %d error(s)",
+                robot,
+                transcript.text,
+                len(result.orders),
+                len(result.errors),
+            )
+            proposal = Proposal(
+                transcript=transcript.text,
+                orders=result.orders,
+                errors=result.errors,
+                session=transcript.session,
+                utterance=transcript.utterance,
+            )
         self._bus.publish(RobotKeys(robot).proposal, proposal)

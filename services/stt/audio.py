@@ -1,0 +1,85 @@
+"""Audio as the recognisers want it: 16 kHz mono 16-bit PCM, from the bus or from files.
+
+Two corrections happen before any engine sees the audio:
+
+- A faint noise floor is added. Exact digital silence (a muted or finished fake microphone,
+  padding added by sox) is not what an acoustic model was trained on: on generated speech
+  padded with zeros, pocketsphinx's grammar search often ended early with a cut transcript
+  ("reach" for "reach base"). About -60 dBFS of noise, far below any microphone's own
+  noise, fixed it; the noise is seeded, so the same audio always decodes the same way.
+- Files of any sample rate, sample format and channel count are converted: channels are
+  averaged, the rate is changed by a windowed-sinc low-pass and linear interpolation.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from shared.errors import VoicectlError
+from shared.messages import FRAME_BYTES, SAMPLE_RATE
+
+NOISE_FLOOR = 30.0
+"""Standard deviation of the added noise, in 16-bit sample units (about -60 dBFS)."""
+BYTES_PER_SECOND = SAMPLE_RATE * 2
+
+
+class AudioError(VoicectlError):
+    """Audio that cannot be used; the text says what and where."""
+
+
+class NoiseFloor:
+    """Adds the same faint noise to every stream that starts from the same seed."""
+
+    def __init__(self, seed: int = 0) -> None:
+        self._random = np.random.default_rng(seed)
+
+    def add(self, pcm: bytes) -> bytes:
+        samples = np.frombuffer(pcm, dtype="<i2").astype(np.float32)
+        samples += self._random.normal(0.0, NOISE_FLOOR, samples.shape).astype(np.float32)
+        return bytes(np.clip(np.rint(samples), -32768, 32767).astype("<i2").tobytes())
+
+
+def seconds(pcm_bytes: int) -> float:
+    return pcm_bytes / BYTES_PER_SECOND
+
+
+def frames(pcm: bytes) -> list[bytes]:
+    """`pcm` cut into 20 ms frames (the last one zero-padded), as a microphone sends them."""
+    padded = pcm + b"\0" * (-len(pcm) % FRAME_BYTES)
+    return [padded[i : i + FRAME_BYTES] for i in range(0, len(padded), FRAME_BYTES)]
+
+
+def read_wav(path: Path) -> bytes:
+    """A sound file's audio as 16 kHz mono 16-bit PCM; raises AudioError saying why not.
+
+    libsndfile (through `soundfile`) reads every WAV flavour (8 to 32-bit, float,
+    extensible headers) and FLAC or Ogg too; the standard `wave` module reads only plain
+    integer PCM.
+    """
+    import soundfile
+
+    try:
+        samples, rate = soundfile.read(str(path), dtype="float64", always_2d=True)
+    except (OSError, RuntimeError, soundfile.LibsndfileError) as exc:
+        raise AudioError(f"{path}: cannot read as audio: {exc}") from exc
+    mono = samples.mean(axis=1)
+    if rate != SAMPLE_RATE:
+        mono = resample(mono, rate, SAMPLE_RATE)
+    return bytes(np.clip(np.rint(mono * 32768.0), -32768, 32767).astype("<i2").tobytes())
+
+
+def resample(samples: np.ndarray, rate: int, target: int) -> np.ndarray:
+    """Change the sample rate; going down, a low-pass at 0.45 of the new rate comes first."""
+    if len(samples) == 0:
+        return samples
+    if target < rate:
+        cutoff = 0.45 * target / rate  # in cycles per input sample
+        taps = np.arange(-32, 33)
+        kernel = 2 * cutoff * np.sinc(2 * cutoff * taps) * np.hamming(len(taps))
+        samples = np.convolve(samples, kernel / kernel.sum(), mode="same")
+    duration = len(samples) / rate
+    times = np.arange(int(duration * target)) / target
+    result: np.ndarray = np.interp(times, np.arange(len(samples)) / rate, samples)
+    return result

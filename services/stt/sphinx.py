@@ -1,0 +1,353 @@
+"""The embedded engine: pocketsphinx 5 with its US-English model, bound to the orders' grammar.
+
+Per utterance, measured on generated speech (bench/stt.py), these choices mattered:
+
+- The grammar is searched as a minimal word automaton (wordgraph.py), not through
+  pocketsphinx's own JSGF compiler: 29 states instead of 16,650, a twentieth of the time.
+- Skip words ("the", "please") cost a transition probability of `SKIP_PROBABILITY`: free
+  skip words made the search explain unclear speech as "to the a to".
+- Two passes. The first runs while the person speaks and gives the partial transcripts;
+  it starts from the cepstral mean of the stream's previous utterance. At the end of the
+  utterance the decoder switches to batch normalisation (the mean of this utterance alone)
+  and decodes it again for the final result, which therefore depends on this utterance
+  only, never on what was said before. It is also better: a fixed starting mean alone got
+  56 of 75 commands right, carrying the mean over between utterances 64, batch 72.
+- Confidence is the final path's acoustic score per frame, which pocketsphinx measures
+  against the best-scoring senone of each frame: a bound on any unconstrained decode. A
+  free phone-loop decode was measured beside it and ranked utterances the same way at
+  three times the cost, so it is not run.
+- End of speech comes from pocketsphinx's `Endpointer` (WebRTC-style VAD, 30 ms frames,
+  0.3 s window); the decoder also gets `PRE_ROLL` seconds of audio from before the speech
+  and the silence the endpointer waited for, so the last word can finish.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import threading
+from collections import deque
+from dataclasses import dataclass
+from typing import Any
+
+import pocketsphinx
+
+from shared.messages import Grammar
+
+from .audio import NoiseFloor, seconds
+from .engine import EngineError, Event, Final, Heard, SpeechStarted, logistic
+from .lexicon import pronunciations
+from .wordgraph import GrammarError, WordGraph, compile_jsgf
+
+_LOGGER = logging.getLogger(__name__)
+
+SKIP_PROBABILITY = 0.01
+PRE_ROLL = 0.3
+"""Seconds of audio before the detected start of speech that the decoder also gets."""
+ENDPOINTER_WINDOW = 0.3
+PARTIAL_EVERY = 0.1
+"""Seconds of audio between two looks at the partial hypothesis."""
+CONFIDENCE_MIDPOINT = -4.4
+"""Acoustic score per 10 ms frame, in nats below the best senone, that maps to confidence
+0.5. Tuned on bench/speech_set.py's generated speech (docs/benchmarks.md)."""
+CONFIDENCE_WIDTH = 0.4
+POOL_SIZE = 2
+"""Idle decoders kept for the next sessions (each holds the acoustic model, ~28 MB)."""
+
+
+@dataclass(frozen=True)
+class _Compiled:
+    """A grammar ready for decoders: automaton, extra pronunciations, skip words."""
+
+    version: str
+    graph: WordGraph
+    added: dict[str, list[list[str]]]
+    skip_words: frozenset[str]
+    unpronounceable: frozenset[str]
+
+
+class _Decoder:
+    """A pocketsphinx decoder and the grammar it has installed."""
+
+    def __init__(self) -> None:
+        self.decoder: Any = pocketsphinx.Decoder(loglevel="FATAL", lm=None)
+        # pocketsphinx 5.1.1 ignores the first switch of the cepstral mean's mode unless the
+        # features were re-initialised once before: without this line every second pass
+        # silently kept the live mean.
+        self.cepstral_mean("live")
+        self.prior = self.decoder.get_cmn()
+        """The model's initial cepstral mean, where a stream's first utterance starts."""
+        self.version = ""
+        self._fsg: Any = None
+        self._words: set[str] = set()
+
+    def cepstral_mean(self, mode: str) -> None:
+        """'live' (updated frame by frame, for the first pass) or 'batch' (the mean of the
+        whole utterance, for the second); switching costs about 0.1 ms."""
+        config = self.decoder.config
+        config["cmn"] = mode
+        self.decoder.reinit_feat(config)
+
+    def known(self, word: str) -> list[list[str]]:
+        found = []
+        variant = 1
+        while (phones := self.decoder.lookup_word(_numbered(word, variant))) is not None:
+            found.append(phones.split())
+            variant += 1
+        return found
+
+    def install(self, compiled: _Compiled) -> None:
+        if self.version == compiled.version:
+            return
+        for word, variants in compiled.added.items():
+            if word in self._words:
+                continue
+            first = len(self.known(word)) + 1
+            for offset, phones in enumerate(variants):
+                self.decoder.add_word(_numbered(word, first + offset), " ".join(phones), False)
+            self._words.add(word)
+        name = f"grammar_{compiled.version}"
+        self.decoder.add_fsg(name, self._fsg_model(compiled))
+        self.decoder.activate_search(name)
+        if self.version:
+            self.decoder.remove_search(f"grammar_{self.version}")
+        self.version = compiled.version
+
+    def _fsg_model(self, compiled: _Compiled) -> Any:
+        graph = compiled.graph
+        logmath = self.decoder.get_logmath()
+        weight = float(self.decoder.config["lw"])
+        final = graph.states
+        fsg = pocketsphinx.FsgModel("voicectl", logmath, weight, graph.states + 1)
+        fsg.set_start_state(0)
+        fsg.set_final_state(final)
+        arcs = [a for a in graph.arcs if a[2] not in compiled.unpronounceable]
+        choices = dict.fromkeys(range(graph.states), 0)
+        for source, _, word in arcs:
+            if word not in compiled.skip_words:
+                choices[source] += 1
+        for state in graph.finals:
+            choices[state] += 1
+
+        def cost(probability: float) -> int:
+            return int(logmath.log(probability) * weight)
+
+        for source, target, word in arcs:
+            chance = SKIP_PROBABILITY if word in compiled.skip_words else 1.0 / choices[source]
+            fsg.trans_add(source, target, cost(chance), fsg.word_add(word))
+        for state in graph.finals:
+            fsg.null_trans_add(state, final, cost(1.0 / choices[state]))
+        self._fsg = fsg  # pocketsphinx's search refers to it
+        return fsg
+
+
+def _numbered(word: str, variant: int) -> str:
+    return word if variant == 1 else f"{word}({variant})"
+
+
+class PocketsphinxEngine:
+    """Compiles grammars once and lends decoders to recognisers."""
+
+    name = "pocketsphinx"
+
+    def __init__(self, min_confidence: float = 0.5) -> None:
+        self.min_confidence = min_confidence
+        self._compiled: _Compiled | None = None
+        self._pool: list[_Decoder] = []
+        self._lock = threading.Lock()
+
+    def use_grammar(self, grammar: Grammar) -> list[str]:
+        try:
+            graph = compile_jsgf(grammar.jsgf)
+        except GrammarError as exc:
+            raise EngineError(f"grammar {grammar.version}: {exc}") from exc
+        if not graph.finals:
+            raise EngineError(f"grammar {grammar.version} accepts no phrase")
+        decoder = self.borrow()
+        try:
+            found = pronunciations(graph.words, decoder.known)
+        finally:
+            self.give_back(decoder)
+        self._compiled = _Compiled(
+            version=grammar.version,
+            graph=graph,
+            added=found.added,
+            skip_words=frozenset(grammar.skip_words),
+            unpronounceable=frozenset(found.unpronounceable),
+        )
+        return found.unpronounceable
+
+    def recogniser(self, max_utterance: float, segment: bool = True) -> SphinxRecogniser:
+        if self._compiled is None:
+            raise EngineError("no grammar yet")
+        return SphinxRecogniser(self, max_utterance, segment)
+
+    def borrow(self) -> _Decoder:
+        with self._lock:
+            if self._pool:
+                return self._pool.pop()
+        return _Decoder()
+
+    def give_back(self, decoder: _Decoder) -> None:
+        with self._lock:
+            if len(self._pool) < POOL_SIZE:
+                self._pool.append(decoder)
+
+    def compiled(self) -> _Compiled:
+        assert self._compiled is not None
+        return self._compiled
+
+
+class _Utterance:
+    """The utterance being decoded: its number, where it began, its audio."""
+
+    def __init__(self, number: int, start: float) -> None:
+        self.number = number
+        self.start = start
+        self.audio = bytearray()
+        self.since_partial = 0
+        self.partial = ""
+
+
+class SphinxRecogniser:
+    """One stream's recogniser: endpointer, first pass while speaking, second at the end."""
+
+    def __init__(self, engine: PocketsphinxEngine, max_utterance: float, segment: bool) -> None:
+        self._engine = engine
+        self._max_bytes = int(max_utterance * 32000)
+        self._segment = segment
+        self._decoder: _Decoder | None = None
+        self._noise = NoiseFloor()
+        self._endpointer: Any = None
+        self._endpointer_origin = 0.0
+        self._pending = bytearray()
+        self._recent: deque[tuple[float, bytes]] = deque()
+        self._clock = 0.0
+        """Seconds of audio consumed."""
+        self._utterance: _Utterance | None = None
+        self._count = 0
+        self._prior = ""
+        """The cepstral mean of this stream's last utterance: where the next first pass
+        starts, so that partial transcripts improve as the person goes on speaking."""
+        self._new_endpointer()
+
+    def accept(self, pcm: bytes) -> list[Event]:
+        events: list[Event] = []
+        self._pending += self._noise.add(pcm)
+        size = self._endpointer.frame_bytes
+        while len(self._pending) >= size:
+            frame = bytes(self._pending[:size])
+            del self._pending[:size]
+            self._frame(frame, events)
+        return events
+
+    def finish(self) -> list[Event]:
+        events: list[Event] = []
+        if self._pending and self._utterance is not None:
+            self._feed(bytes(self._pending), events)
+        self._pending.clear()
+        if self._utterance is not None:
+            events.append(self._end(self._clock))
+        return events
+
+    def close(self) -> None:
+        if self._decoder is not None:
+            if self._utterance is not None:
+                self._decoder.decoder.end_utt()
+                self._utterance = None
+            self._engine.give_back(self._decoder)
+            self._decoder = None
+
+    # --- per frame -------------------------------------------------------------------------
+
+    def _frame(self, frame: bytes, events: list[Event]) -> None:
+        start = self._clock
+        self._clock += seconds(len(frame))
+        self._recent.append((start, frame))
+        while self._recent and self._recent[0][0] < self._clock - 1.0 - PRE_ROLL:
+            self._recent.popleft()
+        if not self._segment:
+            if self._utterance is None:
+                self._begin(0.0, events)
+            else:
+                self._feed(frame, events)
+            return
+        was_speaking = self._endpointer.in_speech
+        speech = self._endpointer.process(frame)
+        if self._utterance is None:
+            if speech is not None and not was_speaking:
+                self._begin(self._endpointer_origin + self._endpointer.speech_start, events)
+            return
+        self._feed(frame, events)
+        if speech is not None and was_speaking and not self._endpointer.in_speech:
+            events.append(self._end(self._endpointer_origin + self._endpointer.speech_end))
+        elif len(self._utterance.audio) >= self._max_bytes:
+            _LOGGER.info("utterance %d cut at its maximum length", self._utterance.number)
+            events.append(self._end(self._clock))
+            self._new_endpointer()  # whoever still speaks starts a new utterance
+
+    def _new_endpointer(self) -> None:
+        self._endpointer = pocketsphinx.Endpointer(window=ENDPOINTER_WINDOW, sample_rate=16000)
+        self._endpointer_origin = self._clock
+
+    def _begin(self, speech_start: float, events: list[Event]) -> None:
+        compiled = self._engine.compiled()
+        if self._decoder is None:
+            self._decoder = self._engine.borrow()
+        self._decoder.install(compiled)  # a new grammar applies from the next utterance
+        decoder = self._decoder.decoder
+        decoder.set_cmn(self._prior or self._decoder.prior)
+        decoder.start_utt()
+        self._utterance = _Utterance(self._count, speech_start)
+        self._count += 1
+        events.append(SpeechStarted(self._utterance.number, speech_start))
+        for begins, frame in self._recent:
+            if begins >= speech_start - PRE_ROLL:
+                self._feed(frame, events)
+
+    def _feed(self, pcm: bytes, events: list[Event]) -> None:
+        utterance = self._utterance
+        assert utterance is not None
+        assert self._decoder is not None
+        decoder = self._decoder.decoder
+        decoder.process_raw(pcm)
+        utterance.audio += pcm
+        utterance.since_partial += len(pcm)
+        if utterance.since_partial >= PARTIAL_EVERY * 32000:
+            utterance.since_partial = 0
+            hypothesis = decoder.hyp()
+            text = hypothesis.hypstr if hypothesis is not None else ""
+            if text and text != utterance.partial:
+                utterance.partial = text
+                events.append(Heard(utterance.number, text))
+
+    def _end(self, speech_end: float) -> Final:
+        """Close the first pass; decode the utterance again with its own cepstral mean."""
+        utterance = self._utterance
+        assert utterance is not None
+        assert self._decoder is not None
+        self._utterance = None
+        decoder = self._decoder.decoder
+        decoder.end_utt()
+        self._decoder.cepstral_mean("batch")
+        decoder.start_utt()
+        decoder.process_raw(bytes(utterance.audio), full_utt=True)
+        decoder.end_utt()
+        self._prior = decoder.get_cmn()
+        self._decoder.cepstral_mean("live")
+        hypothesis = decoder.hyp()
+        text = hypothesis.hypstr if hypothesis is not None else ""
+        frames = max(decoder.n_frames(), 1)
+        score = sum(math.log(max(s.ascore, 1e-320)) for s in decoder.seg() or ())
+        confidence = logistic(score / frames, CONFIDENCE_MIDPOINT, CONFIDENCE_WIDTH)
+        rejection = ""
+        if not text:
+            rejection, confidence = "no command heard", 0.0
+        elif confidence < self._engine.min_confidence:
+            rejection = (
+                f"sounds unlike any command (confidence {confidence:.2f}, "
+                f"below {self._engine.min_confidence:.2f})"
+            )
+        return Final(
+            utterance.number, text, round(confidence, 3), rejection, utterance.start, speech_end
+        )

@@ -1,0 +1,191 @@
+"""Vosk (Kaldi) as an engine: a model directory, the orders' phrases as its grammar.
+
+Vosk takes a grammar as a list of phrases and builds a small language model from them, so
+phrases can recombine ("left then forward" pieces): the service's parse check catches what
+does not make whole orders. Vosk finds the end of an utterance itself. A recogniser is
+created once per stream and reset between utterances: its first chunk costs about 0.7 s.
+
+No English model comes from a package registry; users download one (see `HOW_TO_GET`).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import threading
+from pathlib import Path
+from typing import Any
+
+import vosk
+
+from shared.messages import Grammar
+
+from .audio import seconds
+from .engine import EngineError, Event, Final, Heard, SpeechStarted
+
+_LOGGER = logging.getLogger(__name__)
+
+HOW_TO_GET = (
+    "download and unpack a model from https://alphacephei.com/vosk/models "
+    "(for English: vosk-model-small-en-us-0.15) and pass its directory with --vosk-model"
+)
+UNKNOWN_WORDS = ("[unk]", "<UNK>")
+"""How models name speech outside the grammar (English models, and some others)."""
+CHUNK_BYTES = 3200
+"""100 ms per call: partial results grow at that pace."""
+
+
+class VoskEngine:
+    name = "vosk"
+
+    def __init__(self, model_dir: Path, min_confidence: float = 0.5) -> None:
+        self.min_confidence = min_confidence
+        if not model_dir.is_dir():
+            raise EngineError(f"Vosk model directory {model_dir} does not exist: {HOW_TO_GET}")
+        vosk.SetLogLevel(-1)
+        try:
+            self._model = vosk.Model(str(model_dir))
+        except Exception as exc:  # vosk raises a bare Exception for a broken model
+            raise EngineError(
+                f"{model_dir} is not a usable Vosk model ({exc}): {HOW_TO_GET}"
+            ) from exc
+        self._unknown = next(
+            (w for w in UNKNOWN_WORDS if self._model.vosk_model_find_word(w) != -1), None
+        )
+        self._grammar: str | None = None
+        self._version = ""
+        self._pool: list[tuple[str, Any]] = []
+        self._lock = threading.Lock()
+
+    def use_grammar(self, grammar: Grammar) -> list[str]:
+        words = set(grammar.words)
+        missing = sorted(w for w in words if self._model.vosk_model_find_word(w) == -1)
+        unheard = set(missing)
+        phrases = [p for p in grammar.phrases if not unheard & set(p.split())]
+        # Commands too many to list give their words; skip words and the separator stand
+        # alone: Vosk's grammar is a language model over these, not an exact grammar.
+        singles = sorted(words - unheard - {w for p in phrases for w in p.split()})
+        singles += [w for w in grammar.skip_words if w not in unheard]
+        singles += [w for p in grammar.separator_phrases for w in p.split() if w not in unheard]
+        listed = list(dict.fromkeys([*phrases, *singles]))
+        if not listed:
+            raise EngineError(f"grammar {grammar.version}: no phrase this model can hear")
+        if self._unknown:
+            listed.append(self._unknown)
+        self._grammar = json.dumps(listed, ensure_ascii=False)
+        self._version = grammar.version
+        return missing
+
+    def recogniser(self, max_utterance: float, segment: bool = True) -> VoskRecogniser:
+        if self._grammar is None:
+            raise EngineError("no grammar yet")
+        return VoskRecogniser(self, max_utterance, segment)
+
+    def borrow(self) -> Any:
+        """A Kaldi recogniser with the grammar in use now."""
+        assert self._grammar is not None
+        with self._lock:
+            while self._pool:
+                version, recogniser = self._pool.pop()
+                if version == self._version:
+                    return recogniser
+        recogniser = vosk.KaldiRecognizer(self._model, 16000, self._grammar)
+        recogniser.SetWords(True)
+        return recogniser
+
+    def give_back(self, recogniser: Any) -> None:
+        recogniser.Reset()
+        with self._lock:
+            if len(self._pool) < 2:
+                self._pool.append((self._version, recogniser))
+
+    def judge(self, words: list[dict[str, Any]]) -> tuple[float, str]:
+        """Confidence (mean word confidence) and why the utterance is rejected, if it is."""
+        if not words:
+            return 0.0, "no command heard"
+        confidence = sum(float(w.get("conf", 0.0)) for w in words) / len(words)
+        if any(w.get("word") in UNKNOWN_WORDS for w in words):
+            return confidence, "words outside the orders' grammar"
+        if confidence < self.min_confidence:
+            return confidence, (
+                f"sounds unlike any command (confidence {confidence:.2f}, "
+                f"below {self.min_confidence:.2f})"
+            )
+        return confidence, ""
+
+
+class VoskRecogniser:
+    """One stream: Vosk's own endpointing, a result per utterance."""
+
+    def __init__(self, engine: VoskEngine, max_utterance: float, segment: bool) -> None:
+        self._engine = engine
+        self._recogniser: Any = engine.borrow()
+        self._max_utterance = max_utterance
+        self._segment = segment
+        self._pending = bytearray()
+        self._clock = 0.0
+        self._offset = 0.0
+        """Where the Kaldi recogniser's own clock started (it restarts on a forced cut)."""
+        self._started: float | None = None
+        self._partial = ""
+        self._count = 0
+        self._words: list[dict[str, Any]] = []
+        """Whole-stream mode: the words of every result so far."""
+
+    def accept(self, pcm: bytes) -> list[Event]:
+        events: list[Event] = []
+        self._pending += pcm
+        while len(self._pending) >= CHUNK_BYTES:
+            chunk = bytes(self._pending[:CHUNK_BYTES])
+            del self._pending[:CHUNK_BYTES]
+            self._chunk(chunk, events)
+        return events
+
+    def finish(self) -> list[Event]:
+        events: list[Event] = []
+        if self._pending:
+            self._chunk(bytes(self._pending), events)
+            self._pending.clear()
+        self._result(json.loads(self._recogniser.FinalResult()), events, force=True)
+        return events
+
+    def close(self) -> None:
+        if self._recogniser is not None:
+            self._engine.give_back(self._recogniser)
+            self._recogniser = None
+
+    def _chunk(self, chunk: bytes, events: list[Event]) -> None:
+        self._clock += seconds(len(chunk))
+        if self._recogniser.AcceptWaveform(chunk):
+            self._result(json.loads(self._recogniser.Result()), events)
+            return
+        text = json.loads(self._recogniser.PartialResult()).get("partial", "")
+        if text and self._started is None:
+            self._started = max(self._clock - seconds(len(chunk)), 0.0)
+            events.append(SpeechStarted(self._count, self._started))
+        if text and text != self._partial:
+            self._partial = text
+            events.append(Heard(self._count, text))
+        if self._started is not None and self._clock - self._started > self._max_utterance:
+            _LOGGER.info("utterance %d cut at its maximum length", self._count)
+            self._result(json.loads(self._recogniser.FinalResult()), events, force=True)
+            self._recogniser.Reset()
+            self._offset = self._clock
+
+    def _result(self, result: dict[str, Any], events: list[Event], force: bool = False) -> None:
+        words = [w for w in result.get("result", []) if isinstance(w, dict)]
+        if not self._segment:
+            self._words.extend(words)
+            if not force:
+                return
+            words = self._words
+        elif not words and self._started is None:
+            return  # silence ended: there was no utterance
+        text = " ".join(str(w.get("word", "")) for w in words)
+        confidence, rejection = self._engine.judge(words)
+        start = self._offset + float(words[0]["start"]) if words else self._started or 0.0
+        end = self._offset + float(words[-1]["end"]) if words else self._clock
+        events.append(Final(self._count, text, round(confidence, 3), rejection, start, end))
+        self._count += 1
+        self._started = None
+        self._partial = ""

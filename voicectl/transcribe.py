@@ -1,0 +1,76 @@
+"""Offline transcription: recordings through an engine with a grammar made from orders files.
+
+Integrators use it to check their YAML against real recordings before they run anything:
+each file is one utterance, and the result says what the engine heard, whether it would be
+rejected, and the orders and errors the converter makes of it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import msgspec
+
+from services.stt.audio import AudioError, frames, read_wav
+from services.stt.engine import Engine, Final
+from shared.messages import Order, ParseError, ParseResult
+
+MAX_FILE_SECONDS = 600.0
+
+
+class Transcription(msgspec.Struct):
+    """One file's line of `voicectl transcribe` output."""
+
+    file: str
+    transcript: str
+    rejected: bool
+    reason: str
+    """Why it is rejected; empty when it is not."""
+    confidence: float | None
+    orders: list[Order]
+    """What `voicectl parse` makes of the transcript (never dispatched if rejected)."""
+    errors: list[ParseError]
+
+
+class Unreadable(msgspec.Struct):
+    """The line for a file that could not be read."""
+
+    file: str
+    error: str
+
+
+def transcribe(
+    engine: Engine, parse: Callable[[str], ParseResult], files: list[Path]
+) -> Iterator[Transcription | Unreadable]:
+    """Each file's transcription, in order, with what `parse` makes of the transcript."""
+    for path in files:
+        try:
+            pcm = read_wav(path)
+        except AudioError as exc:
+            yield Unreadable(file=str(path), error=str(exc))
+            continue
+        recogniser = engine.recogniser(MAX_FILE_SECONDS, segment=False)
+        try:
+            events = [e for frame in frames(pcm) for e in recogniser.accept(frame)]
+            events += recogniser.finish()
+        finally:
+            recogniser.close()
+        finals = [e for e in events if isinstance(e, Final)]
+        text = " ".join(f.text for f in finals if f.text)
+        engine_reason = next((f.rejection for f in finals if f.rejection), "")
+        result = parse(text) if text else None
+        reason = engine_reason
+        if not reason and result is not None and (result.errors or not result.orders):
+            reason = "not a command" + (f": {result.errors[0].reason}" if result.errors else "")
+        if not text:
+            reason = reason or "no command heard"
+        yield Transcription(
+            file=str(path),
+            transcript=text,
+            rejected=bool(reason),
+            reason=reason,
+            confidence=min((f.confidence for f in finals), default=None),
+            orders=result.orders if result is not None else [],
+            errors=result.errors if result is not None else [],
+        )
