@@ -20,6 +20,7 @@ from typing import Any, Literal, TypeVar
 
 import msgspec
 import zenoh
+import zenoh.ext
 
 from .errors import BusError
 from .keys import check_chunk
@@ -49,6 +50,8 @@ class BusOptions:
         conf = zenoh.Config()
         conf.insert_json5("mode", json.dumps(self.mode))
         conf.insert_json5("scouting/multicast/enabled", "false")
+        # Publishers that keep their last value for late subscribers need timestamps.
+        conf.insert_json5("timestamping/enabled", "true")
         if self.connect:
             conf.insert_json5("connect/endpoints", json.dumps(self.connect))
         if self.listen:
@@ -102,6 +105,8 @@ class Bus:
         self._encoder = msgspec.json.Encoder()
         self._running: set[asyncio.Task[tuple[bytes, zenoh.Encoding]]] = set()
         """Handler tasks in flight (the loop keeps only weak references to tasks)."""
+        self._streams: set[Stream] = set()
+        self._closers.callback(self._close_streams)
 
     @classmethod
     @contextlib.contextmanager
@@ -113,6 +118,10 @@ class Bus:
         finally:
             bus._closers.close()
             session.close()
+
+    def _close_streams(self) -> None:
+        for stream in list(self._streams):
+            stream.close()
 
     @property
     def session(self) -> zenoh.Session:
@@ -142,9 +151,10 @@ class Bus:
         )
 
     def stream(self, key: str) -> Stream:
-        """A publisher declared once for many messages on one key (an audio session)."""
+        """A publisher declared once for many messages on one key (an audio session);
+        close it when done (the bus closes those still open)."""
         stream = Stream(self, key)
-        self._closers.callback(stream.close)
+        self._streams.add(stream)
         return stream
 
     def latest(self, key: str) -> Latest:
@@ -157,8 +167,21 @@ class Bus:
     def publish_bytes(self, key: str, payload: bytes, encoding: zenoh.Encoding = CDR) -> None:
         self._session.put(key, payload, encoding=encoding)
 
-    def subscribe(self, key: str, decode: Decode[T], handler: Callable[[str, T], None]) -> None:
-        """Call `handler(key, message)` on the loop for every sample that decodes."""
+    def subscribe(
+        self,
+        key: str,
+        decode: Decode[T],
+        handler: Callable[[str, T], None],
+        on_loop: bool = True,
+        history: bool = False,
+    ) -> None:
+        """Call `handler(key, message)` on the loop for every sample that decodes.
+
+        With `history`, also for the last message of every `latest` publisher on `key`,
+        whenever either side starts. With `on_loop` False the handler runs on Zenoh's own
+        thread, for a stream so dense (audio, 50 messages a second) that waking the loop
+        for each message would cost more than the work: it must be quick and thread-safe.
+        """
 
         def on_sample(sample: zenoh.Sample) -> None:
             sample_key = str(sample.key_expr)
@@ -167,9 +190,20 @@ class Bus:
             except Exception as exc:  # any decoder's failure is the sender's fault: drop it
                 _LOGGER.warning("dropped undecodable message on %s: %s", sample_key, exc)
                 return
-            self._call_soon(handler, sample_key, message)
+            if on_loop:
+                self._call_soon(handler, sample_key, message)
+            else:
+                handler(sample_key, message)
 
-        subscriber = self._session.declare_subscriber(key, _direct(on_sample))
+        if history:
+            subscriber: Any = zenoh.ext.declare_advanced_subscriber(
+                self._session,
+                key,
+                _direct(on_sample),
+                history=zenoh.ext.HistoryConfig(detect_late_publishers=True, max_samples=1),
+            )
+        else:
+            subscriber = self._session.declare_subscriber(key, _direct(on_sample))
         self._closers.callback(subscriber.undeclare)
 
     # --- request / reply ----------------------------------------------------------------
@@ -367,43 +401,38 @@ class Stream:
         if not self._closed:
             self._closed = True
             self._publisher.undeclare()
+            self._bus._streams.discard(self)
 
 
 class Latest:
-    """Publishes on one key and sends the last message again whenever a subscriber appears.
+    """Publishes on one key and keeps the last message for subscribers that come later.
 
-    A session that has just opened does not yet know the subscribers and drops what it
-    publishes; the matching listener tells when one is there, and then the last message
-    goes out again. These rare messages (a status, a grammar of some 100 kB) block for room
-    under congestion rather than being dropped.
+    Zenoh's advanced publisher does it: it caches the last sample and announces itself, and
+    a subscriber declared with `history` asks every such publisher for its cache, whether
+    it starts before or after the publisher. These rare messages (a status, a grammar of
+    some 100 kB) block for room under congestion rather than being dropped.
     """
 
     def __init__(self, bus: Bus, key: str) -> None:
         self._bus = bus
-        self._message: Message | None = None
-        self._publisher = bus.session.declare_publisher(
-            key, encoding=JSON, congestion_control=zenoh.CongestionControl.BLOCK
+        self._publisher = zenoh.ext.declare_advanced_publisher(
+            bus.session,
+            key,
+            encoding=JSON,
+            congestion_control=zenoh.CongestionControl.BLOCK,
+            cache=zenoh.ext.CacheConfig(max_samples=1),
+            publisher_detection=True,
         )
-        self._listener = self._publisher.declare_matching_listener(_direct(self._on_matching))
         self._closed = False
 
     def publish(self, message: Message) -> None:
-        self._message = message
-        self._put()
+        if not self._closed:
+            self._publisher.put(self._bus.encode(message))
 
     def close(self) -> None:
         if not self._closed:
             self._closed = True
-            self._listener.undeclare()
             self._publisher.undeclare()
-
-    def _on_matching(self, status: Any) -> None:  # on a Zenoh thread
-        if status.matching:
-            self._bus._call_soon(self._put)
-
-    def _put(self) -> None:
-        if self._message is not None and not self._closed:
-            self._publisher.put(self._bus.encode(self._message))
 
 
 def _direct(callback: Callable[[T], None]) -> zenoh.handlers.Callback[T]:

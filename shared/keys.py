@@ -107,13 +107,20 @@ class RobotKeys:
         """Progress and results published by the executor."""
         return f"{self.prefix}/executor/events"
 
+    @property
+    def pose(self) -> str:
+        """The robot's pose from odometry, published by its executor."""
+        return f"{self.prefix}/robot/pose"
+
     def label(self, label: str) -> str:
         """Liveliness token of one order label an executor of this robot serves."""
         return f"{self.prefix}/labels/{check_chunk(label, 'label')}"
 
     def alive(self, service: str) -> str:
         """Liveliness token of one service serving this robot."""
-        return f"{self.prefix}/alive/{check_chunk(service, 'service name')}"
+        return (
+            f"{self.prefix}/alive/{check_chunk(service, 'service name') if service != ANY else ANY}"
+        )
 
 
 @dataclass(frozen=True)

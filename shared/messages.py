@@ -214,6 +214,18 @@ class OrdersStatus(Message):
     """How many orders are loaded (the previous set when the reload failed)."""
 
 
+# --- robot ------------------------------------------------------------------------------------
+
+
+class RobotPose(Message):
+    """Where the robot is, from its odometry, as its executor sees it (at most twice a second)."""
+
+    x: float
+    y: float
+    yaw: float
+    frame: str = "odom"
+
+
 # --- supervisor ---------------------------------------------------------------------------
 
 

@@ -13,21 +13,27 @@ from collections.abc import Callable, Coroutine
 from pathlib import Path
 from typing import Any
 
+import pytest
+import zenoh
+
 from services.stt.audio import frames, read_wav
 from shared.bus import Bus, BusOptions, json_decoder
-from shared.keys import ConverterKeys, RobotKeys
+from shared.keys import BridgeKeys, ConverterKeys, RobotKeys
 from shared.messages import (
     AudioChunk,
     AudioStart,
     AudioStop,
     Grammar,
+    OrderStatus,
     PartialTranscript,
     Proposal,
     SttStatus,
     Transcript,
 )
+from shared.ros2 import Pose2D, Ros2Codec, RosDistro
 
-from .conftest import REPO, Processes, Speak, async_wait_until
+from .conftest import REPO, Processes, Speak, Stack, async_wait_until, wait_until
+from .support import Client
 
 ORDERS = REPO / "orders"
 KEYS = RobotKeys("robot")
@@ -56,7 +62,10 @@ class Listener:
         bus.subscribe(KEYS.transcript, json_decoder(Transcript), self._final)
         bus.subscribe(KEYS.proposal, json_decoder(Proposal), lambda _k, m: self.proposals.append(m))
         bus.subscribe(
-            KEYS.stt_status, json_decoder(SttStatus), lambda _k, m: self.statuses.append(m)
+            KEYS.stt_status,
+            json_decoder(SttStatus),
+            lambda _k, m: self.statuses.append(m),
+            history=True,
         )
 
     def _partial(self, _key: str, message: PartialTranscript) -> None:
@@ -274,3 +283,38 @@ def test_speech_that_goes_on_is_cut_at_the_maximum_utterance(
         assert first.speech_end - first.speech_start < 2.0
 
     scenario(router, processes, body, stt_args=("--max-utterance", "1.5"))
+
+
+@pytest.mark.e2e
+def test_speech_streamed_to_voicectl_up_moves_the_simulated_robot(
+    stack: Stack, speech: Speak
+) -> None:
+    """Done-when of the speech issue: generated speech from the shipped orders, streamed to
+    the stack's recogniser, becomes orders that the simulated robot carries out."""
+    wav = speech("please turn left then go to the kitchen", "en-gb", 160)
+
+    async def run() -> list[str]:
+        with Bus.open(BusOptions(connect=[stack.router]), asyncio.get_running_loop()) as bus:
+            listener = Listener(bus)
+            await listener.ready()
+            await stream(bus, "mic", wav)
+            proposal = await listener.proposal("mic")
+            assert not proposal.rejected
+            assert [o.description for o in proposal.orders] == ["turn left", "reach kitchen"]
+            client = Client(bus, "robot")
+            ids = await client.submit(*proposal.orders)
+            finished = [await client.finished(i, timeout=WAIT) for i in ids]
+            assert [r.status for r in finished] == [OrderStatus.SUCCEEDED] * 2
+            return ids
+
+    asyncio.run(run())
+    pose: list[Pose2D] = []
+    codec = Ros2Codec(RosDistro.JAZZY)
+    with zenoh.open(BusOptions(connect=[stack.router]).zenoh_config()) as session:
+        subscriber = session.declare_subscriber(
+            BridgeKeys().odom, lambda s: pose.append(codec.read_odometry(s.payload.to_bytes()).pose)
+        )
+        wait_until(lambda: pose, 30.0, "odometry")
+        subscriber.undeclare()
+    assert abs(pose[-1].x - 3.0) < 0.1
+    assert abs(pose[-1].y - 5.0) < 0.1

@@ -79,7 +79,9 @@ async def main(argv: list[str] | None = None) -> int:
         return 2
     loop = asyncio.get_running_loop()
     with Bus.open(bus_options(args), loop) as bus:
-        robot = RobotLink(bus, BridgeKeys(args.namespace), Ros2Codec(args.distro))
+        robot = RobotLink(
+            bus, BridgeKeys(args.namespace), Ros2Codec(args.distro), RobotKeys(args.robot).pose
+        )
         service = ExecutorService(
             bus, RobotKeys(args.robot), robot, bindings, cancel_deadline=args.cancel_deadline
         )

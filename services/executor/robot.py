@@ -10,7 +10,7 @@ from collections.abc import Callable
 from shared.bus import Bus
 from shared.errors import BusError, OrderFailed
 from shared.keys import BridgeKeys
-from shared.messages import TargetPose
+from shared.messages import RobotPose, TargetPose
 from shared.ros2 import (
     GoalStatus,
     Image,
@@ -24,6 +24,8 @@ from shared.ros2 import (
 _LOGGER = logging.getLogger(__name__)
 
 NAVIGATE = "navigate_to_pose"
+POSE_EVERY = 0.5
+"""Seconds between two poses published for panels."""
 SEND_GOAL_TIMEOUT = 10.0
 RESULT_TIMEOUT = 24 * 3600.0
 """get_result answers when navigation ends, which can take as long as the robot needs."""
@@ -32,10 +34,15 @@ RESULT_TIMEOUT = 24 * 3600.0
 class RobotLink:
     """Topics and actions of one robot, shared by every executor of the process."""
 
-    def __init__(self, bus: Bus, keys: BridgeKeys, codec: Ros2Codec) -> None:
+    def __init__(
+        self, bus: Bus, keys: BridgeKeys, codec: Ros2Codec, pose_key: str | None = None
+    ) -> None:
         self.bus = bus
         self.keys = keys
         self.codec = codec
+        self._pose_key = pose_key
+        """Where to publish the pose for panels (`voice/<robot>/robot/pose`), if anywhere."""
+        self._pose_sent = 0.0
         self.pose: Pose2D | None = None
         """Latest pose from odometry, None until the first message."""
         self.image: Image | None = None
@@ -54,6 +61,11 @@ class RobotLink:
     def _on_odom(self, _key: str, odometry: Odometry) -> None:
         self.pose = odometry.pose
         self._odometry.set()
+        now = asyncio.get_running_loop().time()
+        if self._pose_key is not None and now - self._pose_sent >= POSE_EVERY:
+            self._pose_sent = now
+            pose = RobotPose(x=self.pose.x, y=self.pose.y, yaw=self.pose.yaw)
+            self.bus.publish(self._pose_key, pose, superseded=True)
 
     def _on_image(self, _key: str, image: Image) -> None:
         self.image = image

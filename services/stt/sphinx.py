@@ -16,9 +16,13 @@ Per utterance, measured on generated speech (bench/stt.py), these choices matter
   against the best-scoring senone of each frame: a bound on any unconstrained decode. A
   free phone-loop decode was measured beside it and ranked utterances the same way at
   three times the cost, so it is not run.
-- End of speech comes from pocketsphinx's `Endpointer` (WebRTC-style VAD, 30 ms frames,
-  0.3 s window); the decoder also gets `PRE_ROLL` seconds of audio from before the speech
-  and the silence the endpointer waited for, so the last word can finish.
+- Speech begins and ends where pocketsphinx's WebRTC-style voice activity detector says
+  (30 ms frames, its most aggressive mode, which stopped flagging speech 80 to 120 ms after
+  its true end where the default mode took 160 to 190 ms). The end is 0.24 s without
+  speech; the final pass already runs after 0.09 s and is kept if no speech follows, so the
+  final result is ready when the end is confirmed. pocketsphinx's own `Endpointer` (a
+  0.3 s window) confirmed ends 460 to 490 ms after the speech. The decoder also gets
+  `PRE_ROLL` seconds from before the speech, so that the first word can start.
 """
 
 from __future__ import annotations
@@ -44,13 +48,24 @@ _LOGGER = logging.getLogger(__name__)
 SKIP_PROBABILITY = 0.01
 PRE_ROLL = 0.3
 """Seconds of audio before the detected start of speech that the decoder also gets."""
-ENDPOINTER_WINDOW = 0.3
+VAD_FRAME = 0.03
+START_WINDOW = 4
+START_FRAMES = 3
+"""Speech begins when this many of the last `START_WINDOW` VAD frames are speech."""
+MIN_SPEECH_FRAMES = 5
+"""Fewer speech frames (0.15 s) are a click or a breath, not an utterance."""
+END_FRAMES = 8
+"""It ends after this many frames without speech (0.24 s)."""
+EARLY_FRAMES = 3
+"""After this many (0.09 s) the final pass runs already; the end confirms or drops it."""
 PARTIAL_EVERY = 0.1
 """Seconds of audio between two looks at the partial hypothesis."""
-CONFIDENCE_MIDPOINT = -4.4
+CONFIDENCE_MIDPOINT = -5.3
 """Acoustic score per 10 ms frame, in nats below the best senone, that maps to confidence
 0.5. Tuned on bench/speech_set.py's generated speech (docs/benchmarks.md)."""
 CONFIDENCE_WIDTH = 0.4
+DECODER_CONFIG: dict[str, str] = {}
+"""pocketsphinx options beyond its defaults."""
 POOL_SIZE = 2
 """Idle decoders kept for the next sessions (each holds the acoustic model, ~28 MB)."""
 
@@ -70,7 +85,7 @@ class _Decoder:
     """A pocketsphinx decoder and the grammar it has installed."""
 
     def __init__(self) -> None:
-        self.decoder: Any = pocketsphinx.Decoder(loglevel="FATAL", lm=None)
+        self.decoder: Any = pocketsphinx.Decoder(loglevel="FATAL", lm=None, **DECODER_CONFIG)
         # pocketsphinx 5.1.1 ignores the first switch of the cepstral mean's mode unless the
         # features were re-initialised once before: without this line every second pass
         # silently kept the live mean.
@@ -207,10 +222,29 @@ class _Utterance:
         self.audio = bytearray()
         self.since_partial = 0
         self.partial = ""
+        self.quiet = 0
+        """VAD frames without speech since the last one with speech."""
+        self.speech = 0
+        """VAD frames with speech."""
+        self.speech_end = start
+        self.early: _Result | None = None
+        """The final pass run when the speech paused; used if the pause is the end."""
+        self.live = True
+        """Whether the first pass is running (it stops for the early final pass, and goes
+        on, from the start of the utterance, only if speech resumes)."""
+
+
+@dataclass(frozen=True)
+class _Result:
+    text: str
+    confidence: float
+    mean: str
+    """The utterance's own cepstral mean."""
 
 
 class SphinxRecogniser:
-    """One stream's recogniser: endpointer, first pass while speaking, second at the end."""
+    """One stream's recogniser: voice activity, a first pass while the person speaks, the
+    final pass at the end (started early, when the speech pauses)."""
 
     def __init__(self, engine: PocketsphinxEngine, max_utterance: float, segment: bool) -> None:
         self._engine = engine
@@ -218,8 +252,10 @@ class SphinxRecogniser:
         self._segment = segment
         self._decoder: _Decoder | None = None
         self._noise = NoiseFloor()
-        self._endpointer: Any = None
-        self._endpointer_origin = 0.0
+        self._vad: Any = pocketsphinx.Vad(
+            mode=pocketsphinx.Vad.STRICT, sample_rate=16000, frame_length=VAD_FRAME
+        )
+        self._flags: deque[bool] = deque(maxlen=START_WINDOW)
         self._pending = bytearray()
         self._recent: deque[tuple[float, bytes]] = deque()
         self._clock = 0.0
@@ -229,12 +265,11 @@ class SphinxRecogniser:
         self._prior = ""
         """The cepstral mean of this stream's last utterance: where the next first pass
         starts, so that partial transcripts improve as the person goes on speaking."""
-        self._new_endpointer()
 
     def accept(self, pcm: bytes) -> list[Event]:
         events: list[Event] = []
         self._pending += self._noise.add(pcm)
-        size = self._endpointer.frame_bytes
+        size = self._vad.frame_bytes
         while len(self._pending) >= size:
             frame = bytes(self._pending[:size])
             del self._pending[:size]
@@ -247,7 +282,7 @@ class SphinxRecogniser:
             self._feed(bytes(self._pending), events)
         self._pending.clear()
         if self._utterance is not None:
-            events.append(self._end(self._clock))
+            self._end(self._clock, events)
         return events
 
     def close(self) -> None:
@@ -272,35 +307,43 @@ class SphinxRecogniser:
             else:
                 self._feed(frame, events)
             return
-        was_speaking = self._endpointer.in_speech
-        speech = self._endpointer.process(frame)
-        if self._utterance is None:
-            if speech is not None and not was_speaking:
-                self._begin(self._endpointer_origin + self._endpointer.speech_start, events)
+        speech = bool(self._vad.is_speech(frame))
+        utterance = self._utterance
+        if utterance is None:
+            self._flags.append(speech)
+            if sum(self._flags) >= START_FRAMES:
+                first = len(self._flags) - list(self._flags).index(True)
+                self._begin(self._clock - first * VAD_FRAME, events)
             return
+        if speech and not utterance.live:  # the pause was not the end
+            self._resume(utterance)
         self._feed(frame, events)
-        if speech is not None and was_speaking and not self._endpointer.in_speech:
-            events.append(self._end(self._endpointer_origin + self._endpointer.speech_end))
-        elif len(self._utterance.audio) >= self._max_bytes:
-            _LOGGER.info("utterance %d cut at its maximum length", self._utterance.number)
-            events.append(self._end(self._clock))
-            self._new_endpointer()  # whoever still speaks starts a new utterance
-
-    def _new_endpointer(self) -> None:
-        self._endpointer = pocketsphinx.Endpointer(window=ENDPOINTER_WINDOW, sample_rate=16000)
-        self._endpointer_origin = self._clock
+        if speech:
+            utterance.speech += 1
+            utterance.quiet = 0
+            utterance.speech_end = self._clock
+        else:
+            utterance.quiet += 1
+            if utterance.quiet == EARLY_FRAMES and utterance.speech >= MIN_SPEECH_FRAMES:
+                utterance.early = self._final_pass(utterance)
+        if utterance.quiet >= END_FRAMES:
+            self._end(utterance.speech_end, events)
+        elif len(utterance.audio) >= self._max_bytes:
+            _LOGGER.info("utterance %d cut at its maximum length", utterance.number)
+            self._end(self._clock, events)
 
     def _begin(self, speech_start: float, events: list[Event]) -> None:
         compiled = self._engine.compiled()
         if self._decoder is None:
             self._decoder = self._engine.borrow()
         self._decoder.install(compiled)  # a new grammar applies from the next utterance
+        self._utterance = _Utterance(self._count, speech_start)
+        self._count += 1
+        self._flags.clear()
+        events.append(SpeechStarted(self._utterance.number, speech_start))
         decoder = self._decoder.decoder
         decoder.set_cmn(self._prior or self._decoder.prior)
         decoder.start_utt()
-        self._utterance = _Utterance(self._count, speech_start)
-        self._count += 1
-        events.append(SpeechStarted(self._utterance.number, speech_start))
         for begins, frame in self._recent:
             if begins >= speech_start - PRE_ROLL:
                 self._feed(frame, events)
@@ -309,9 +352,11 @@ class SphinxRecogniser:
         utterance = self._utterance
         assert utterance is not None
         assert self._decoder is not None
+        utterance.audio += pcm
+        if not utterance.live:
+            return
         decoder = self._decoder.decoder
         decoder.process_raw(pcm)
-        utterance.audio += pcm
         utterance.since_partial += len(pcm)
         if utterance.since_partial >= PARTIAL_EVERY * 32000:
             utterance.since_partial = 0
@@ -321,33 +366,65 @@ class SphinxRecogniser:
                 utterance.partial = text
                 events.append(Heard(utterance.number, text))
 
-    def _end(self, speech_end: float) -> Final:
-        """Close the first pass; decode the utterance again with its own cepstral mean."""
+    def _end(self, speech_end: float, events: list[Event]) -> None:
+        """The final result: the early pass if the speech ended where it paused, else a
+        final pass now. A blip too short to be a word ends without one."""
         utterance = self._utterance
         assert utterance is not None
         assert self._decoder is not None
         self._utterance = None
+        if self._segment and utterance.speech < MIN_SPEECH_FRAMES:
+            self._decoder.decoder.end_utt()
+            self._count -= 1  # numbers count utterances that got a result
+            return
+        result = utterance.early or self._final_pass(utterance)
+        self._prior = result.mean
+        rejection = ""
+        if not result.text:
+            rejection = "no command heard"
+        elif result.confidence < self._engine.min_confidence:
+            rejection = (
+                f"sounds unlike any command (confidence {result.confidence:.2f}, "
+                f"below {self._engine.min_confidence:.2f})"
+            )
+        events.append(
+            Final(
+                utterance.number,
+                result.text,
+                round(result.confidence, 3),
+                rejection,
+                utterance.start,
+                speech_end,
+            )
+        )
+
+    def _final_pass(self, utterance: _Utterance) -> _Result:
+        """Stop the first pass and decode the utterance again with its own cepstral mean."""
+        assert self._decoder is not None
         decoder = self._decoder.decoder
-        decoder.end_utt()
+        if utterance.live:
+            decoder.end_utt()
+            utterance.live = False
         self._decoder.cepstral_mean("batch")
         decoder.start_utt()
         decoder.process_raw(bytes(utterance.audio), full_utt=True)
         decoder.end_utt()
-        self._prior = decoder.get_cmn()
-        self._decoder.cepstral_mean("live")
         hypothesis = decoder.hyp()
         text = hypothesis.hypstr if hypothesis is not None else ""
         frames = max(decoder.n_frames(), 1)
         score = sum(math.log(max(s.ascore, 1e-320)) for s in decoder.seg() or ())
         confidence = logistic(score / frames, CONFIDENCE_MIDPOINT, CONFIDENCE_WIDTH)
-        rejection = ""
-        if not text:
-            rejection, confidence = "no command heard", 0.0
-        elif confidence < self._engine.min_confidence:
-            rejection = (
-                f"sounds unlike any command (confidence {confidence:.2f}, "
-                f"below {self._engine.min_confidence:.2f})"
-            )
-        return Final(
-            utterance.number, text, round(confidence, 3), rejection, utterance.start, speech_end
-        )
+        mean = decoder.get_cmn()
+        self._decoder.cepstral_mean("live")
+        return _Result(text, confidence if text else 0.0, mean)
+
+    def _resume(self, utterance: _Utterance) -> None:
+        """Start the first pass again over the utterance so far: the speech goes on."""
+        assert self._decoder is not None
+        assert utterance.early is not None
+        decoder = self._decoder.decoder
+        decoder.set_cmn(utterance.early.mean)
+        decoder.start_utt()
+        decoder.process_raw(bytes(utterance.audio))
+        utterance.early = None
+        utterance.live = True

@@ -1,4 +1,4 @@
-"""`voicectl web`: the browser panel and HTTP API for one robot."""
+"""`voicectl web`: the browser panel and HTTP API for the robots on the bus."""
 
 from __future__ import annotations
 
@@ -12,10 +12,11 @@ from pathlib import Path
 
 import uvicorn
 
-from shared.bus import Bus, add_bus_arguments, bus_options, robot_name, setup_logging, wait_for_stop
+from shared.bus import add_bus_arguments, bus_options, robot_name, setup_logging, wait_for_stop
 from shared.config import default_token_file, load_or_create_token
 
-from .app import Panel
+from .app import Access, create_app
+from .audio import MAX_MESSAGE
 
 _LOGGER = logging.getLogger(__name__)
 
@@ -30,7 +31,7 @@ class _QuietServer(uvicorn.Server):
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="voicectl web", description=__doc__)
-    parser.add_argument("--robot", default="robot", type=robot_name)
+    parser.add_argument("--robot", default="robot", type=robot_name, help="robot shown first")
     parser.add_argument("--host", default="127.0.0.1", help="address to serve on")
     parser.add_argument("--port", type=int, default=8000)
     parser.add_argument(
@@ -40,31 +41,63 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         help="file holding the API token, created if missing (default: data dir/token; "
         "$VOICECTL_TOKEN overrides)",
     )
+    add_tls_arguments(parser)
+    parser.add_argument(
+        "--allow-origin",
+        action="append",
+        default=[],
+        metavar="ORIGIN",
+        help="another origin (scheme://host:port) whose pages may open the microphone socket",
+    )
     add_bus_arguments(parser)
     return parser.parse_args(argv)
+
+
+def add_tls_arguments(parser: argparse.ArgumentParser) -> None:
+    """HTTPS: browsers give pages a microphone only on https or on localhost."""
+    parser.add_argument("--certfile", type=Path, help="TLS certificate (PEM); see voicectl cert")
+    parser.add_argument("--keyfile", type=Path, help="its private key (PEM)")
+
+
+def tls_problem(args: argparse.Namespace) -> str:
+    """Why the TLS flags cannot be used, or ''."""
+    if (args.certfile is None) != (args.keyfile is None):
+        return "--certfile and --keyfile go together"
+    for path in (args.certfile, args.keyfile):
+        if path is not None and not path.is_file():
+            return f"{path}: no such file (voicectl cert HOST... writes a certificate and key)"
+    return ""
 
 
 async def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     setup_logging(args.debug)
+    problem = tls_problem(args)
+    if problem:
+        print(f"voicectl web: {problem}", file=sys.stderr)
+        return 2
     token_file = args.token_file or default_token_file()
-    token = load_or_create_token(token_file)
-    loop = asyncio.get_running_loop()
-    with Bus.open(bus_options(args), loop) as bus:
-        panel = Panel(bus, args.robot, token)
-        panel.start()
-        config = uvicorn.Config(
-            panel.app(), host=args.host, port=args.port, access_log=False, log_level="warning"
-        )
-        server = _QuietServer(config)
-        serving = asyncio.create_task(server.serve())
-        stopping = asyncio.create_task(wait_for_stop())
-        _LOGGER.info("panel on http://%s:%d (token in %s)", args.host, args.port, token_file)
-        await asyncio.wait({serving, stopping}, return_when=asyncio.FIRST_COMPLETED)
-        server.should_exit = True  # uvicorn closes connections and returns
-        stopping.cancel()
-        await serving
-        await asyncio.gather(stopping, return_exceptions=True)
+    access = Access(load_or_create_token(token_file), origins=args.allow_origin)
+    config = uvicorn.Config(
+        create_app(bus_options(args), args.robot, access),
+        host=args.host,
+        port=args.port,
+        access_log=False,
+        log_level="warning",
+        ws_max_size=MAX_MESSAGE + 1024,
+        ssl_certfile=str(args.certfile) if args.certfile else None,
+        ssl_keyfile=str(args.keyfile) if args.keyfile else None,
+    )
+    server = _QuietServer(config)
+    serving = asyncio.create_task(server.serve())
+    stopping = asyncio.create_task(wait_for_stop())
+    scheme = "https" if args.certfile else "http"
+    _LOGGER.info("panel on %s://%s:%d (token in %s)", scheme, args.host, args.port, token_file)
+    await asyncio.wait({serving, stopping}, return_when=asyncio.FIRST_COMPLETED)
+    server.should_exit = True  # uvicorn closes connections and returns
+    stopping.cancel()
+    await serving
+    await asyncio.gather(stopping, return_exceptions=True)
     return 0 if server.started else 1
 
 

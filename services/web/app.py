@@ -1,8 +1,11 @@
-"""The panel's HTTP API: typed or spoken text in, orders out, live state back.
+"""The panel's HTTP API: speech and text in, orders out, every robot's live state back.
 
-Every /api route but /api/health needs ``Authorization: Bearer <token>``: the panel
-drives a machine. The live stream (/api/events) is server-sent events read with fetch,
-so the token travels in a header and never in a URL that a log could keep.
+Every /api route but /api/health needs ``Authorization: Bearer <token>``: the panel drives
+a machine. The live stream (/api/events) is server-sent events read with fetch, so the
+token travels in a header and never in a URL that a log could keep; the microphone's
+WebSocket (/api/audio, audio.py) sends it in its first message and must come from the
+panel's own origin. Every route takes ``?robot=NAME`` (default: the one the service was
+started for). A refused request changes nothing.
 """
 
 from __future__ import annotations
@@ -13,17 +16,20 @@ import hmac
 import logging
 import uuid
 from collections.abc import AsyncIterator, Awaitable, Callable
+from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TypeVar
 
 import msgspec
 from starlette.applications import Starlette
 from starlette.requests import Request
 from starlette.responses import FileResponse, JSONResponse, Response, StreamingResponse
-from starlette.routing import Route
+from starlette.routing import Route, WebSocketRoute
+from starlette.websockets import WebSocket
 
-from shared.bus import Bus, json_decoder
-from shared.errors import BusError
-from shared.keys import ConverterKeys, RobotKeys
+from shared.bus import Bus, BusOptions, json_decoder
+from shared.errors import BusError, VoicectlError
+from shared.keys import ConverterKeys, RobotKeys, check_chunk
 from shared.messages import (
     Cancel,
     CancelAll,
@@ -36,7 +42,6 @@ from shared.messages import (
     Order,
     ParseReply,
     ParseRequest,
-    Proposal,
     Reorder,
     StateReply,
     StateUpdate,
@@ -45,10 +50,16 @@ from shared.messages import (
     SupervisorReply,
 )
 
+from .audio import AudioSocket
+from .hub import Hub
+
 _LOGGER = logging.getLogger(__name__)
 STATIC = Path(__file__).parent / "static"
 MAX_BODY = 64 * 1024
 BUS_TIMEOUT = 5.0
+KEEP_ALIVE = 15.0
+
+S = TypeVar("S", bound=msgspec.Struct)
 
 
 class SubmitBody(msgspec.Struct, forbid_unknown_fields=True):
@@ -70,41 +81,70 @@ class ReorderBody(msgspec.Struct, forbid_unknown_fields=True):
     position: int
 
 
-class ApiError(Exception):
+class ApiError(VoicectlError):
+    """A request refused with an HTTP status and a one-line reason."""
+
     def __init__(self, status: int, message: str) -> None:
         super().__init__(message)
         self.status = status
 
 
-class Panel:
-    """One robot's panel backend: bus requests for the API, a fan-out for live events."""
+@dataclass
+class Access:
+    """Who may drive the robots: the token, and the origins a browser may come from."""
 
-    def __init__(self, bus: Bus, robot: str, token: str) -> None:
-        self._bus = bus
-        self._keys = RobotKeys(robot)
-        self._token = token.encode()
-        self._listeners: set[asyncio.Queue[bytes]] = set()
+    token: str
+    origins: list[str] = field(default_factory=list)
+    """Origins allowed besides the panel's own (scheme://host:port)."""
+
+    def token_ok(self, given: str) -> bool:
+        return hmac.compare_digest(given.encode(), self.token.encode())
+
+    def check(self, request: Request) -> None:
+        scheme, _, given = request.headers.get("authorization", "").partition(" ")
+        if scheme.lower() != "bearer" or not self.token_ok(given):
+            raise ApiError(401, "missing or wrong token (Authorization: Bearer <token>)")
+
+    def origin_ok(self, websocket: WebSocket) -> bool:
+        """A browser always sends Origin: it must be the panel's own, or listed. Clients
+        that are not browsers send none and still need the token."""
+        origin = websocket.headers.get("origin")
+        if origin is None:
+            return True
+        scheme = "https" if websocket.url.scheme == "wss" else "http"
+        own = f"{scheme}://{websocket.headers.get('host', '')}"
+        return origin == own or origin in self.origins
+
+
+class Panel:
+    """The API's handlers; the bus and the hub arrive when the app starts."""
+
+    def __init__(self, robot: str, access: Access) -> None:
+        self.default_robot = robot
+        self.access = access
+        self._bus: Bus | None = None
+        self.hub: Hub | None = None
         self._parse_decode = json_decoder(ParseReply | Failed)
         self._supervisor_decode = json_decoder(SupervisorReply)
         self._encoder = msgspec.json.Encoder()
 
-    def start(self) -> None:
-        self._bus.subscribe(self._keys.state, json_decoder(StateUpdate), self._on_event)
-        self._bus.subscribe(self._keys.proposal, json_decoder(Proposal), self._on_event)
+    def attach(self, bus: Bus) -> None:
+        self._bus = bus
+        self.hub = Hub(bus, self.default_robot)
+        self.hub.start()
 
-    def _on_event(self, _key: str, message: StateUpdate | Proposal) -> None:
-        frame = b"data: " + self._encoder.encode(message) + b"\n\n"
-        for queue in self._listeners:
-            if queue.qsize() < 100:  # a stalled browser loses old frames, not the server
-                queue.put_nowait(frame)
+    @property
+    def bus(self) -> Bus:
+        assert self._bus is not None, "the app has not started"
+        return self._bus
 
-    def app(self) -> Starlette:
+    def routes(self) -> list[Route | WebSocketRoute]:
         def api(
             handler: Callable[[Request], Awaitable[object]],
         ) -> Callable[[Request], Awaitable[Response]]:
             async def endpoint(request: Request) -> Response:
                 try:
-                    self._check_token(request)
+                    self.access.check(request)
                     result = await handler(request)
                 except ApiError as exc:
                     return JSONResponse({"error": str(exc)}, status_code=exc.status)
@@ -114,10 +154,12 @@ class Panel:
 
             return endpoint
 
-        routes = [
+        audio = AudioSocket(lambda: self.bus, self.access.token_ok, self.access.origin_ok)
+        return [
             Route("/", self._index),
             Route("/static/{name}", self._static),
             Route("/api/health", self._health),
+            Route("/api/robots", api(self._robots)),
             Route("/api/parse", api(self._parse), methods=["POST"]),
             Route("/api/submit", api(self._submit), methods=["POST"]),
             Route("/api/say", api(self._say), methods=["POST"]),
@@ -128,44 +170,56 @@ class Panel:
             Route("/api/state", api(self._state)),
             Route("/api/history", api(self._history)),
             Route("/api/events", api(self._events)),
+            WebSocketRoute("/api/audio", audio.serve),
         ]
-        return Starlette(routes=routes)
 
-    # --- pages -------------------------------------------------------------------------------
+    # --- pages ---------------------------------------------------------------------------------
 
     async def _index(self, _request: Request) -> Response:
         return FileResponse(STATIC / "index.html")
 
     async def _static(self, request: Request) -> Response:
         name = request.path_params["name"]
+        missing = JSONResponse({"error": f"no static file {name[:80]!r}"}, status_code=404)
+        if "/" in name or name.startswith(".") or len(name) > 64:
+            return missing
         path = STATIC / name
-        if "/" in name or name.startswith(".") or not path.is_file():
-            return JSONResponse({"error": f"no static file {name!r}"}, status_code=404)
-        return FileResponse(path)
+        try:
+            found = path.is_file()
+        except OSError:
+            found = False
+        return FileResponse(path) if found else missing
 
     async def _health(self, _request: Request) -> Response:
-        return JSONResponse({"ok": True, "robot": self._keys.robot})
+        return JSONResponse({"ok": True, "robot": self.default_robot})
 
-    # --- API -----------------------------------------------------------------------------------
+    # --- requests ------------------------------------------------------------------------------
 
-    def _check_token(self, request: Request) -> None:
-        header = request.headers.get("authorization", "")
-        scheme, _, given = header.partition(" ")
-        if scheme.lower() != "bearer" or not hmac.compare_digest(given.encode(), self._token):
-            raise ApiError(401, "missing or wrong token (Authorization: Bearer <token>)")
-
-    async def _body(self, request: Request, kind: type[msgspec.Struct]) -> msgspec.Struct:
-        raw = await request.body()
-        if len(raw) > MAX_BODY:
-            raise ApiError(413, f"request body over {MAX_BODY} bytes")
+    def _robot(self, request: Request) -> RobotKeys:
+        name = request.query_params.get("robot", self.default_robot)
         try:
-            return msgspec.json.decode(raw, type=kind)
+            return RobotKeys(check_chunk(name, "robot name"))
+        except ValueError as exc:
+            raise ApiError(400, str(exc)) from exc
+
+    async def _body(self, request: Request, kind: type[S]) -> S:
+        """The body decoded as `kind`, read no further than `MAX_BODY` bytes."""
+        declared = request.headers.get("content-length", "")
+        if declared.isdigit() and int(declared) > MAX_BODY:
+            raise ApiError(413, f"request body over {MAX_BODY} bytes")
+        raw = bytearray()
+        async for chunk in request.stream():
+            raw += chunk
+            if len(raw) > MAX_BODY:
+                raise ApiError(413, f"request body over {MAX_BODY} bytes")
+        try:
+            return msgspec.json.decode(bytes(raw), type=kind)
         except (msgspec.DecodeError, msgspec.ValidationError) as exc:
             raise ApiError(400, f"bad request body: {exc}") from exc
 
     async def _ask_converter(self, text: str) -> ParseReply:
         try:
-            reply: ParseReply | Failed = await self._bus.request(
+            reply: ParseReply | Failed = await self.bus.request(
                 ConverterKeys().parse, ParseRequest(text=text), self._parse_decode, BUS_TIMEOUT
             )
         except BusError as exc:
@@ -174,10 +228,10 @@ class Panel:
             raise ApiError(400, reply.reason)
         return reply
 
-    async def _ask_supervisor(self, request: Message) -> SupervisorReply:
+    async def _ask_supervisor(self, keys: RobotKeys, request: Message) -> SupervisorReply:
         try:
-            reply: SupervisorReply = await self._bus.request(
-                self._keys.supervisor, request, self._supervisor_decode, BUS_TIMEOUT
+            reply: SupervisorReply = await self.bus.request(
+                keys.supervisor, request, self._supervisor_decode, BUS_TIMEOUT
             )
         except BusError as exc:
             raise ApiError(503, f"supervisor unavailable: {exc}") from exc
@@ -185,87 +239,112 @@ class Panel:
             raise ApiError(409, reply.reason)
         return reply
 
+    async def _robots(self, _request: Request) -> object:
+        assert self.hub is not None
+        return {"robots": self.hub.robots, "default": self.default_robot}
+
     async def _parse(self, request: Request) -> object:
         body = await self._body(request, TextBody)
-        assert isinstance(body, TextBody)
         return (await self._ask_converter(body.text)).result
 
     async def _submit(self, request: Request) -> object:
+        keys = self._robot(request)
         body = await self._body(request, SubmitBody)
-        assert isinstance(body, SubmitBody)
         if not body.orders:
             raise ApiError(400, "nothing to submit: 'orders' is empty")
         reply = await self._ask_supervisor(
-            Submit(request_id=body.request_id, orders=body.orders, transcript=body.transcript)
+            keys, Submit(request_id=body.request_id, orders=body.orders, transcript=body.transcript)
         )
         assert isinstance(reply, Submitted)
         return {"order_ids": reply.order_ids}
 
     async def _say(self, request: Request) -> object:
-        """Parse and submit in one go; what parsed is queued, errors come back beside it."""
+        """Parse and submit in one go, only when the whole text made orders."""
+        keys = self._robot(request)
         body = await self._body(request, TextBody)
-        assert isinstance(body, TextBody)
         result = (await self._ask_converter(body.text)).result
         order_ids: list[str] = []
-        if result.orders:
+        if result.orders and not result.errors:
             reply = await self._ask_supervisor(
-                Submit(request_id=uuid.uuid4().hex, orders=result.orders, transcript=body.text)
+                keys,
+                Submit(request_id=uuid.uuid4().hex, orders=result.orders, transcript=body.text),
             )
             assert isinstance(reply, Submitted)
             order_ids = reply.order_ids
         return {"orders": result.orders, "errors": result.errors, "order_ids": order_ids}
 
     async def _cancel(self, request: Request) -> object:
+        keys = self._robot(request)
         body = await self._body(request, CancelBody)
-        assert isinstance(body, CancelBody)
-        return await self._done(Cancel(order_id=body.order_id))
+        return await self._done(keys, Cancel(order_id=body.order_id))
 
-    async def _cancel_all(self, _request: Request) -> object:
-        return await self._done(CancelAll())
+    async def _cancel_all(self, request: Request) -> object:
+        return await self._done(self._robot(request), CancelAll())
 
-    async def _stop(self, _request: Request) -> object:
-        return await self._done(EmergencyStop())
+    async def _stop(self, request: Request) -> object:
+        return await self._done(self._robot(request), EmergencyStop())
 
-    async def _done(self, request: Message) -> object:
-        reply = await self._ask_supervisor(request)
+    async def _done(self, keys: RobotKeys, request: Message) -> object:
+        reply = await self._ask_supervisor(keys, request)
         return {"detail": reply.detail if isinstance(reply, Done) else ""}
 
     async def _reorder(self, request: Request) -> object:
+        keys = self._robot(request)
         body = await self._body(request, ReorderBody)
-        assert isinstance(body, ReorderBody)
-        return await self._done(Reorder(order_id=body.order_id, position=body.position))
+        return await self._done(keys, Reorder(order_id=body.order_id, position=body.position))
 
     async def _history(self, request: Request) -> object:
+        keys = self._robot(request)
         try:
             offset = int(request.query_params.get("offset", "0"))
             limit = int(request.query_params.get("limit", "50"))
         except ValueError as exc:
             raise ApiError(400, "offset and limit must be integers") from exc
-        return await self._ask_supervisor(GetHistory(offset=offset, limit=limit))
+        if not (0 <= offset <= 10**9 and 1 <= limit <= 500):
+            raise ApiError(400, "offset must be 0 or more, limit 1 to 500")
+        return await self._ask_supervisor(keys, GetHistory(offset=offset, limit=limit))
 
-    async def _state(self, _request: Request) -> object:
-        reply = await self._ask_supervisor(GetState())
+    async def _state(self, request: Request) -> object:
+        reply = await self._ask_supervisor(self._robot(request), GetState())
         assert isinstance(reply, StateReply)
         return reply.state
 
-    async def _events(self, _request: Request) -> Response:
-        queue: asyncio.Queue[bytes] = asyncio.Queue()
-        self._listeners.add(queue)
-        with contextlib.suppress(ApiError):
-            first = await self._ask_supervisor(GetState())
-            if isinstance(first, StateReply):
-                queue.put_nowait(
-                    b"data: " + self._encoder.encode(StateUpdate(state=first.state)) + b"\n\n"
-                )
+    async def _events(self, request: Request) -> Response:
+        keys = self._robot(request)
+        robot = keys.robot
+        assert self.hub is not None
+        hub = self.hub
+        if not hub.knows_state(robot):
+            with contextlib.suppress(ApiError):  # no supervisor yet: the state comes later
+                reply = await self._ask_supervisor(keys, GetState())
+                if isinstance(reply, StateReply):
+                    hub.remember(robot, StateUpdate(state=reply.state))
 
         async def stream() -> AsyncIterator[bytes]:
-            try:
+            with hub.listen(robot) as queue:
                 while True:
                     try:
-                        yield await asyncio.wait_for(queue.get(), timeout=15.0)
+                        yield await asyncio.wait_for(queue.get(), timeout=KEEP_ALIVE)
                     except TimeoutError:
                         yield b": keep-alive\n\n"
-            finally:
-                self._listeners.discard(queue)
 
         return StreamingResponse(stream(), media_type="text/event-stream")
+
+
+def create_app(options: BusOptions, robot: str, access: Access) -> Starlette:
+    """The panel as an ASGI app; it opens its bus when it starts and closes it at the end."""
+    panel = Panel(robot, access)
+
+    @contextlib.asynccontextmanager
+    async def lifespan(_app: Starlette) -> AsyncIterator[None]:
+        with Bus.open(options, asyncio.get_running_loop()) as bus:
+            panel.attach(bus)
+            assert panel.hub is not None
+            watcher = asyncio.create_task(panel.hub.watch_poses())
+            try:
+                yield
+            finally:
+                watcher.cancel()
+                await asyncio.gather(watcher, return_exceptions=True)
+
+    return Starlette(routes=panel.routes(), lifespan=lifespan)

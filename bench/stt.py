@@ -1,0 +1,417 @@
+"""Speech to text on generated speech: accuracy, rejection, speed, latency and memory.
+
+    .venv/bin/python bench/stt.py [--set DIR] [--vosk-model DIR] [--min-confidence C]
+
+The set is bench/speech_set.py's (commands from the shipped orders and non-commands, in
+several espeak-ng voices and speeds); it is generated into --set when missing.
+
+Two passes per engine:
+
+1. Offline, in this process, each file as one utterance: real-time factor (CPU seconds of
+   decoding per second of audio) and accuracy, beside pocketsphinx with its own JSGF
+   compiler on the same files (the baseline this engine replaces).
+2. Through the service, over Zenoh on loopback: a router, the converter and `voicectl stt`
+   as processes; each file is streamed as a session in 100 ms chunks, the last half second
+   of speech and the silence after it at real-time pace. Measured: commands that became
+   exactly the right orders, word error rate (jiwer), non-commands rejected, end of speech
+   to final transcript and to the converter's proposal, the service's CPU per second of
+   audio, its start-up time and peak RSS, and a raw Zenoh put/subscribe beside them.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import math
+import os
+import platform
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+import jiwer  # noqa: E402
+import pocketsphinx  # noqa: E402
+from speech_set import Utterance, generate  # noqa: E402
+
+from services.converter.grammar import build_grammar  # noqa: E402
+from services.converter.orders import OrderSet  # noqa: E402
+from services.converter.parser import Parser  # noqa: E402
+from services.stt.audio import NoiseFloor, frames, read_wav  # noqa: E402
+from services.stt.engine import EngineOptions, Final, load_engine  # noqa: E402
+from shared.bus import Bus, BusOptions, json_decoder  # noqa: E402
+from shared.keys import RobotKeys  # noqa: E402
+from shared.messages import (  # noqa: E402
+    AudioChunk,
+    AudioStart,
+    AudioStop,
+    Order,
+    Proposal,
+    SttStatus,
+    Transcript,
+)
+
+KEYS = RobotKeys("robot")
+BASELINE_EVERY = 4
+"""The baseline is slow (its hypothesis alone can take seconds): it decodes every 4th file."""
+CHUNK_FRAMES = 1
+"""One 20 ms frame per message, as the panel's web service forwards them."""
+PACED = 0.5
+"""Seconds of speech before its end that are streamed at real-time pace, with the tail."""
+
+
+@dataclass
+class Outcome:
+    """What became of one utterance."""
+
+    utterance: Utterance
+    text: str = ""
+    orders: list[Order] = field(default_factory=list)
+    rejected: bool = True
+    to_final: float | None = None
+    to_proposal: float | None = None
+
+
+def percentile(values: list[float], q: float) -> float:
+    ordered = sorted(values)
+    return ordered[min(len(ordered) - 1, math.ceil(q * len(ordered)) - 1)]
+
+
+def score(outcomes: list[Outcome], parser: Parser) -> dict[str, float]:
+    commands = [o for o in outcomes if o.utterance.command]
+    chatter = [o for o in outcomes if not o.utterance.command]
+    right = sum(
+        not o.rejected and o.orders == parser.parse(o.utterance.text).orders for o in commands
+    )
+    wer = jiwer.wer([o.utterance.text for o in commands], [o.text for o in commands])
+    return {
+        "commands": len(commands),
+        "right": right,
+        "wer": wer,
+        "chatter": len(chatter),
+        "refused": sum(o.rejected for o in chatter),
+    }
+
+
+def report(title: str, numbers: dict[str, float]) -> None:
+    print(
+        f"{title:<46} commands right {numbers['right']:.0f}/{numbers['commands']:.0f} "
+        f"({100 * numbers['right'] / numbers['commands']:.1f} %)   WER {100 * numbers['wer']:.1f} %"
+        f"   non-commands rejected {numbers['refused']:.0f}/{numbers['chatter']:.0f} "
+        f"({100 * numbers['refused'] / numbers['chatter']:.1f} %)"
+    )
+
+
+# --- offline -----------------------------------------------------------------------------------
+
+
+def offline(
+    options: EngineOptions, orders: OrderSet, utterances: list[Utterance], directory: Path
+) -> None:
+    parser = Parser(orders)
+    grammar = build_grammar(orders)
+    started = time.perf_counter()
+    engine = load_engine(EngineOptions(options.name, options.vosk_model, min_confidence=0.0))
+    engine.use_grammar(grammar)
+    engine.recogniser(15.0).close()  # the first decoder is part of loading
+    print(
+        f"{options.name}: engine loaded, grammar compiled, first decoder in "
+        f"{time.perf_counter() - started:.2f} s"
+    )
+    heard: list[tuple[Outcome, float]] = []
+    cpu, audio = 0.0, 0.0
+    for utterance in utterances:
+        pcm = read_wav(directory / utterance.file)
+        begin = time.thread_time()
+        recogniser = engine.recogniser(15.0)
+        events = [e for frame in frames(pcm) for e in recogniser.accept(frame)]
+        events += recogniser.finish()
+        recogniser.close()
+        cpu += time.thread_time() - begin
+        audio += len(pcm) / 32000
+        finals = [e for e in events if isinstance(e, Final)]
+        text = " ".join(f.text for f in finals if f.text)
+        result = parser.parse(text) if text else None
+        whole = len(finals) == 1 and not finals[0].rejection
+        if result is None or result.errors or not result.orders or not whole:
+            heard.append((Outcome(utterance, text), 0.0))
+        else:
+            heard.append((Outcome(utterance, text, result.orders, False), finals[0].confidence))
+    print(
+        f"{options.name}, offline, as the service segments it: real-time factor "
+        f"{cpu / audio:.4f} ({audio:.0f} s of audio)"
+    )
+    for threshold in (0.3, 0.4, 0.5, 0.6, 0.7):
+        kept = [
+            Outcome(o.utterance, o.text, o.orders, o.rejected or c < threshold) for o, c in heard
+        ]
+        report(f"  min confidence {threshold:.1f}", score(kept, parser))
+    if options.name == "pocketsphinx":
+        baseline(grammar.jsgf, parser, utterances, directory)
+
+
+def baseline(jsgf: str, parser: Parser, utterances: list[Utterance], directory: Path) -> None:
+    """pocketsphinx searching the JSGF through its own compiler, batch cepstral mean, the same
+    noise floor: what the engine would be without the word automaton."""
+    decoder = pocketsphinx.Decoder(loglevel="FATAL", lm=None, cmn="batch")
+    decoder.add_jsgf_string("own", jsgf)
+    decoder.activate_search("own")
+    outcomes, cpu, audio = [], 0.0, 0.0
+    for utterance in utterances[::BASELINE_EVERY]:
+        pcm = NoiseFloor().add(read_wav(directory / utterance.file))
+        begin = time.thread_time()
+        decoder.start_utt()
+        decoder.process_raw(pcm, full_utt=True)
+        decoder.end_utt()
+        hypothesis = decoder.hyp()
+        cpu += time.thread_time() - begin
+        audio += len(pcm) / 32000
+        text = hypothesis.hypstr if hypothesis is not None else ""
+        result = parser.parse(text) if text else None
+        ok = result is not None and not result.errors and bool(result.orders)
+        outcomes.append(Outcome(utterance, text, result.orders if ok and result else [], not ok))
+    report(f"baseline: its own JSGF search, 1 file in {BASELINE_EVERY}", score(outcomes, parser))
+    print(f"{'':<46} real-time factor {cpu / audio:.4f}   (no rejection by confidence)")
+
+
+# --- through the service -------------------------------------------------------------------------
+
+
+def free_port() -> int:
+    import socket
+
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        port: int = sock.getsockname()[1]
+        return port
+
+
+def cpu_seconds(pid: int) -> float:
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def print_threads(pid: int) -> None:
+    """CPU of each live thread of `pid` (threads that ended are not listed)."""
+    for task in sorted(Path(f"/proc/{pid}/task").iterdir()):
+        name = (task / "comm").read_text().strip()
+        fields = (task / "stat").read_text().rsplit(")", 1)[1].split()
+        used = (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+        print(f"    thread {name:<16} {used:6.2f} s CPU")
+
+
+def peak_rss_mb(pid: int) -> float:
+    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if line.startswith("VmHWM:"):
+            return int(line.split()[1]) / 1024
+    return float("nan")
+
+
+async def through_service(
+    args: argparse.Namespace, orders: OrderSet, utterances: list[Utterance], directory: Path
+) -> None:
+    parser = Parser(orders)
+    router = f"tcp/127.0.0.1:{free_port()}"
+    env = {**os.environ, "PYTHONUNBUFFERED": "1"}
+    logs = tempfile.TemporaryDirectory()
+    started: list[subprocess.Popen[bytes]] = []
+
+    def start(*argv: str) -> subprocess.Popen[bytes]:
+        log = open(Path(logs.name) / f"{argv[0]}.log", "wb")  # noqa: SIM115 (closed at exit)
+        process = subprocess.Popen(
+            [sys.executable, "-m", *argv], cwd=REPO, env=env, stdout=log, stderr=subprocess.STDOUT
+        )
+        started.append(process)
+        return process
+
+    engine = ["--engine", args.engine, "--min-confidence", str(args.min_confidence)]
+    if args.vosk_model:
+        engine += ["--vosk-model", str(args.vosk_model)]
+    try:
+        start("services.router", "--listen", router)
+        start("services.converter", "--connect", router, "--orders", str(args.orders))
+        loop = asyncio.get_running_loop()
+        with Bus.open(BusOptions(connect=[router]), loop) as bus:
+            finals: dict[str, tuple[float, Transcript]] = {}
+            proposals: dict[str, float] = {}
+            arrived: dict[str, asyncio.Event] = {}
+            ready = asyncio.Event()
+
+            def on_final(_key: str, transcript: Transcript) -> None:
+                finals.setdefault(transcript.session, (time.monotonic(), transcript))
+
+            def on_proposal(_key: str, proposal: Proposal) -> None:
+                proposals.setdefault(proposal.session, time.monotonic())
+                arrived.setdefault(proposal.session, asyncio.Event()).set()
+
+            bus.subscribe(KEYS.transcript, json_decoder(Transcript), on_final)
+            bus.subscribe(KEYS.proposal, json_decoder(Proposal), on_proposal)
+            bus.subscribe(
+                KEYS.stt_status,
+                json_decoder(SttStatus),
+                lambda _k, s: ready.set() if s.ready else None,
+                history=True,
+            )
+            launched = time.monotonic()
+            stt = start("services.stt", "--connect", router, *engine)
+            await asyncio.wait_for(ready.wait(), 120)
+            print(
+                f"{args.engine}: service start to grammar in use "
+                f"{time.monotonic() - launched:.2f} s"
+            )
+            cpu_before = cpu_seconds(stt.pid)
+            raw = await raw_latency(bus)
+            outcomes, audio = [], 0.0
+            for number, utterance in enumerate(utterances):
+                session = f"u{number}"
+                pcm = read_wav(directory / utterance.file)
+                audio += len(pcm) / 32000
+                spoken_end = await stream(bus, session, pcm, utterance.speech_end, finals)
+                with contextlib.suppress(TimeoutError):
+                    event = arrived.setdefault(session, asyncio.Event())
+                    await asyncio.wait_for(event.wait(), 15)
+                outcome = Outcome(utterance)
+                if session in finals:
+                    at, transcript = finals[session]
+                    outcome.text, outcome.rejected = transcript.text, transcript.rejected
+                    outcome.to_final = at - spoken_end
+                    if session in proposals:
+                        outcome.to_proposal = proposals[session] - spoken_end
+                    if not transcript.rejected:
+                        outcome.orders = parser.parse(transcript.text).orders
+                outcomes.append(outcome)
+            cpu = cpu_seconds(stt.pid) - cpu_before
+            rss = peak_rss_mb(stt.pid)
+            if args.threads:
+                print_threads(stt.pid)
+    finally:
+        for process in reversed(started):
+            process.terminate()
+            process.wait(timeout=20)
+        logs.cleanup()
+    report(f"{args.engine}, through the service", score(outcomes, parser))
+    to_final = [o.to_final for o in outcomes if o.to_final is not None]
+    to_proposal = [o.to_proposal for o in outcomes if o.to_proposal is not None]
+    print(
+        f"{'':<46} end of speech -> final    p50 {1e3 * percentile(to_final, 0.5):4.0f} ms"
+        f"   p95 {1e3 * percentile(to_final, 0.95):4.0f} ms   (n={len(to_final)}; includes "
+        "the endpointer's silence wait)"
+    )
+    print(
+        f"{'':<46} end of speech -> proposal p50 {1e3 * percentile(to_proposal, 0.5):4.0f} ms"
+        f"   p95 {1e3 * percentile(to_proposal, 0.95):4.0f} ms"
+    )
+    print(
+        f"{'':<46} baseline: raw Zenoh put -> subscriber p50 {1e6 * statistics.median(raw):.0f} us"
+    )
+    print(f"{'':<46} service CPU per second of audio {cpu / audio:.4f}   peak RSS {rss:.0f} MB")
+    missed = [
+        o
+        for o in outcomes
+        if o.utterance.command
+        and (o.rejected or o.orders != Parser(orders).parse(o.utterance.text).orders)
+    ]
+    passed = [o for o in outcomes if not o.utterance.command and not o.rejected]
+    for outcome in missed:
+        u = outcome.utterance
+        print(f"    missed   {u.voice:>11} {u.speed}  {u.text!r} -> {outcome.text!r}")
+    for outcome in passed:
+        u = outcome.utterance
+        print(f"    accepted {u.voice:>11} {u.speed}  {u.text!r} -> {outcome.text!r}")
+
+
+async def stream(
+    bus: Bus, session: str, pcm: bytes, speech_end: float, finals: dict[str, object]
+) -> float:
+    """Send one utterance; returns the wall time at which its speech ended."""
+    split = frames(pcm)
+    chunks = [b"".join(split[i : i + CHUNK_FRAMES]) for i in range(0, len(split), CHUNK_FRAMES)]
+    seconds_per_chunk = CHUNK_FRAMES * 0.02
+    paced_from = max(0, int((speech_end - PACED) / seconds_per_chunk))
+    sender = bus.stream(KEYS.stt_audio(session))
+    await sender.matched(10)
+    sender.send(AudioStart())
+    for seq, chunk in enumerate(chunks[:paced_from]):
+        sender.send(AudioChunk(seq=seq, pcm=chunk))
+    began = time.monotonic()
+    spoken_end = began + speech_end - paced_from * seconds_per_chunk
+    for seq in range(paced_from, len(chunks)):
+        # A microphone sends a frame once it has been heard: at the end of its audio.
+        delay = began + (seq - paced_from + 1) * seconds_per_chunk - time.monotonic()
+        if delay > 0:
+            await asyncio.sleep(delay)
+        sender.send(AudioChunk(seq=seq, pcm=chunks[seq]))
+    # A microphone goes on sending silence; the endpointer may still be waiting for it.
+    silence = b"\x00" * len(chunks[0])
+    extra = len(chunks)
+    while session not in finals and time.monotonic() < spoken_end + 2.0:
+        sender.send(AudioChunk(seq=extra, pcm=silence))
+        extra += 1
+        await asyncio.sleep(seconds_per_chunk)
+    sender.send(AudioStop())
+    sender.close()
+    return spoken_end
+
+
+async def raw_latency(bus: Bus) -> list[float]:
+    """Plain Zenoh put to subscriber through the same router: the transport's share."""
+    loop = asyncio.get_running_loop()
+    got: asyncio.Queue[float] = asyncio.Queue()
+
+    def on_sample(_sample: object) -> None:  # on Zenoh's thread
+        loop.call_soon_threadsafe(got.put_nowait, time.monotonic())
+
+    subscriber = bus.session.declare_subscriber("bench/raw", on_sample)
+    publisher = bus.session.declare_publisher("bench/raw")
+    await asyncio.sleep(0.5)
+    times = []
+    for _ in range(200):
+        sent = time.monotonic()
+        publisher.put(b"x" * 900)
+        times.append(await got.get() - sent)
+    publisher.undeclare()
+    subscriber.undeclare()
+    return times
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--set", type=Path, default=Path(tempfile.gettempdir()) / "voicectl-speech")
+    parser.add_argument("--orders", type=Path, default=REPO / "orders")
+    parser.add_argument("--engine", default="pocketsphinx", choices=["pocketsphinx", "vosk"])
+    parser.add_argument("--vosk-model", type=Path)
+    parser.add_argument("--min-confidence", type=float, default=0.5)
+    parser.add_argument("--offline-only", action="store_true")
+    parser.add_argument("--service-only", action="store_true")
+    parser.add_argument("--threads", action="store_true", help="CPU of each service thread")
+    parser.add_argument("--every", type=int, default=1, help="only every Nth utterance")
+    args = parser.parse_args()
+    utterances = generate(args.set)[:: args.every]
+    orders = OrderSet.load(args.orders)
+    machine = platform.processor() or platform.machine()
+    print(
+        f"{len(utterances)} utterances from {args.set}; {machine}, {os.cpu_count()} cores, "
+        f"Python {platform.python_version()}, pocketsphinx {version('pocketsphinx')}"
+    )
+    options = EngineOptions(args.engine, args.vosk_model, args.min_confidence)
+    if not args.service_only:
+        offline(options, orders, utterances, args.set)
+    if not args.offline_only:
+        asyncio.run(through_service(args, orders, utterances, args.set))
+
+
+def version(package: str) -> str:
+    from importlib.metadata import version as found
+
+    return found(package)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,170 @@
+"""What the panel shows, from the bus: every robot's events fanned out to its listeners.
+
+One subscription per kind of message covers every robot (`voice/*/...`); each browser
+listens to the robot it selected. New listeners get the last state, recogniser status,
+pose and parts at once, so a reloaded page is whole without asking.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+from collections.abc import Iterator
+
+import msgspec
+
+from shared.bus import Bus, json_decoder
+from shared.keys import ANY, ConverterKeys, RobotKeys, last_chunk, robot_of
+from shared.messages import (
+    PartialTranscript,
+    Proposal,
+    RobotPose,
+    StateUpdate,
+    SttStatus,
+    Transcript,
+)
+
+_LOGGER = logging.getLogger(__name__)
+
+PARTS = ("converter", "stt", "supervisor", "executor", "robot")
+POSE_FRESH = 3.0
+"""Seconds after its last pose that a robot still counts as online."""
+QUEUE_LIMIT = 200
+"""Frames a stalled browser may fall behind before it loses the oldest."""
+
+
+class Parts(msgspec.Struct, tag="parts", tag_field="type"):
+    """Which parts serving a robot are alive (from their liveliness tokens)."""
+
+    robot: str
+    parts: dict[str, bool]
+
+
+class Robots(msgspec.Struct, tag="robots", tag_field="type"):
+    """Every robot a service has announced itself for."""
+
+    robots: list[str]
+
+
+Event = StateUpdate | Proposal | PartialTranscript | Transcript | SttStatus | RobotPose
+
+
+class Hub:
+    """Bus subscriptions for every robot, and the browsers listening to each."""
+
+    def __init__(self, bus: Bus, default_robot: str) -> None:
+        self._bus = bus
+        self._default = default_robot
+        self._listeners: dict[str, set[asyncio.Queue[bytes]]] = {}
+        self._last: dict[str, dict[str, bytes]] = {}
+        """Per robot, the last frame of each kind a new listener needs."""
+        self._alive: dict[str, set[str]] = {}
+        """Per robot, the services whose token is up."""
+        self._converter = False
+        self._posed: dict[str, float] = {}
+        self._encoder = msgspec.json.Encoder()
+
+    def start(self) -> None:
+        every = RobotKeys(ANY)
+        for key, kind in (
+            (every.state, StateUpdate),
+            (every.proposal, Proposal),
+            (every.partial, PartialTranscript),
+            (every.transcript, Transcript),
+            (every.stt_status, SttStatus),
+            (every.pose, RobotPose),
+        ):
+            self._bus.subscribe(key, json_decoder(kind), self._on_event, history=kind is SttStatus)
+        self._bus.watch(ConverterKeys().alive, self._on_converter)
+        self._bus.watch(every.alive(ANY), self._on_alive)
+
+    async def watch_poses(self) -> None:
+        """Mark robots offline whose pose went stale; runs until cancelled."""
+        while True:
+            await asyncio.sleep(1.0)
+            now = asyncio.get_running_loop().time()
+            for robot, at in list(self._posed.items()):
+                if now - at > POSE_FRESH:
+                    del self._posed[robot]
+                    self._send_parts(robot)
+
+    @property
+    def robots(self) -> list[str]:
+        return sorted({self._default, *self._alive})
+
+    def parts(self, robot: str) -> Parts:
+        alive = self._alive.get(robot, set())
+        states = {part: part in alive for part in PARTS}
+        states["converter"] = self._converter
+        states["robot"] = robot in self._posed
+        return Parts(robot=robot, parts=states)
+
+    def knows_state(self, robot: str) -> bool:
+        return "StateUpdate" in self._last.get(robot, {})
+
+    def remember(self, robot: str, state: StateUpdate) -> None:
+        """A state asked for (a panel opened before any change was published)."""
+        frame = self._frame(state)
+        self._last.setdefault(robot, {})["StateUpdate"] = frame
+        self._send(robot, frame)
+
+    @contextlib.contextmanager
+    def listen(self, robot: str) -> Iterator[asyncio.Queue[bytes]]:
+        """A queue of server-sent-event frames for `robot`, primed with what is known."""
+        queue: asyncio.Queue[bytes] = asyncio.Queue()
+        for frame in self._last.get(robot, {}).values():
+            queue.put_nowait(frame)
+        queue.put_nowait(self._frame(self.parts(robot)))
+        queue.put_nowait(self._frame(Robots(robots=self.robots)))
+        self._listeners.setdefault(robot, set()).add(queue)
+        try:
+            yield queue
+        finally:
+            self._listeners[robot].discard(queue)
+
+    def _frame(self, message: object) -> bytes:
+        return b"data: " + self._encoder.encode(message) + b"\n\n"
+
+    def _send(self, robot: str, frame: bytes) -> None:
+        for queue in self._listeners.get(robot, ()):
+            if queue.qsize() >= QUEUE_LIMIT:  # a stalled browser loses old frames
+                queue.get_nowait()
+            queue.put_nowait(frame)
+
+    def _on_event(self, key: str, message: Event) -> None:
+        robot = robot_of(key)
+        frame = self._frame(message)
+        match message:
+            case StateUpdate() | SttStatus():
+                self._last.setdefault(robot, {})[type(message).__name__] = frame
+            case RobotPose():
+                self._last.setdefault(robot, {})["pose"] = frame
+                fresh = robot not in self._posed
+                self._posed[robot] = asyncio.get_running_loop().time()
+                if fresh:
+                    self._send_parts(robot)
+        self._send(robot, frame)
+
+    def _on_converter(self, _key: str, alive: bool) -> None:
+        self._converter = alive
+        for robot in self._listeners:
+            self._send_parts(robot)
+
+    def _on_alive(self, key: str, alive: bool) -> None:
+        robot, service = robot_of(key), last_chunk(key)
+        services = self._alive.setdefault(robot, set())
+        known = set(self._alive)
+        if alive:
+            services.add(service)
+        else:
+            services.discard(service)
+        self._send_parts(robot)
+        if robot not in known or robot not in self.robots:
+            robots = self._frame(Robots(robots=self.robots))
+            for listeners in self._listeners.values():
+                for queue in listeners:
+                    queue.put_nowait(robots)
+
+    def _send_parts(self, robot: str) -> None:
+        self._send(robot, self._frame(self.parts(robot)))
