@@ -88,7 +88,10 @@ def test_spoken_sequence_moves_the_simulated_robot(stack: Stack) -> None:
 def test_panel_api_needs_the_token_and_drives_the_robot(stack: Stack) -> None:
     base = f"http://127.0.0.1:{stack.port}"
     token = Path(stack.env["VOICECTL_DATA"], "token").read_text().strip()
-    assert token not in "\n".join(stack.output)  # the secret never reaches the logs
+    # The secret is in the panel's address that voicectl up prints, and nowhere else.
+    [line] = [line for line in stack.output if token in line]
+    assert line.endswith(f":{stack.port}/#token={token}")
+    assert line.startswith("voicectl up: panel on http://127.0.0.1:")
     auth = {"Authorization": f"Bearer {token}"}
     with httpx.Client(base_url=base, timeout=30) as http:
         assert http.get("/api/health").json()["ok"] is True

@@ -1,15 +1,19 @@
-"""The panel in a real headless Chromium against the real stack: log in with the token,
-type a command, see the orders, send them, watch the history fill in."""
+"""The panel in a real headless Chromium against the real stack (`voicectl up`): logging
+in from the printed address, typing and speaking through Chromium's fake microphone (a
+WAV made with espeak-ng), staging, sending, watching, reordering, cancelling, stopping."""
 
 from __future__ import annotations
 
 import os
 import shutil
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
+from typing import Any
 
 import pytest
 
-from .conftest import Stack
+from .conftest import REPO, Speak, Stack
 
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
 CHROMIUM_FLAGS = [
@@ -21,6 +25,9 @@ CHROMIUM_FLAGS = [
     "--disable-component-update",
     "--disable-sync",
 ]
+ARTIFACTS = REPO / "test-artifacts"
+"""Screenshots of the panel, kept after the run (the directory is ignored by git)."""
+WAIT = 60_000
 
 pytestmark = [
     pytest.mark.e2e,
@@ -31,46 +38,166 @@ pytestmark = [
 ]
 
 
-def test_type_parse_send_and_watch(stack: Stack, tmp_path: Path) -> None:
-    from playwright.sync_api import expect, sync_playwright
+@contextmanager
+def panel(
+    stack: Stack, profile: Path, microphone: Path | None = None, extra: tuple[str, ...] = ()
+) -> Iterator[Any]:
+    """A page for the stack's panel, with `microphone` as the fake microphone."""
+    from playwright.sync_api import sync_playwright
 
-    token = Path(stack.env["VOICECTL_DATA"], "token").read_text().strip()
+    flags = [*CHROMIUM_FLAGS, *extra]
+    if microphone is not None:
+        flags += [
+            "--use-fake-ui-for-media-stream",
+            "--use-fake-device-for-media-stream",
+            f"--use-file-for-fake-audio-capture={microphone}%noloop",
+        ]
     with sync_playwright() as playwright:
         browser = playwright.chromium.launch_persistent_context(
-            str(tmp_path / "profile"),
-            executable_path=CHROMIUM,
-            headless=True,
-            args=CHROMIUM_FLAGS,
+            str(profile), executable_path=CHROMIUM, headless=True, args=flags
         )
         try:
             page = browser.new_page()
-            page.goto(f"http://127.0.0.1:{stack.port}/")
-
-            expect(page.locator("#login")).to_be_visible()
-            page.fill("#token", "wrong")
-            page.click("#save-token")
-            expect(page.locator("#status")).to_contain_text("token", timeout=10_000)
-
-            page.fill("#token", token)
-            page.click("#save-token")
-            expect(page.locator("#executor")).to_have_text("executor online", timeout=20_000)
-
-            page.fill("#text", "turn left then reach kitchen then dance")
-            page.click("#command button[type=submit]")
-            expect(page.locator("#orders li")).to_have_text(["turn left", "reach kitchen"])
-            expect(page.locator("#errors li")).to_have_text(["dance: no order matches"])
-
-            page.click("#send")
-            history = page.locator("#history tr")
-            expect(history).to_have_count(2, timeout=60_000)
-            expect(history.nth(0)).to_contain_text("reach kitchen")
-            expect(history.nth(0)).to_contain_text("succeeded")
-            expect(history.nth(1)).to_contain_text("turn left")
-            expect(history.nth(1)).to_contain_text("succeeded")
-            page.screenshot(path=str(tmp_path / "panel.png"), full_page=True)
-
-            # the token survives a reload; the state is there at once
-            page.reload()
-            expect(page.locator("#history tr")).to_have_count(2, timeout=20_000)
+            page.set_default_timeout(WAIT)
+            yield page
         finally:
             browser.close()
+
+
+def login(page: Any, stack: Stack) -> None:
+    """Open the address `voicectl up` printed: the token in its fragment logs in."""
+    from playwright.sync_api import expect
+
+    prefix = "voicectl up: panel on "
+    [address] = [line.removeprefix(prefix) for line in stack.output if line.startswith(prefix)]
+    page.goto(address)
+    expect(page.locator("#panel")).to_be_visible()
+    assert "token" not in page.url  # the page took the token and dropped the fragment
+    for part in ("converter", "stt", "supervisor", "executor", "robot"):
+        expect(page.locator(f'#parts [data-part="{part}"]')).to_have_class("badge online")
+
+
+def test_log_in_type_stage_edit_suggest_send_and_watch(stack: Stack, tmp_path: Path) -> None:
+    from playwright.sync_api import expect
+
+    with panel(stack, tmp_path / "profile") as page:
+        page.goto(f"http://127.0.0.1:{stack.port}/")
+        expect(page.locator("#login")).to_be_visible()
+        page.fill("#token", "wrong")
+        page.click("#save-token")
+        expect(page.locator("#status")).to_contain_text("token")
+
+        login(page, stack)
+        staged = page.locator("#staged li .what")
+        page.fill("#text", "turn left then reach kitchen then dance")
+        page.press("#text", "Enter")
+        expect(staged).to_have_text(["turn left", "reach kitchen"])
+        expect(page.locator("#errors li")).to_have_text(["dance no order matches"])
+
+        # edit: keyboard reorder, delete, then a suggestion puts an order back
+        page.locator("#staged li").first.focus()
+        page.keyboard.press("Alt+ArrowDown")
+        expect(staged).to_have_text(["reach kitchen", "turn left"])
+        page.locator("#staged li").nth(1).focus()
+        page.keyboard.press("Delete")
+        expect(staged).to_have_text(["reach kitchen"])
+        page.fill("#text", "turn lift")
+        page.press("#text", "Enter")
+        page.click("#errors button.suggestion:has-text('turn left')")
+        expect(staged).to_have_text(["reach kitchen", "turn left"])
+        page.click("#clear")
+        expect(staged).to_have_count(0)
+
+        page.fill("#text", "please turn left then reach the kitchen")
+        page.press("#text", "Enter")
+        expect(staged).to_have_text(["turn left", "reach kitchen"])
+        page.click("#send")
+        expect(staged).to_have_count(0)
+        history = page.locator("#history tr")
+        expect(history.nth(0)).to_contain_text("reach kitchen")
+        expect(history.nth(0)).to_contain_text("succeeded")
+        expect(history.nth(1)).to_contain_text("turn left")
+        expect(history.nth(1)).to_contain_text("succeeded")
+        expect(page.locator("#pose")).to_contain_text("x 3.00")
+
+        # a reload keeps the login and shows the history at once
+        page.reload()
+        expect(page.locator("#history tr").nth(0)).to_contain_text("succeeded")
+
+
+def test_queue_reorder_cancel_and_stop(stack: Stack, tmp_path: Path) -> None:
+    from playwright.sync_api import expect
+
+    with panel(stack, tmp_path / "profile") as page:
+        login(page, stack)
+        page.fill(
+            "#text",
+            "wait ten seconds then wait two seconds then wait three seconds then wait four seconds",
+        )
+        page.press("#text", "Enter")
+        page.click("#send")
+        queue = page.locator("#queue li .what")
+        expect(page.locator("#current")).to_contain_text("wait 10 s")
+        expect(queue).to_have_text(["wait 2 s", "wait 3 s", "wait 4 s"])
+        page.locator("#queue li").nth(2).locator("button[title='run earlier']").click()
+        expect(queue).to_have_text(["wait 2 s", "wait 4 s", "wait 3 s"])
+        page.locator("#queue li").nth(0).locator("button:has-text('cancel')").click()
+        expect(queue).to_have_text(["wait 4 s", "wait 3 s"])
+        page.on("dialog", lambda dialog: dialog.dismiss())  # "cancel all?" answered no
+        page.click("#cancel-all")
+        expect(queue).to_have_text(["wait 4 s", "wait 3 s"])
+        page.click("#stop")  # no question asked
+        expect(queue).to_have_count(0)
+        expect(page.locator("#current")).to_have_text("idle")
+        expect(page.locator("#history tr").nth(0)).to_contain_text("cancelled")
+
+
+def test_speak_a_command_and_a_non_command(stack: Stack, speech: Speak, tmp_path: Path) -> None:
+    from playwright.sync_api import expect
+
+    command = speech("turn left then reach kitchen")
+    with panel(stack, tmp_path / "speak", microphone=command) as page:
+        login(page, stack)
+        page.click("#mic")
+        expect(page.locator("#mic")).to_have_attribute("aria-pressed", "true")
+        expect(page.locator("#heard")).to_have_text("turn left then reach kitchen")
+        expect(page.locator("#heard")).to_have_class("heard final")
+        expect(page.locator("#staged li .what")).to_have_text(["turn left", "reach kitchen"])
+        page.click("#mic")  # stop listening
+        page.click("#send")
+        history = page.locator("#history tr")
+        expect(history.nth(0)).to_contain_text("reach kitchen")
+        expect(history.nth(0)).to_contain_text("succeeded")
+        expect(history.nth(1)).to_contain_text("succeeded")
+        ARTIFACTS.mkdir(exist_ok=True)
+        page.screenshot(path=str(ARTIFACTS / "panel-spoken.png"), full_page=True)
+
+    chatter = speech("what is the weather like")
+    with panel(stack, tmp_path / "chatter", microphone=chatter) as page:
+        login(page, stack)
+        page.click("#mic")
+        expect(page.locator("#heard")).to_have_class("heard rejected")
+        expect(page.locator("#heard")).to_contain_text("not a command")
+        expect(page.locator("#staged li")).to_have_count(0)
+        page.screenshot(path=str(ARTIFACTS / "panel-rejected.png"), full_page=True)
+        # on a phone's screen STOP stays in view while the page scrolls
+        page.set_viewport_size({"width": 390, "height": 844})
+        page.mouse.wheel(0, 2000)
+        expect(page.locator("#stop")).to_be_in_viewport()
+        page.screenshot(path=str(ARTIFACTS / "panel-phone.png"), full_page=False)
+
+
+def test_without_https_the_panel_says_why_there_is_no_microphone(
+    stack: Stack, tmp_path: Path
+) -> None:
+    from playwright.sync_api import expect
+
+    # panel.test is the stack on loopback, but not "localhost": no secure context
+    mapped = ("--host-resolver-rules=MAP panel.test 127.0.0.1",)
+    with panel(stack, tmp_path / "profile", extra=mapped) as page:
+        token = Path(stack.env["VOICECTL_DATA"], "token").read_text().strip()
+        page.goto(f"http://panel.test:{stack.port}/#token={token}")
+        expect(page.locator("#panel")).to_be_visible()
+        page.click("#mic")
+        expect(page.locator("#mic-note")).to_contain_text("only over HTTPS or on localhost")
+        expect(page.locator("#mic")).to_have_attribute("aria-pressed", "false")

@@ -12,6 +12,7 @@ from pathlib import Path
 import msgspec
 
 from services.stt.__main__ import add_engine_arguments, engine_options
+from services.web.__main__ import add_tls_arguments, tls_problem
 from shared.bus import (
     DEFAULT_ROUTER,
     Bus,
@@ -21,7 +22,7 @@ from shared.bus import (
     json_decoder,
     robot_name,
 )
-from shared.config import default_token_file, load_or_create_token
+from shared.config import data_dir, default_token_file, load_or_create_token
 from shared.errors import BusError, OrdersFileError
 from shared.keys import BridgeKeys, ConverterKeys, RobotKeys
 from shared.messages import (
@@ -41,7 +42,7 @@ from shared.messages import (
     SupervisorReply,
 )
 
-from .stack import Child, run_stack
+from .stack import Child, Panel, run_stack
 
 SERVICES = ("router", "converter", "stt", "supervisor", "executor", "sim", "web")
 REPO_ORDERS = Path(__file__).resolve().parents[1] / "orders"
@@ -75,6 +76,7 @@ def build_parser() -> argparse.ArgumentParser:
     up.add_argument("--time-scale", type=float, default=1.0, help="simulator speed-up")
     up.add_argument("--no-web", action="store_true", help="do not start the panel")
     up.add_argument("--no-stt", action="store_true", help="do not start speech recognition")
+    add_tls_arguments(up)
     add_engine_arguments(up)
     up.add_argument(
         "--executor",
@@ -133,6 +135,12 @@ def build_parser() -> argparse.ArgumentParser:
     reorder.add_argument("order_id")
     reorder.add_argument("position", type=int)
 
+    cert = sub.add_parser(
+        "cert", help="write a self-signed TLS certificate for the panel's LAN names and addresses"
+    )
+    cert.add_argument("hosts", nargs="+", metavar="HOST", help="a name or an IP address")
+    cert.add_argument("--out", type=Path, default=None, help="directory (default: data dir/tls)")
+
     token = sub.add_parser("token", help="print the panel's API token (creating it if needed)")
     token.add_argument("--token-file", type=Path, default=None)
     return parser
@@ -172,6 +180,8 @@ def main(argv: list[str] | None = None) -> int:
         case "token":
             print(load_or_create_token(args.token_file or default_token_file()))
             return 0
+        case "cert":
+            return _cert(args)
     return 2
 
 
@@ -198,10 +208,20 @@ def _up(args: argparse.Namespace) -> int:
         children.insert(3, Child("stt", ["services.stt", *robot, *engine, *connect]))
     web = None
     if not args.no_web:
-        load_or_create_token(default_token_file())
-        port = ["--port", str(args.port), "--host", args.host]
-        children.append(Child("web", ["services.web", *robot, *port, *connect]))
-        web = (args.host, args.port)
+        problem = tls_problem(args)
+        if problem:
+            print(f"voicectl up: {problem}", file=sys.stderr)
+            return 2
+        token = load_or_create_token(default_token_file())
+        serve = ["--port", str(args.port), "--host", args.host]
+        if args.certfile is not None:
+            serve += ["--certfile", str(args.certfile), "--keyfile", str(args.keyfile)]
+        children.append(Child("web", ["services.web", *robot, *serve, *connect]))
+        scheme = "https" if args.certfile is not None else "http"
+        shown = "127.0.0.1" if args.host in ("0.0.0.0", "::") else args.host
+        # The token rides in the fragment: one click logs in, and a browser never sends a
+        # fragment to the server, so no access log can keep it.
+        web = Panel(args.host, args.port, f"{scheme}://{shown}:{args.port}/#token={token}")
     keys = RobotKeys(args.robot)
     ready = [
         ConverterKeys().alive,
@@ -210,6 +230,17 @@ def _up(args: argparse.Namespace) -> int:
         BridgeKeys().simulator,
     ] + ([] if args.no_stt else [keys.alive("stt")])
     return run_stack(children, web, args.router, ready)
+
+
+def _cert(args: argparse.Namespace) -> int:
+    from .cert import write_certificate
+
+    directory = args.out or data_dir() / "tls"
+    certfile, keyfile = directory / "panel.crt", directory / "panel.key"
+    write_certificate(args.hosts, certfile, keyfile)
+    print(f"certificate {certfile} for {', '.join(args.hosts)}; key {keyfile} (mode 0600)")
+    print(f"serve with: voicectl up --host 0.0.0.0 --certfile {certfile} --keyfile {keyfile}")
+    return 0
 
 
 def _parse(args: argparse.Namespace) -> int:

@@ -21,6 +21,15 @@ from shared.bus import BusOptions
 STOP_TIMEOUT = 10.0
 
 
+@dataclass(frozen=True)
+class Panel:
+    """Where the panel listens, and the address that logs a browser in."""
+
+    host: str
+    port: int
+    address: str
+
+
 @dataclass
 class Child:
     """One service process of the stack, its output prefixed with its name."""
@@ -113,7 +122,7 @@ def wait_for_tokens(router: str, keys: list[str], timeout: float) -> list[str]:
 
 def run_stack(
     children: list[Child],
-    web: tuple[str, int] | None,
+    web: Panel | None,
     router: str,
     ready_tokens: list[str],
 ) -> int:
@@ -129,12 +138,11 @@ def run_stack(
             if missing:
                 print(f"voicectl up: not up after 60 s: {', '.join(missing)}", flush=True)
             if web is not None:
-                host, port = web
-                if wait_for_port(host, port, timeout=30.0):
-                    print(f"voicectl up: panel on http://{host}:{port}", flush=True)
-                    print("voicectl up: its token: run `voicectl token`", flush=True)
+                host = "127.0.0.1" if web.host in ("0.0.0.0", "::") else web.host
+                if wait_for_port(host, web.port, timeout=30.0):
+                    print(f"voicectl up: panel on {web.address}", flush=True)
                 else:
-                    print(f"voicectl up: the panel did not open port {port} in 30 s")
+                    print(f"voicectl up: the panel did not open port {web.port} in 30 s")
             print("voicectl up: ready; Ctrl-C stops everything", flush=True)
             while not stop.wait(0.2):
                 dead = [

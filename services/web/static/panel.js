@@ -1,103 +1,146 @@
-// The voicectl panel: parse a command, send it, watch the robot carry it out.
+// The voicectl panel: speak or type, check what was understood, send, watch the robot.
 "use strict";
 
 const $ = (id) => document.getElementById(id);
-let token = localStorage.getItem("voicectl-token") || "";
-let proposal = null;
+const PAGE = 20;
+
+const store = {
+  get token() { return localStorage.getItem("voicectl-token") || ""; },
+  set token(value) { localStorage.setItem("voicectl-token", value); },
+  get robot() { return localStorage.getItem("voicectl-robot") || ""; },
+  set robot(value) { localStorage.setItem("voicectl-robot", value); },
+  get autoSend() { return localStorage.getItem("voicectl-auto-send") === "1"; },
+  set autoSend(on) { localStorage.setItem("voicectl-auto-send", on ? "1" : "0"); },
+};
+
+const view = {
+  robot: "",
+  staged: [], // {order, said}
+  state: null,
+  historyOffset: 0,
+  events: null, // AbortController of the event stream
+  mic: null, // the open microphone, see startMic
+};
+
+// --- helpers -----------------------------------------------------------------------------------
 
 function setStatus(text) { $("status").textContent = text || ""; }
 
-async function api(path, body) {
-  const init = { headers: { Authorization: `Bearer ${token}` } };
+function el(tag, text, cls) {
+  const node = document.createElement(tag);
+  if (text !== undefined && text !== null) node.textContent = text;
+  if (cls) node.className = cls;
+  return node;
+}
+
+function button(text, cls, onclick, title) {
+  const node = el("button", text, cls);
+  node.type = "button";
+  node.onclick = onclick;
+  if (title) node.title = title;
+  return node;
+}
+
+async function api(path, body, query) {
+  const params = new URLSearchParams({ robot: view.robot, ...(query || {}) });
+  const init = { headers: { Authorization: `Bearer ${store.token}` } };
   if (body !== undefined) {
     init.method = "POST";
     init.headers["Content-Type"] = "application/json";
     init.body = JSON.stringify(body);
   }
-  const response = await fetch(path, init);
-  const data = await response.json();
-  if (response.status === 401) { showLogin("wrong or missing token"); }
-  if (!response.ok) { throw new Error(data.error || response.statusText); }
+  const response = await fetch(`${path}?${params}`, init);
+  const data = await response.json().catch(() => ({}));
+  if (response.status === 401) showLogin("wrong or missing token");
+  if (!response.ok) throw new Error(data.error || response.statusText);
   return data;
 }
 
-function el(tag, text, cls) {
-  const node = document.createElement(tag);
-  if (text !== undefined) node.textContent = text;
-  if (cls) node.className = cls;
-  return node;
+function report(error) { setStatus(error.message || String(error)); }
+
+// --- logging in --------------------------------------------------------------------------------
+
+function tokenFromAddress() {
+  // voicectl up prints http://host:port/#token=...: a fragment never reaches the server.
+  const match = location.hash.match(/(?:^#|&)token=([^&]+)/);
+  if (!match) return false;
+  store.token = decodeURIComponent(match[1]);
+  history.replaceState(null, "", location.pathname + location.search);
+  return true;
 }
 
-function showProposal(transcript, result) {
-  proposal = { transcript, orders: result.orders };
-  $("transcript").textContent = transcript ? `“${transcript}”` : "";
-  $("orders").replaceChildren(...result.orders.map((o) => el("li", o.description)));
-  $("errors").replaceChildren(...result.errors.map((e) => {
-    const item = el("li", `${e.text || "(empty)"}: ${e.reason}`);
+function showLogin(why) {
+  $("panel").hidden = true;
+  $("login").hidden = false;
+  stopMic();
+  if (view.events) view.events.abort();
+  setStatus(why || "");
+}
+
+async function start() {
+  $("login").hidden = true;
+  $("panel").hidden = false;
+  $("auto-send").checked = store.autoSend;
+  try {
+    const known = await api("/api/robots");
+    showRobots(known.robots);
+    selectRobot(known.robots.includes(store.robot) ? store.robot : known.default);
+  } catch (error) { report(error); }
+}
+
+// --- robots and what serves them ----------------------------------------------------------------
+
+function selectRobot(name) {
+  view.robot = name;
+  store.robot = name;
+  view.historyOffset = 0;
+  view.state = null;
+  stopMic();
+  listen();
+}
+
+function showRobots(robots) {
+  const select = $("robot");
+  if (!view.robot && robots.length) view.robot = robots[0];
+  const names = robots.includes(view.robot) ? robots : [view.robot, ...robots];
+  select.replaceChildren(...names.map((name) => {
+    const option = el("option", name);
+    option.value = name;
+    option.selected = name === view.robot;
+    return option;
+  }));
+}
+
+function showParts(parts) {
+  $("parts").replaceChildren(...Object.entries(parts).map(([name, alive]) => {
+    const item = el("li", name, `badge ${alive ? "online" : "offline"}`);
+    item.title = `${name} ${alive ? "online" : "offline"}`;
+    item.dataset.part = name;
     return item;
   }));
-  $("send").disabled = result.orders.length === 0;
 }
 
-function orderLine(record, index) {
-  const item = el("li", `${record.order.description} `);
-  const cancel = el("button", "cancel", "small");
-  cancel.onclick = () => api("/api/cancel", { order_id: record.id }).catch((e) => setStatus(e.message));
-  item.append(cancel);
-  if (index > 0) {
-    const up = el("button", "↑", "small");
-    up.title = "run earlier";
-    up.onclick = () => api("/api/reorder", { order_id: record.id, position: index - 1 })
-      .catch((e) => setStatus(e.message));
-    item.append(up);
-  }
-  return item;
+function showPose(pose) {
+  const degrees = Math.round((pose.yaw * 180) / Math.PI);
+  $("pose").textContent = `x ${pose.x.toFixed(2)}  y ${pose.y.toFixed(2)}  ${degrees}°`;
 }
 
-function showState(state) {
-  $("robot").textContent = state.robot;
-  const badge = $("executor");
-  badge.textContent = state.executor_online ? "executor online" : "executor offline";
-  badge.className = "badge " + (state.executor_online ? "online" : "offline");
-  const current = state.current;
-  if (current) {
-    const box = el("div");
-    box.append(orderLine(current, 0));
-    const p = current.progress;
-    if (p) {
-      box.append(el("div", p.text, "muted"));
-      if (p.percent !== null && p.percent !== undefined) {
-        const bar = el("div", undefined, "bar");
-        const fill = el("div");
-        fill.style.width = `${Math.max(0, Math.min(100, p.percent))}%`;
-        bar.append(fill);
-        box.append(bar);
-      }
-    }
-    $("current").replaceChildren(box);
-    $("current").className = "";
-  } else {
-    $("current").textContent = "idle";
-    $("current").className = "muted";
-  }
-  $("queue").replaceChildren(...state.queue.map(orderLine));
-  const more = state.queue_length - state.queue.length;
-  if (more > 0) $("queue").append(el("li", `… and ${more} more`, "muted"));
-  $("history").replaceChildren(...state.history.map((r) => {
-    const row = el("tr");
-    const ended = r.ended_at ? new Date(r.ended_at * 1000).toLocaleTimeString() : "";
-    row.append(el("td", r.order.description), el("td", r.status, r.status),
-      el("td", r.message), el("td", r.transcript, "muted"), el("td", ended, "muted"));
-    return row;
-  }));
-}
+// --- the live stream ---------------------------------------------------------------------------
 
 async function listen() {
-  // Server-sent events read with fetch so the token stays in a header.
-  for (;;) {
+  if (view.events) view.events.abort();
+  const controller = new AbortController();
+  view.events = controller;
+  const query = new URLSearchParams({ robot: view.robot });
+  while (!controller.signal.aborted) {
     try {
-      const response = await fetch("/api/events", { headers: { Authorization: `Bearer ${token}` } });
+      // Server-sent events read with fetch, so that the token stays in a header.
+      const response = await fetch(`/api/events?${query}`, {
+        headers: { Authorization: `Bearer ${store.token}` },
+        signal: controller.signal,
+      });
       if (response.status === 401) { showLogin("wrong or missing token"); return; }
+      if (!response.ok) throw new Error((await response.json()).error || response.statusText);
       const reader = response.body.getReader();
       const decoder = new TextDecoder();
       let buffer = "";
@@ -110,58 +153,351 @@ async function listen() {
         while ((end = buffer.indexOf("\n\n")) >= 0) {
           const frame = buffer.slice(0, end);
           buffer = buffer.slice(end + 2);
-          if (!frame.startsWith("data: ")) continue;
-          const message = JSON.parse(frame.slice(6));
-          if (message.type === "stateupdate") showState(message.state);
-          if (message.type === "proposal") showProposal(message.transcript, message);
+          if (frame.startsWith("data: ")) handle(JSON.parse(frame.slice(6)));
         }
       }
     } catch (error) {
-      setStatus(`connection lost: ${error.message}; retrying`);
+      if (controller.signal.aborted) return;
+      setStatus(`connection lost (${error.message}); retrying`);
     }
     await new Promise((resolve) => setTimeout(resolve, 1000));
   }
 }
 
-function showLogin(why) {
-  $("panel").hidden = true;
-  $("login").hidden = false;
-  setStatus(why || "");
+function handle(message) {
+  const mine = view.mic && message.session === view.mic.session;
+  switch (message.type) {
+    case "stateupdate": showState(message.state); break;
+    case "parts": if (message.robot === view.robot) showParts(message.parts); break;
+    case "robots": showRobots(message.robots); break;
+    case "robotpose": showPose(message); break;
+    case "sttstatus": view.stt = message; break;
+    case "partialtranscript": if (mine) showHeard(message.text, "partial"); break;
+    case "transcript":
+      if (mine && message.rejected) {
+        const heard = message.text ? ` (heard “${message.text}”)` : "";
+        showHeard(`not a command${heard}: ${message.reason}`, "rejected");
+      } else if (mine) {
+        showHeard(message.text, "final");
+      }
+      break;
+    case "proposal": if (mine) propose(message); break;
+    default: break;
+  }
 }
 
-function start() {
-  $("login").hidden = true;
-  $("panel").hidden = false;
-  listen();
+// --- speaking ----------------------------------------------------------------------------------
+
+function micUnavailable() {
+  if (!window.isSecureContext || !navigator.mediaDevices || !window.AudioWorkletNode) {
+    return "The browser gives pages a microphone only over HTTPS or on localhost. Open the " +
+      "panel at https:// (voicectl cert makes a certificate; see docs/deploy.md) or type below.";
+  }
+  return "";
 }
+
+async function startMic() {
+  const why = micUnavailable();
+  if (why) { showMicNote(why); return; }
+  let stream;
+  try {
+    stream = await navigator.mediaDevices.getUserMedia({
+      // The recogniser wants the raw voice: no echo cancelling, denoising or gain riding.
+      audio: { echoCancellation: false, noiseSuppression: false, autoGainControl: false, channelCount: 1 },
+    });
+  } catch (error) {
+    const reasons = {
+      NotAllowedError: "Microphone permission was refused; allow it in the address bar.",
+      NotFoundError: "No microphone was found.",
+      NotReadableError: "The microphone is in use by another program.",
+    };
+    showMicNote(reasons[error.name] || `No microphone: ${error.message}`);
+    return;
+  }
+  const context = new AudioContext();
+  await context.audioWorklet.addModule("/static/capture.js");
+  const node = new AudioWorkletNode(context, "capture");
+  const silent = context.createGain();
+  silent.gain.value = 0;
+  context.createMediaStreamSource(stream).connect(node).connect(silent).connect(context.destination);
+  const scheme = location.protocol === "https:" ? "wss" : "ws";
+  const socket = new WebSocket(`${scheme}://${location.host}/api/audio`);
+  socket.binaryType = "arraybuffer";
+  const mic = { stream, context, node, socket, session: "", waiting: [] };
+  view.mic = mic;
+  socket.onopen = () => socket.send(JSON.stringify({ token: store.token, robot: view.robot }));
+  socket.onmessage = (event) => {
+    const message = JSON.parse(event.data);
+    if (message.type === "session") {
+      mic.session = message.session;
+      for (const frame of mic.waiting) socket.send(frame); // said before the session opened
+      mic.waiting = [];
+    } else if (message.type === "error") {
+      showMicNote(message.error);
+    }
+  };
+  socket.onclose = () => { if (view.mic === mic) stopMic(); };
+  node.port.onmessage = (event) => {
+    $("level").style.width = `${Math.min(100, Math.round(event.data.level * 300))}%`;
+    if (socket.readyState !== WebSocket.OPEN) return;
+    if (mic.session) socket.send(event.data.pcm);
+    else if (mic.waiting.length < 100) mic.waiting.push(event.data.pcm);
+  };
+  showMicNote("");
+  showHeard("listening…", "partial");
+  $("mic").setAttribute("aria-pressed", "true");
+  $("mic").lastChild.textContent = " Stop listening";
+  $("mic").classList.add("live");
+}
+
+function stopMic() {
+  const mic = view.mic;
+  if (!mic) return;
+  view.mic = { session: mic.session }; // its last transcript may still come
+  if (mic.socket.readyState === WebSocket.OPEN) mic.socket.send(JSON.stringify({ type: "stop" }));
+  for (const track of mic.stream.getTracks()) track.stop();
+  mic.context.close();
+  $("level").style.width = "0";
+  $("mic").setAttribute("aria-pressed", "false");
+  $("mic").lastChild.textContent = " Listen";
+  $("mic").classList.remove("live");
+}
+
+function showMicNote(text) {
+  $("mic-note").textContent = text;
+  $("mic-note").hidden = !text;
+}
+
+function showHeard(text, kind) {
+  $("heard").textContent = text;
+  $("heard").className = `heard ${kind}`;
+}
+
+// --- checking: staging, errors, suggestions ---------------------------------------------------
+
+function propose(proposal) {
+  if (proposal.rejected) {
+    showErrors(proposal.transcript, []); // the transcript line says why, next to the words
+    return;
+  }
+  if (store.autoSend && proposal.orders.length && !proposal.errors.length) {
+    submit(proposal.orders.map((order) => ({ order, said: proposal.transcript })));
+    showErrors(proposal.transcript, []);
+    return;
+  }
+  stage(proposal.orders, proposal.transcript);
+  showErrors(proposal.transcript, proposal.errors);
+}
+
+function stage(orders, said) {
+  for (const order of orders) view.staged.push({ order, said });
+  showStaged();
+}
+
+function showErrors(said, errors) {
+  $("errors").replaceChildren(...errors.map((error) => {
+    const item = el("li");
+    item.append(el("strong", error.text || said || "(nothing)"), ` ${error.reason}`);
+    const phrases = (error.candidates || []).filter((c) => !c.includes("/"));
+    for (const phrase of phrases) {
+      item.append(" ", button(phrase, "suggestion", () => addText(phrase),
+        "add this order to the list; nothing is sent until you send"));
+    }
+    return item;
+  }));
+}
+
+async function addText(text) {
+  try {
+    const result = await api("/api/parse", { text });
+    stage(result.orders, text);
+    showErrors(text, result.errors);
+    setStatus("");
+  } catch (error) { report(error); }
+}
+
+function showStaged() {
+  const list = $("staged");
+  list.replaceChildren(...view.staged.map((item, index) => {
+    const row = el("li");
+    row.tabIndex = 0;
+    row.draggable = true;
+    row.dataset.index = String(index);
+    row.append(el("span", item.order.description, "what"), el("span", item.said, "muted said"));
+    row.append(button("↑", "small", () => move(index, index - 1), "earlier"));
+    row.append(button("↓", "small", () => move(index, index + 1), "later"));
+    row.append(button("✕", "small", () => remove(index), "remove"));
+    row.onkeydown = (event) => {
+      if (event.altKey && event.key === "ArrowUp") { move(index, index - 1, true); event.preventDefault(); }
+      if (event.altKey && event.key === "ArrowDown") { move(index, index + 1, true); event.preventDefault(); }
+      if (event.key === "Delete" || event.key === "Backspace") { remove(index); event.preventDefault(); }
+    };
+    row.ondragstart = (event) => event.dataTransfer.setData("text/plain", String(index));
+    row.ondragover = (event) => event.preventDefault();
+    row.ondrop = (event) => {
+      event.preventDefault();
+      move(Number(event.dataTransfer.getData("text/plain")), index);
+    };
+    return row;
+  }));
+  const empty = view.staged.length === 0;
+  $("staged-empty").hidden = !empty;
+  $("send").disabled = empty;
+  $("clear").disabled = empty;
+}
+
+function move(from, to, keepFocus) {
+  if (to < 0 || to >= view.staged.length || from === to) return;
+  const [item] = view.staged.splice(from, 1);
+  view.staged.splice(to, 0, item);
+  showStaged();
+  if (keepFocus) $("staged").children[to].focus();
+}
+
+function remove(index) {
+  view.staged.splice(index, 1);
+  showStaged();
+}
+
+async function submit(items) {
+  const said = [...new Set(items.map((item) => item.said))].join(" / ");
+  await api("/api/submit", { orders: items.map((item) => item.order), transcript: said });
+}
+
+// --- watching ---------------------------------------------------------------------------------
+
+function progressLine(progress) {
+  const parts = [];
+  if (progress.text) parts.push(progress.text);
+  if (progress.distance_linear !== null && progress.distance_linear !== undefined) {
+    parts.push(`${progress.distance_linear.toFixed(2)} m to go`);
+  }
+  if (progress.distance_angular !== null && progress.distance_angular !== undefined) {
+    parts.push(`${Math.round((progress.distance_angular * 180) / Math.PI)}° to turn`);
+  }
+  if (progress.percent !== null && progress.percent !== undefined) {
+    parts.push(`${Math.round(progress.percent)} %`);
+  }
+  return parts.join(" · ");
+}
+
+function queueLine(record, index, length) {
+  const item = el("li");
+  item.append(el("span", record.order.description, "what"));
+  if (index > 0) {
+    item.append(button("↑", "small", () => reorder(record, index - 1), "run earlier"));
+  }
+  if (index >= 0 && index < length - 1) {
+    item.append(button("↓", "small", () => reorder(record, index + 1), "run later"));
+  }
+  item.append(button("cancel", "small", () => api("/api/cancel", { order_id: record.id }).catch(report)));
+  return item;
+}
+
+function reorder(record, position) {
+  api("/api/reorder", { order_id: record.id, position }).catch(report);
+}
+
+function showState(state) {
+  view.state = state;
+  const current = state.current;
+  if (current) {
+    const box = el("div", undefined, "current");
+    box.append(queueLine(current, -1, 0));
+    const progress = current.progress;
+    if (progress) {
+      box.append(el("div", progressLine(progress), "muted progress-text"));
+      if (progress.percent !== null && progress.percent !== undefined) {
+        const bar = el("div", undefined, "bar");
+        const fill = el("div");
+        fill.style.width = `${Math.max(0, Math.min(100, progress.percent))}%`;
+        bar.append(fill);
+        box.append(bar);
+      }
+    }
+    $("current").replaceChildren(box);
+    $("current").className = "";
+  } else {
+    $("current").textContent = "idle";
+    $("current").className = "muted";
+  }
+  const length = state.queue_length;
+  $("queue").replaceChildren(...state.queue.map((record, index) => queueLine(record, index, length)));
+  const more = length - state.queue.length;
+  if (more > 0) $("queue").append(el("li", `… and ${more} more`, "muted"));
+  if (view.historyOffset === 0) showHistory(state.history, null);
+}
+
+function showHistory(records, total) {
+  $("history").replaceChildren(...records.map((record) => {
+    const row = el("tr");
+    const ended = record.ended_at ? new Date(record.ended_at * 1000).toLocaleString() : "";
+    row.append(el("td", record.order.description), el("td", record.status, record.status),
+      el("td", record.message), el("td", record.transcript, "muted"), el("td", ended, "muted"));
+    return row;
+  }));
+  const first = view.historyOffset + 1;
+  $("page").textContent = records.length ? `${first}–${view.historyOffset + records.length}` +
+    (total !== null ? ` of ${total}` : "") : "";
+  $("newer").disabled = view.historyOffset === 0;
+  $("older").disabled = total !== null ? view.historyOffset + records.length >= total
+    : records.length < PAGE; // the live page is the most recent records only
+}
+
+async function page(offset) {
+  view.historyOffset = Math.max(0, offset);
+  try {
+    const result = await api("/api/history", undefined, { offset: view.historyOffset, limit: PAGE });
+    showHistory(result.records, result.total);
+  } catch (error) { report(error); }
+}
+
+// --- controls --------------------------------------------------------------------------------
 
 $("save-token").onclick = () => {
-  token = $("token").value.trim();
-  localStorage.setItem("voicectl-token", token);
+  store.token = $("token").value.trim();
   start();
 };
-
-$("command").onsubmit = async (event) => {
+$("robot").onchange = (event) => selectRobot(event.target.value);
+$("mic").onclick = () => (view.mic && view.mic.socket ? stopMic() : startMic().catch(report));
+$("command").onsubmit = (event) => {
   event.preventDefault();
-  const text = $("text").value;
-  try {
-    showProposal(text, await api("/api/parse", { text }));
-    setStatus("");
-  } catch (error) { setStatus(error.message); }
+  const text = $("text").value.trim();
+  if (!text) return;
+  $("text").value = "";
+  addText(text);
 };
-
 $("send").onclick = async () => {
-  if (!proposal) return;
+  const items = view.staged.slice();
   $("send").disabled = true;
   try {
-    await api("/api/submit", { orders: proposal.orders, transcript: proposal.transcript });
-    $("text").value = "";
-    showProposal("", { orders: [], errors: [] });
+    await submit(items);
+    view.staged.splice(0, items.length);
+    showStaged();
     setStatus("");
-  } catch (error) { setStatus(error.message); $("send").disabled = false; }
+  } catch (error) { report(error); showStaged(); }
 };
+$("clear").onclick = () => { view.staged = []; showStaged(); };
+$("auto-send").onchange = (event) => { store.autoSend = event.target.checked; };
+$("cancel-all").onclick = () => {
+  if (confirm("Cancel the running order and every queued one?")) {
+    api("/api/cancel_all", {}).catch(report);
+  }
+};
+$("stop").onclick = () => api("/api/stop", {}).catch(report); // never asks: it stops now
+$("newer").onclick = () => page(view.historyOffset - PAGE);
+$("older").onclick = () => page(view.historyOffset + PAGE);
+document.addEventListener("keydown", (event) => {
+  const typing = ["INPUT", "TEXTAREA", "SELECT"].includes(document.activeElement.tagName);
+  if (event.key === "m" && !typing && !event.ctrlKey && !event.metaKey && !event.altKey) {
+    $("mic").click();
+  }
+});
 
-$("cancel-all").onclick = () => api("/api/cancel_all", {}).catch((e) => setStatus(e.message));
-$("stop").onclick = () => api("/api/stop", {}).catch((e) => setStatus(e.message));
+window.addEventListener("hashchange", () => {
+  if (tokenFromAddress()) start(); // the address voicectl up printed, opened in this tab
+});
 
-if (token) start(); else showLogin();
+tokenFromAddress();
+showStaged();
+if (store.token) start(); else showLogin();

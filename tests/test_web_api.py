@@ -1,0 +1,277 @@
+"""The panel's HTTP API and microphone socket, in process with Starlette's TestClient on a
+real Zenoh router: every refusal, and the audio bridge's messages on the bus."""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+from collections.abc import Iterator
+
+import msgspec
+import pytest
+import zenoh
+from starlette.testclient import TestClient
+from starlette.websockets import WebSocketDisconnect
+
+from services.web.app import MAX_BODY, Access, create_app
+from shared.bus import BusOptions
+from shared.keys import RobotKeys
+from shared.messages import AudioChunk, AudioMessage, AudioStart, AudioStop
+
+from .conftest import Processes, wait_until
+
+TOKEN = "test-token-0123456789"
+AUTH = {"Authorization": f"Bearer {TOKEN}"}
+
+
+@pytest.fixture
+def client(router: str) -> Iterator[TestClient]:
+    app = create_app(BusOptions(connect=[router]), "robot", Access(TOKEN))
+    with TestClient(app) as test_client:  # runs the lifespan: the app opens its bus
+        yield test_client
+
+
+class AudioListener:
+    """A real subscriber on one robot's audio keys, as the recogniser would have."""
+
+    def __init__(self, router: str, robot: str = "robot") -> None:
+        self.received: list[tuple[str, AudioMessage]] = []
+        self._decoder = msgspec.json.Decoder(AudioMessage)
+        self._session = zenoh.open(BusOptions(connect=[router]).zenoh_config())
+        self._subscriber = self._session.declare_subscriber(
+            RobotKeys(robot).stt_audio_any, self._on_sample
+        )
+        self._lock = threading.Lock()
+
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        with self._lock:
+            self.received.append(
+                (str(sample.key_expr), self._decoder.decode(sample.payload.to_bytes()))
+            )
+
+    def close(self) -> None:
+        self._subscriber.undeclare()
+        self._session.close()
+
+
+@pytest.mark.parametrize(
+    ("method", "path"),
+    [
+        ("GET", "/api/state"),
+        ("GET", "/api/history"),
+        ("GET", "/api/events"),
+        ("GET", "/api/robots"),
+        ("POST", "/api/parse"),
+        ("POST", "/api/submit"),
+        ("POST", "/api/say"),
+        ("POST", "/api/cancel"),
+        ("POST", "/api/cancel_all"),
+        ("POST", "/api/stop"),
+        ("POST", "/api/reorder"),
+    ],
+)
+def test_every_api_route_needs_the_token(client: TestClient, method: str, path: str) -> None:
+    for headers in ({}, {"Authorization": "Bearer wrong"}, {"Authorization": TOKEN}):
+        response = client.request(method, path, headers=headers, json={})
+        assert response.status_code == 401, (headers, response.text)
+        assert "token" in response.json()["error"]
+
+
+def test_the_page_and_health_need_no_token_and_hold_no_data(client: TestClient) -> None:
+    page = client.get("/")
+    assert page.status_code == 200
+    assert TOKEN not in page.text
+    assert client.get("/static/panel.js").status_code == 200
+    assert client.get("/static/capture.js").status_code == 200
+    assert client.get("/api/health").json() == {"ok": True, "robot": "robot"}
+
+
+@pytest.mark.parametrize("name", [".env", "x" * 256, "..%2fapp.py", "missing.js"])
+def test_static_paths_outside_the_panel_are_404(client: TestClient, name: str) -> None:
+    assert client.get(f"/static/{name}").status_code == 404
+
+
+def test_bad_bodies_and_parameters_are_4xx_and_change_nothing(client: TestClient) -> None:
+    cases = [
+        ("/api/parse", b"\xff\xfe not utf-8", 400),
+        ("/api/parse", b"[" * 100_000 + b"]" * 100_000, 413),
+        ("/api/parse", b'{"text": "x", "extra": 1}', 400),
+        ("/api/submit", b'{"orders": []}', 400),
+        ("/api/reorder", b'{"order_id": "a"}', 400),
+        ("/api/parse", b"x" * (MAX_BODY + 1), 413),
+    ]
+    for path, body, status in cases:
+        response = client.post(path, content=body, headers=AUTH)
+        assert response.status_code == status, (path, body[:20], response.text)
+        assert response.json()["error"]
+    assert client.get("/api/state?robot=no/such", headers=AUTH).status_code == 400
+    assert client.get("/api/history?offset=1e23", headers=AUTH).status_code == 400
+    assert client.get("/api/history?limit=0", headers=AUTH).status_code == 400
+
+
+def test_without_services_requests_say_what_is_missing(client: TestClient) -> None:
+    response = client.post("/api/parse", json={"text": "turn left"}, headers=AUTH)
+    assert response.status_code == 503
+    assert response.json()["error"].startswith("converter unavailable")
+    response = client.get("/api/state", headers=AUTH)
+    assert response.status_code == 503
+    assert response.json()["error"].startswith("supervisor unavailable")
+
+
+def test_robots_lists_the_default_robot(client: TestClient) -> None:
+    assert client.get("/api/robots", headers=AUTH).json() == {
+        "robots": ["robot"],
+        "default": "robot",
+    }
+
+
+def test_the_event_stream_starts_with_what_is_known(router: str) -> None:
+    app = create_app(BusOptions(connect=[router]), "robot", Access(TOKEN))
+    with (
+        TestClient(app) as client,
+        client.stream("GET", "/api/events?robot=robot", headers=AUTH) as response,
+    ):
+        assert response.status_code == 200
+        frames = []
+        for line in response.iter_lines():
+            if line.startswith("data: "):
+                frames.append(json.loads(line[6:]))
+            if len(frames) == 2:
+                break
+    assert frames[0] == {
+        "type": "parts",
+        "robot": "robot",
+        "parts": dict.fromkeys(["converter", "stt", "supervisor", "executor", "robot"], False),
+    }
+    assert frames[1] == {"type": "robots", "robots": ["robot"]}
+
+
+# --- the microphone socket ------------------------------------------------------------------
+
+
+def test_the_audio_socket_refuses_a_foreign_origin(client: TestClient) -> None:
+    with (
+        pytest.raises(WebSocketDisconnect) as closed,
+        client.websocket_connect(
+            "/api/audio", headers={"origin": "https://evil.example"}
+        ) as socket,
+    ):
+        socket.receive_text()
+    assert closed.value.code == 4403
+
+
+def test_the_audio_socket_needs_the_token_first(client: TestClient) -> None:
+    for hello, code in (
+        ({"token": "wrong", "robot": "robot"}, 4401),
+        ({"robot": "robot"}, 1003),
+        ({"token": TOKEN, "robot": "../x"}, 1003),
+    ):
+        with client.websocket_connect(
+            "/api/audio", headers={"origin": "http://testserver"}
+        ) as socket:
+            socket.send_text(json.dumps(hello))
+            assert socket.receive_json()["type"] == "error"
+            with pytest.raises(WebSocketDisconnect) as closed:
+                socket.receive_text()
+            assert closed.value.code == code
+
+
+def test_the_audio_socket_says_when_no_recogniser_listens(client: TestClient) -> None:
+    with client.websocket_connect("/api/audio") as socket:  # no Origin: not a browser
+        socket.send_text(json.dumps({"token": TOKEN, "robot": "robot"}))
+        message = socket.receive_json()
+        assert message == {"type": "error", "error": "speech recognition is not running"}
+
+
+def test_audio_frames_become_one_session_on_the_bus(client: TestClient, router: str) -> None:
+    listener = AudioListener(router)
+    try:
+        time.sleep(0.5)  # our subscriber reaches the router; the socket waits for it anyway
+        frames = [bytes([n]) * 640 for n in range(3)]
+        with client.websocket_connect(
+            "/api/audio", headers={"origin": "http://testserver"}
+        ) as socket:
+            socket.send_text(json.dumps({"token": TOKEN, "robot": "robot"}))
+            hello = socket.receive_json()
+            assert hello["type"] == "session"
+            socket.send_bytes(frames[0])
+            socket.send_bytes(frames[1] + frames[2])
+            socket.send_text(json.dumps({"type": "stop"}))
+        session = hello["session"]
+        wait_until(lambda: len(listener.received) >= 4, 10.0, "the session on the bus")
+        key = RobotKeys("robot").stt_audio(session)
+        assert listener.received == [
+            (key, AudioStart()),
+            (key, AudioChunk(seq=0, pcm=frames[0])),
+            (key, AudioChunk(seq=1, pcm=frames[1] + frames[2])),
+            (key, AudioStop()),
+        ]
+    finally:
+        listener.close()
+
+
+@pytest.mark.parametrize(
+    ("payload", "code", "says"),
+    [
+        (b"\x00" * 700, 1003, "whole 640-byte frames"),
+        (b"\x00" * (640 * 51), 1009, "at most 32000 bytes"),
+    ],
+)
+def test_bad_audio_ends_the_session_with_a_reason(
+    client: TestClient, router: str, payload: bytes, code: int, says: str
+) -> None:
+    listener = AudioListener(router)
+    try:
+        time.sleep(0.5)
+        with client.websocket_connect("/api/audio") as socket:
+            socket.send_text(json.dumps({"token": TOKEN, "robot": "robot"}))
+            assert socket.receive_json()["type"] == "session"
+            socket.send_bytes(payload)
+            error = socket.receive_json()
+            assert error["type"] == "error"
+            assert says in error["error"]
+            with pytest.raises(WebSocketDisconnect) as closed:
+                socket.receive_text()
+            assert closed.value.code == code
+        wait_until(
+            lambda: any(isinstance(m, AudioStop) for _, m in listener.received), 10.0, "a stop"
+        )
+        assert not any(isinstance(m, AudioChunk) for _, m in listener.received)
+    finally:
+        listener.close()
+
+
+def test_the_api_drives_the_converter_and_supervisor(
+    client: TestClient, router: str, processes: Processes
+) -> None:
+    processes.start("services.converter", "--connect", router)
+    processes.start("services.supervisor", "--robot", "robot", "--connect", router)
+    wait_until(
+        lambda: client.post("/api/parse", json={"text": "x"}, headers=AUTH).status_code == 200,
+        30.0,
+        "the converter",
+    )
+    parsed = client.post(
+        "/api/parse", json={"text": "please reach the kitchen then dance"}, headers=AUTH
+    ).json()
+    assert [o["description"] for o in parsed["orders"]] == ["reach kitchen"]
+    assert parsed["errors"][0]["text"] == "dance"
+    # /api/say submits nothing when a part of the text was not understood
+    said = client.post("/api/say", json={"text": "turn left then dance"}, headers=AUTH).json()
+    assert said["order_ids"] == []
+    wait_until(
+        lambda: client.get("/api/state", headers=AUTH).status_code == 200, 30.0, "the supervisor"
+    )
+    submitted = client.post(
+        "/api/submit?robot=robot", json={"orders": parsed["orders"]}, headers=AUTH
+    ).json()
+    [order_id] = submitted["order_ids"]
+    state = client.get("/api/state", headers=AUTH).json()
+    assert [r["id"] for r in state["queue"]] == [order_id]  # no executor: it waits
+    assert client.post("/api/cancel", json={"order_id": order_id}, headers=AUTH).status_code == 200
+    unknown = client.post("/api/cancel", json={"order_id": "nope"}, headers=AUTH)
+    assert unknown.status_code == 409
+    history = client.get("/api/history?limit=5", headers=AUTH).json()
+    assert history["records"][0]["id"] == order_id
+    assert history["records"][0]["status"] == "cancelled"
