@@ -136,6 +136,18 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]):  
     return report
 
 
+def voicectl(*args: str, timeout: float = 120.0) -> subprocess.CompletedProcess[str]:
+    """Run `voicectl ARGS...` from the repository and capture what it says."""
+    return subprocess.run(
+        [sys.executable, "-m", "voicectl", *args],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        timeout=timeout,
+        check=False,
+    )
+
+
 def wait_until(condition: Callable[[], object], timeout: float, what: str) -> None:
     """Poll `condition` until truthy; fail naming `what` after `timeout` seconds."""
     deadline = time.monotonic() + timeout

@@ -7,33 +7,16 @@ import ipaddress
 import os
 import ssl
 import stat
-import subprocess
-import sys
 from pathlib import Path
 
 import httpx
 from cryptography import x509
 
-from .conftest import REPO, Processes, free_port, wait_until
+from .conftest import Processes, free_port, voicectl, wait_until
 
 
 def test_cert_names_every_host_and_keeps_the_key_private(tmp_path: Path) -> None:
-    done = subprocess.run(
-        [
-            sys.executable,
-            "-m",
-            "voicectl",
-            "cert",
-            "robot.local",
-            "192.168.1.20",
-            "--out",
-            str(tmp_path),
-        ],
-        capture_output=True,
-        text=True,
-        cwd=REPO,
-        check=False,
-    )
+    done = voicectl("cert", "robot.local", "192.168.1.20", "--out", str(tmp_path))
     assert done.returncode == 0, done.stderr
     certificate = x509.load_pem_x509_certificate((tmp_path / "panel.crt").read_bytes())
     names = certificate.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
@@ -44,12 +27,7 @@ def test_cert_names_every_host_and_keeps_the_key_private(tmp_path: Path) -> None
 
 
 def test_the_panel_serves_https_with_it(tmp_path: Path, router: str, processes: Processes) -> None:
-    subprocess.run(
-        [sys.executable, "-m", "voicectl", "cert", "127.0.0.1", "--out", str(tmp_path)],
-        cwd=REPO,
-        check=True,
-        capture_output=True,
-    )
+    assert voicectl("cert", "127.0.0.1", "--out", str(tmp_path)).returncode == 0
     port = free_port()
     processes.start(
         "services.web",
@@ -75,13 +53,6 @@ def test_the_panel_serves_https_with_it(tmp_path: Path, router: str, processes: 
 
 
 def test_half_a_tls_configuration_is_refused(tmp_path: Path) -> None:
-    done = subprocess.run(
-        [sys.executable, "-m", "voicectl", "web", "--certfile", str(tmp_path / "a.crt")],
-        capture_output=True,
-        text=True,
-        cwd=REPO,
-        check=False,
-        timeout=60,
-    )
+    done = voicectl("web", "--certfile", str(tmp_path / "a.crt"))
     assert done.returncode == 2
     assert done.stderr.strip() == "voicectl web: --certfile and --keyfile go together"

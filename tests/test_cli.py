@@ -14,18 +14,7 @@ from shared.errors import BusError
 from shared.keys import RobotKeys
 from shared.messages import Failed, GetState, StateReply, SupervisorReply
 
-from .conftest import REPO, Processes, wait_until
-
-
-def voicectl(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "voicectl", *args],
-        capture_output=True,
-        text=True,
-        cwd=REPO,
-        timeout=60,
-        check=False,
-    )
+from .conftest import REPO, Processes, voicectl, wait_until
 
 
 def test_parse_prints_one_json_object() -> None:

@@ -7,7 +7,6 @@ import itertools
 import json
 import re
 import subprocess
-import sys
 import wave
 from pathlib import Path
 
@@ -20,11 +19,17 @@ from services.converter.grammar import build_grammar
 from services.converter.orders import OrderSet
 from services.stt.audio import AudioError, frames, read_wav
 from services.stt.engine import EngineError, EngineOptions, Final, Heard, load_engine
-from services.stt.lexicon import ipa_to_arpabet, non_rhotic, pronunciations
+from services.stt.lexicon import (
+    espeak_pronunciations,
+    ipa_to_arpabet,
+    non_rhotic,
+    pronunciations,
+    variants,
+)
 from services.stt.wordgraph import GrammarError, compile_jsgf
 from shared.messages import FRAME_BYTES, AudioChunk, AudioMessage
 
-from .conftest import REPO, Speak
+from .conftest import REPO, Speak, voicectl
 
 ORDERS = REPO / "orders"
 
@@ -103,6 +108,10 @@ def test_optional_repeated_quoted_null_and_void() -> None:
 # --- pronunciations and audio ---------------------------------------------------------------
 
 
+def arpa(text: str) -> list[str]:
+    return text.split()
+
+
 def test_non_rhotic_variants_drop_the_r_after_vowels_only() -> None:
     assert non_rhotic(["D", "AH", "M", "P", "S", "T", "ER"]) == [
         "D",
@@ -121,28 +130,56 @@ def test_non_rhotic_variants_drop_the_r_after_vowels_only() -> None:
 def test_espeak_ipa_becomes_arpabet() -> None:
     assert ipa_to_arpabet("dˈʌmpstə") == ["D", "AH", "M", "P", "S", "T", "AH"]
     assert ipa_to_arpabet("zˈænzɪbˌɑːɹ") == ["Z", "AE", "N", "Z", "IH", "B", "AA", "R"]
+    assert ipa_to_arpabet("bˈak") == ["B", "AA", "K"]  # British TRAP: the open a
     assert ipa_to_arpabet("ʘ") is None  # a click has no ARPAbet phone
 
 
-def test_pronunciations_add_variants_and_guess_missing_words() -> None:
-    dictionary = {
-        "dumpster": [["D", "AH", "M", "P", "S", "T", "ER"]],
-        "left": [["L", "EH", "F", "T"]],
+def test_pronunciations_add_accent_variants_and_espeak_words() -> None:
+    dictionary = {"dumpster": [["D", "AH", "M", "P", "S", "T", "ER"]], "back": [["B", "AE", "K"]]}
+    spoken = {  # a fake espeak-ng: its real output is tested above and below
+        "en-gb": {"dumpster": ["D", "AH", "M", "P", "S", "T", "AH"], "zanzibar": ["Z", "AA", "N"]},
+        "en-us": {"zanzibar": ["Z", "AE", "N", "Z", "IH", "B", "AA", "R"]},
     }
-    guesses = {"zanzibar": [["Z", "AE", "N", "Z", "IH", "B", "AA", "R"]]}
+    asked: list[tuple[str, list[str]]] = []
+
+    def speak(words: list[str], voice: str) -> dict[str, list[str]]:
+        asked.append((voice, words))
+        return {w: spoken[voice][w] for w in words if w in spoken[voice]}
+
     found = pronunciations(
-        ["dumpster", "left", "zanzibar", "qxz"],
-        known=lambda w: dictionary.get(w, []),
-        guess=lambda w: guesses.get(w, []),  # a fake guesser: espeak-ng's output is tested above
+        ["dumpster", "back", "zanzibar", "qxz"], known=lambda w: dictionary.get(w, []), speak=speak
     )
-    assert found.added == {
-        "dumpster": [["D", "AH", "M", "P", "S", "T", "AH"]],
-        "zanzibar": [
-            ["Z", "AE", "N", "Z", "IH", "B", "AA", "R"],
-            ["Z", "AE", "N", "Z", "IH", "B", "AA"],
-        ],
-    }
+    assert found.added["dumpster"] == [["D", "AH", "M", "P", "S", "T", "AH"]]
+    assert found.added["back"] == [["B", "AA", "K"]]
+    assert found.added["zanzibar"][:2] == [
+        ["Z", "AE", "N", "Z", "IH", "B", "AA", "R"],
+        ["Z", "AE", "N", "Z", "IH", "B", "AA"],
+    ]
     assert found.unpronounceable == ["qxz"]
+    # British pronunciations for every word, American ones only where the dictionary has none
+    assert asked == [
+        ("en-gb", ["back", "dumpster", "qxz", "zanzibar"]),
+        ("en-us", ["qxz", "zanzibar"]),
+    ]
+
+
+def test_accent_variants_change_one_thing_at_a_time() -> None:
+    assert variants(arpa("N AY N T IY")) == [
+        arpa("N AY N T IY"),
+        arpa("N AY N IY"),
+        arpa("N AY N D IY"),
+    ]
+    assert variants(arpa("P IH K CH ER")) == [arpa("P IH K CH ER"), arpa("P IH K CH AH")]
+    assert variants(arpa("B AE K")) == [arpa("B AE K"), arpa("B AA K")]
+
+
+def test_espeak_pronounces_many_words_in_one_call() -> None:
+    found = espeak_pronunciations(["dumpster", "back", "zanzibar"], "en-gb")
+    assert found == {
+        "dumpster": arpa("D AH M P S T AH"),
+        "back": arpa("B AA K"),
+        "zanzibar": arpa("Z AA N Z IH B AA"),
+    }
 
 
 def test_wav_files_of_any_rate_width_and_channels_become_16k_mono(
@@ -175,17 +212,6 @@ def test_audio_chunks_carry_whole_frames_and_at_most_a_second(size: int) -> None
 
 
 # --- pocketsphinx, and voicectl transcribe ------------------------------------------------------
-
-
-def voicectl(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run(
-        [sys.executable, "-m", "voicectl", *args],
-        capture_output=True,
-        text=True,
-        cwd=REPO,
-        timeout=120,
-        check=False,
-    )
 
 
 def test_transcribe_prints_one_json_line_per_file_in_the_parse_contract(

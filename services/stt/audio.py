@@ -13,6 +13,7 @@ Two corrections happen before any engine sees the audio:
 
 from __future__ import annotations
 
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -43,6 +44,14 @@ class NoiseFloor:
 
 def seconds(pcm_bytes: int) -> float:
     return pcm_bytes / BYTES_PER_SECOND
+
+
+def whole(pending: bytearray, size: int) -> Iterator[bytes]:
+    """Take every whole `size`-byte piece off the front of `pending`, in order."""
+    while len(pending) >= size:
+        piece = bytes(pending[:size])
+        del pending[:size]
+        yield piece
 
 
 def frames(pcm: bytes) -> list[bytes]:

@@ -127,3 +127,12 @@ def logistic(value: float, midpoint: float, width: float) -> float:
     if exponent > 700:
         return 0.0
     return 1.0 / (1.0 + math.exp(exponent))
+
+
+def rejection(text: str, confidence: float, minimum: float) -> str:
+    """Why an engine rejects what it heard, or '' when it does not."""
+    if not text:
+        return "no command heard"
+    if confidence < minimum:
+        return f"sounds unlike any command (confidence {confidence:.2f}, below {minimum:.2f})"
+    return ""

@@ -1,16 +1,19 @@
 """Pronunciations for the words of the orders, across accents.
 
 pocketsphinx ships the CMU dictionary: American pronunciations, one per word in most
-cases. Two gaps matter for commands:
+cases. What a command recogniser adds to it, for every word of the grammar:
 
-- British and other non-rhotic speakers drop the r after a vowel: "dumpster" ends in a
-  schwa, "forward" has no r. Every pronunciation gets a non-rhotic variant (an r-coloured
-  vowel becomes a schwa, an r after a vowel and before a consonant or the end is dropped).
-  On generated British speech this turned "take a picture" from a miss into a hit.
-- Words the dictionary lacks (a place called "zanzibar", a made-up robot name) get their
-  American and British pronunciations from espeak-ng when it is installed (Debian package
-  espeak-ng), converted from its IPA to the ARPAbet phones of the acoustic model. Without
-  it such words are reported: commands that use them cannot be heard.
+- Accent variants by rule (`variants`): non-rhotic (British "dumpster" ends in a schwa,
+  "forward" has no r), a broad a (British "back", "bathroom" with the open vowel of
+  "father"), and American flapped or dropped t after n ("ninety" as "niney").
+- espeak-ng's American and British pronunciations when it is installed (Debian package
+  espeak-ng), converted from its IPA to the acoustic model's ARPAbet phones. For a word the
+  dictionary lacks (a place called "zanzibar") they are the only ones; without espeak-ng
+  such a word is reported, and commands that use it cannot be heard.
+
+On the generated set (docs/benchmarks.md) these took the commands heard exactly right from
+68 to 71 of 75. That set is spoken by espeak-ng itself, so the part of the gain that comes
+from espeak-ng's own pronunciations may not carry over to people.
 """
 
 from __future__ import annotations
@@ -27,6 +30,35 @@ VOWELS = frozenset(
     ["AA", "AE", "AH", "AO", "AW", "AY", "EH", "ER", "EY", "IH", "IY", "OW", "OY", "UH", "UW"]
 )
 """ARPAbet vowels, as in the CMU dictionary without stress marks."""
+
+
+def variants(phones: list[str]) -> list[list[str]]:
+    """`phones` and each of its accent variants, one change at a time: non-rhotic, broad
+    a, flapped t after n."""
+    found = [phones]
+    for changed in (non_rhotic(phones), broad_a(phones), *flapped(phones)):
+        if changed not in found:
+            found.append(changed)
+    return found
+
+
+def broad_a(phones: list[str]) -> list[str]:
+    """British TRAP and BATH vowels are more open than American [æ]: AE becomes AA."""
+    return ["AA" if phone == "AE" else phone for phone in phones]
+
+
+def flapped(phones: list[str]) -> list[list[str]]:
+    """American t after n and before a vowel, dropped or voiced ("twenty" as "twenny")."""
+    found = []
+    for position in range(1, len(phones) - 1):
+        if (
+            phones[position] == "T"
+            and phones[position - 1] == "N"
+            and phones[position + 1] in VOWELS
+        ):
+            found.append(phones[:position] + phones[position + 1 :])
+            found.append([*phones[:position], "D", *phones[position + 1 :]])
+    return found
 
 
 def non_rhotic(phones: list[str]) -> list[str]:
@@ -49,7 +81,7 @@ _IPA = {
     "aɪə": "AY AH", "aʊə": "AW AH", "ɔːɹ": "AO R", "ɑːɹ": "AA R", "ɪəɹ": "IH R",
     "aɪ": "AY", "aʊ": "AW", "eɪ": "EY", "oʊ": "OW", "əʊ": "OW", "ɔɪ": "OY", "ɪə": "IH AH",
     "eə": "EH AH", "ʊə": "UH AH", "tʃ": "CH", "dʒ": "JH", "ɑː": "AA", "ɔː": "AO", "ɜː": "ER",
-    "iː": "IY", "uː": "UW", "oː": "AO", "ɑ": "AA", "æ": "AE", "a": "AE", "ʌ": "AH",
+    "iː": "IY", "uː": "UW", "oː": "AO", "ɑ": "AA", "æ": "AE", "a": "AA", "ʌ": "AH",
     "ə": "AH", "ɐ": "AH", "ɔ": "AO", "ɒ": "AA", "ɛ": "EH", "e": "EH", "ɜ": "ER", "ɝ": "ER",
     "ɚ": "ER", "ɪ": "IH", "ᵻ": "IH", "i": "IY", "ʊ": "UH", "u": "UW", "o": "OW", "b": "B",
     "d": "D", "ð": "DH", "f": "F", "ɡ": "G", "g": "G", "h": "HH", "k": "K", "l": "L",
@@ -81,26 +113,32 @@ def ipa_to_arpabet(ipa: str) -> list[str] | None:
     return phones or None
 
 
-def espeak_pronunciations(word: str) -> list[list[str]]:
-    """American and British pronunciations of `word` from espeak-ng; none if not installed."""
-    if shutil.which("espeak-ng") is None:
-        return []
-    found: list[list[str]] = []
-    for voice in ("en-us", "en-gb"):
-        try:
-            done = subprocess.run(
-                ["espeak-ng", "-q", "--ipa", "-v", voice, word],
-                capture_output=True,
-                text=True,
-                timeout=10,
-                check=True,
-            )
-        except (OSError, subprocess.SubprocessError) as exc:
-            _LOGGER.warning("espeak-ng could not pronounce %r: %s", word, exc)
-            continue
-        phones = ipa_to_arpabet(done.stdout.strip())
-        if phones and phones not in found:
-            found.append(phones)
+def espeak_pronunciations(words: list[str], voice: str) -> dict[str, list[str]]:
+    """Pronunciations of `words` by one espeak-ng voice ("en-gb"), in one call; empty when
+    espeak-ng is not installed or fails."""
+    if shutil.which("espeak-ng") is None or not words:
+        return {}
+    try:
+        done = subprocess.run(
+            ["espeak-ng", "-q", "--ipa", "-v", voice],
+            input="\n".join(words),
+            capture_output=True,
+            text=True,
+            timeout=30,
+            check=True,
+        )
+    except (OSError, subprocess.SubprocessError) as exc:
+        _LOGGER.warning("espeak-ng could not pronounce the grammar's words: %s", exc)
+        return {}
+    lines = done.stdout.strip().splitlines()
+    if len(lines) != len(words):
+        _LOGGER.warning("espeak-ng answered %d lines for %d words", len(lines), len(words))
+        return {}
+    found = {}
+    for word, ipa in zip(words, lines, strict=True):
+        phones = ipa_to_arpabet(ipa.strip())
+        if phones:
+            found[word] = phones
     return found
 
 
@@ -116,22 +154,28 @@ class Pronunciations:
 def pronunciations(
     words: Iterable[str],
     known: Callable[[str], list[list[str]]],
-    guess: Callable[[str], list[list[str]]] = espeak_pronunciations,
+    speak: Callable[[list[str], str], dict[str, list[str]]] = espeak_pronunciations,
 ) -> Pronunciations:
-    """Pronunciations to add for `words`, given the dictionary's (`known`) and a guesser
-    for words it lacks; every pronunciation also gets its non-rhotic variant."""
+    """Pronunciations to add for `words`: the dictionary's (`known`), espeak-ng's (`speak`)
+    British one for every word and American one for words the dictionary lacks, and the
+    accent variants of each."""
+    ordered = sorted(set(words))
+    british = speak(ordered, "en-gb")
+    unknown = [word for word in ordered if not known(word)]
+    american = speak(unknown, "en-us")
     result = Pronunciations()
-    for word in sorted(set(words)):
+    for word in ordered:
         existing = known(word)
-        candidates = existing or guess(word)
+        spoken = [american[word]] if word in american else []
+        if word in british and british[word] not in spoken:
+            spoken.append(british[word])
+        candidates = existing + [p for p in spoken if p not in existing]
         if not candidates:
             result.unpronounceable.append(word)
             continue
-        wanted = list(candidates)
+        wanted: list[list[str]] = []
         for phones in candidates:
-            variant = non_rhotic(phones)
-            if variant not in wanted:
-                wanted.append(variant)
+            wanted.extend(v for v in variants(phones) if v not in wanted)
         new = [phones for phones in wanted if phones not in existing]
         if new:
             result.added[word] = new

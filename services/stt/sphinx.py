@@ -38,8 +38,8 @@ import pocketsphinx
 
 from shared.messages import Grammar
 
-from .audio import NoiseFloor, seconds
-from .engine import EngineError, Event, Final, Heard, SpeechStarted, logistic
+from .audio import NoiseFloor, seconds, whole
+from .engine import EngineError, Event, Final, Heard, SpeechStarted, logistic, rejection
 from .lexicon import pronunciations
 from .wordgraph import GrammarError, WordGraph, compile_jsgf
 
@@ -269,10 +269,7 @@ class SphinxRecogniser:
     def accept(self, pcm: bytes) -> list[Event]:
         events: list[Event] = []
         self._pending += self._noise.add(pcm)
-        size = self._vad.frame_bytes
-        while len(self._pending) >= size:
-            frame = bytes(self._pending[:size])
-            del self._pending[:size]
+        for frame in whole(self._pending, self._vad.frame_bytes):
             self._frame(frame, events)
         return events
 
@@ -379,20 +376,12 @@ class SphinxRecogniser:
             return
         result = utterance.early or self._final_pass(utterance)
         self._prior = result.mean
-        rejection = ""
-        if not result.text:
-            rejection = "no command heard"
-        elif result.confidence < self._engine.min_confidence:
-            rejection = (
-                f"sounds unlike any command (confidence {result.confidence:.2f}, "
-                f"below {self._engine.min_confidence:.2f})"
-            )
         events.append(
             Final(
                 utterance.number,
                 result.text,
                 round(result.confidence, 3),
-                rejection,
+                rejection(result.text, result.confidence, self._engine.min_confidence),
                 utterance.start,
                 speech_end,
             )

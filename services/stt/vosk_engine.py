@@ -20,8 +20,8 @@ import vosk
 
 from shared.messages import Grammar
 
-from .audio import seconds
-from .engine import EngineError, Event, Final, Heard, SpeechStarted
+from .audio import seconds, whole
+from .engine import EngineError, Event, Final, Heard, SpeechStarted, rejection
 
 _LOGGER = logging.getLogger(__name__)
 
@@ -102,16 +102,12 @@ class VoskEngine:
     def judge(self, words: list[dict[str, Any]]) -> tuple[float, str]:
         """Confidence (mean word confidence) and why the utterance is rejected, if it is."""
         if not words:
-            return 0.0, "no command heard"
+            return 0.0, rejection("", 0.0, self.min_confidence)
         confidence = sum(float(w.get("conf", 0.0)) for w in words) / len(words)
         if any(w.get("word") in UNKNOWN_WORDS for w in words):
             return confidence, "words outside the orders' grammar"
-        if confidence < self.min_confidence:
-            return confidence, (
-                f"sounds unlike any command (confidence {confidence:.2f}, "
-                f"below {self.min_confidence:.2f})"
-            )
-        return confidence, ""
+        text = " ".join(str(w.get("word", "")) for w in words)
+        return confidence, rejection(text, confidence, self.min_confidence)
 
 
 class VoskRecogniser:
@@ -135,9 +131,7 @@ class VoskRecogniser:
     def accept(self, pcm: bytes) -> list[Event]:
         events: list[Event] = []
         self._pending += pcm
-        while len(self._pending) >= CHUNK_BYTES:
-            chunk = bytes(self._pending[:CHUNK_BYTES])
-            del self._pending[:CHUNK_BYTES]
+        for chunk in whole(self._pending, CHUNK_BYTES):
             self._chunk(chunk, events)
         return events
 
