@@ -275,3 +275,29 @@ def test_the_api_drives_the_converter_and_supervisor(
     history = client.get("/api/history?limit=5", headers=AUTH).json()
     assert history["records"][0]["id"] == order_id
     assert history["records"][0]["status"] == "cancelled"
+
+
+def test_robots_follow_the_services_on_the_bus(
+    client: TestClient, router: str, processes: Processes
+) -> None:
+    processes.start("services.supervisor", "--robot", "r2", "--connect", router)
+    wait_until(
+        lambda: "r2" in client.get("/api/robots", headers=AUTH).json()["robots"],
+        30.0,
+        "robot r2 in the list",
+    )
+    assert client.get("/api/robots", headers=AUTH).json()["default"] == "robot"
+    wait_until(
+        lambda: client.get("/api/state?robot=r2", headers=AUTH).status_code == 200,
+        30.0,
+        "r2's supervisor",
+    )
+    assert client.get("/api/state?robot=r2", headers=AUTH).json()["robot"] == "r2"
+    with client.stream("GET", "/api/events?robot=r2", headers=AUTH) as response:
+        for line in response.iter_lines():
+            if line.startswith("data: ") and '"parts"' in line:
+                parts = json.loads(line[6:])
+                break
+    assert parts["robot"] == "r2"
+    assert parts["parts"]["supervisor"] is True
+    assert parts["parts"]["executor"] is False

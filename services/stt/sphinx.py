@@ -220,7 +220,8 @@ class _Utterance:
         self.number = number
         self.start = start
         self.audio = bytearray()
-        self.since_partial = 0
+        self.unfed = bytearray()
+        """Audio of the first pass not yet given to the decoder."""
         self.partial = ""
         self.quiet = 0
         """VAD frames without speech since the last one with speech."""
@@ -352,11 +353,13 @@ class SphinxRecogniser:
         utterance.audio += pcm
         if not utterance.live:
             return
-        decoder = self._decoder.decoder
-        decoder.process_raw(pcm)
-        utterance.since_partial += len(pcm)
-        if utterance.since_partial >= PARTIAL_EVERY * 32000:
-            utterance.since_partial = 0
+        utterance.unfed += pcm
+        if len(utterance.unfed) >= PARTIAL_EVERY * 32000:
+            # The first pass only makes partials: it takes the audio in 0.1 s batches, which
+            # cost a quarter less CPU than 30 ms ones when audio arrives in real time.
+            decoder = self._decoder.decoder
+            decoder.process_raw(bytes(utterance.unfed))
+            utterance.unfed.clear()
             hypothesis = decoder.hyp()
             text = hypothesis.hypstr if hypothesis is not None else ""
             if text and text != utterance.partial:
@@ -415,5 +418,6 @@ class SphinxRecogniser:
         decoder.set_cmn(utterance.early.mean)
         decoder.start_utt()
         decoder.process_raw(bytes(utterance.audio))
+        utterance.unfed.clear()
         utterance.early = None
         utterance.live = True
