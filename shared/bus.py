@@ -164,8 +164,22 @@ class Bus:
         self._closers.callback(latest.close)
         return latest
 
-    def publish_bytes(self, key: str, payload: bytes, encoding: zenoh.Encoding = CDR) -> None:
-        self._session.put(key, payload, encoding=encoding)
+    def publish_bytes(
+        self, key: str, payload: bytes, encoding: zenoh.Encoding = CDR, urgent: bool = False
+    ) -> None:
+        """Publish raw bytes (CDR for ROS topics). An `urgent` one (zero velocity, a stop)
+        waits for room instead of being dropped, and goes first and at once."""
+        if urgent:
+            self._session.put(
+                key,
+                payload,
+                encoding=encoding,
+                congestion_control=zenoh.CongestionControl.BLOCK,
+                priority=zenoh.Priority.REAL_TIME,
+                express=True,
+            )
+        else:
+            self._session.put(key, payload, encoding=encoding)
 
     def subscribe(
         self,

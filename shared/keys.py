@@ -103,6 +103,11 @@ class RobotKeys:
         return f"{self.prefix}/executor/control"
 
     @property
+    def executor_info(self) -> str:
+        """How the executor reaches the robot (namespace, distro), kept for late subscribers."""
+        return f"{self.prefix}/executor/info"
+
+    @property
     def executor_events(self) -> str:
         """Progress and results published by the executor."""
         return f"{self.prefix}/executor/events"

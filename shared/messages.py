@@ -217,6 +217,15 @@ class OrdersStatus(Message):
 # --- robot ------------------------------------------------------------------------------------
 
 
+class ExecutorInfo(Message):
+    """How the executor reaches its robot: what the supervisor needs to stop the robot
+    itself when the executor is gone."""
+
+    namespace: str = ""
+    """The bridge namespace ('' or 'bot1')."""
+    distro: str = "jazzy"
+
+
 class RobotPose(Message):
     """Where the robot is, from its odometry, as its executor sees it (at most twice a second)."""
 
@@ -278,6 +287,11 @@ class State(Data):
     queue_length: int = 0
     history: list[OrderRecord] = msgspec.field(default_factory=list)
     """Recent history, most recent first; GetHistory pages through all of it."""
+    stopped: bool = False
+    """The emergency stop is latched: nothing runs and nothing is accepted until Release."""
+    paused: str = ""
+    """Why the queue waits instead of dispatching (orders restored after a restart wait
+    for Resume); empty when it runs."""
 
 
 class Submit(Message):
@@ -304,21 +318,31 @@ class GetState(Message):
     pass
 
 
+class Release(Message):
+    """Release a latched emergency stop: orders are accepted again."""
+
+
+class Resume(Message):
+    """Let a paused queue (orders restored after a restart) run."""
+
+
 class Reorder(Message):
     """Move a queued order to `position` (0 is next)."""
 
     order_id: str
-    position: int
+    position: Annotated[int, msgspec.Meta(ge=0)]
 
 
 class GetHistory(Message):
     """A page of finished orders, most recent first."""
 
-    offset: int = 0
-    limit: int = 50
+    offset: Annotated[int, msgspec.Meta(ge=0, le=2**53)] = 0
+    limit: Annotated[int, msgspec.Meta(ge=1, le=500)] = 50
 
 
-SupervisorRequest = Submit | Cancel | CancelAll | EmergencyStop | GetState | Reorder | GetHistory
+SupervisorRequest = (
+    Submit | Cancel | CancelAll | EmergencyStop | Release | Resume | GetState | Reorder | GetHistory
+)
 
 
 class Submitted(Message):

@@ -43,6 +43,10 @@ class Client:
         )
         return reply
 
+    async def ask_submit(self, *orders: Order) -> SupervisorReply:
+        """Submit and return whatever the supervisor answers (a refusal too)."""
+        return await self.ask(Submit(request_id=uuid.uuid4().hex, orders=list(orders)))
+
     async def submit(self, *orders: Order, request_id: str | None = None) -> list[str]:
         reply = await self.ask(
             Submit(request_id=request_id or uuid.uuid4().hex, orders=list(orders))

@@ -167,12 +167,27 @@ def test_up_stops_every_child_on_sigint(stack: Stack) -> None:
         ["pgrep", "-f", f"--connect {stack.router}"], capture_output=True, text=True, check=False
     )
     assert leftovers.stdout.strip() == "", leftovers.stdout
-    # The executor stopped before the robot: the running order was cancelled, not lost,
-    # and the rest of the utterance stays queued for the next start.
+    # The executor stopped before the robot: the running order was interrupted, not lost,
+    # and the rest of its utterance was dropped, so that the next start moves nothing.
     database = Path(stack.env["VOICECTL_DATA"]) / "supervisor.sqlite3"
     with sqlite3.connect(database) as db:
         status = dict(db.execute("SELECT id, status FROM orders").fetchall())
-    assert status == {running: "cancelled", queued: "queued"}
+    assert status == {running: "interrupted", queued: "cancelled"}
+
+
+def test_say_submits_only_what_was_wholly_understood(stack: Stack) -> None:
+    half = stack.voicectl("say", "--connect", stack.router, "multiply primes then dance")
+    assert half.returncode == 1
+    assert json.loads(half.stdout)["order_ids"] == []
+    assert half.stderr.splitlines() == [
+        "voicectl say: 'dance': no order matches",
+        "voicectl say: nothing submitted (--partial submits what was understood)",
+    ]
+    partial = stack.voicectl(
+        "say", "--connect", stack.router, "--partial", "multiply primes then dance"
+    )
+    assert partial.returncode == 1
+    assert len(json.loads(partial.stdout)["order_ids"]) == 1
 
 
 def test_supervisor_commands_from_the_cli(stack: Stack) -> None:

@@ -185,7 +185,10 @@ def test_executor_lost_mid_order_pauses_the_queue(robot: Robot) -> None:
         executor.send_signal(signal.SIGKILL)
         executor.wait()
         lost = await client.finished(running)
-        assert (lost.status, lost.message) == (OrderStatus.FAILED, "executor lost")
+        assert (lost.status, lost.message) == (
+            OrderStatus.FAILED,
+            "executor lost; halting the robot",
+        )
         state = await client.wait_state(lambda s: not s.executor_online, "executor offline")
         # the failed order's sibling is cancelled; the other utterance waits, not lost
         assert [r.id for r in state.queue] == [other]

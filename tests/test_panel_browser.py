@@ -152,6 +152,16 @@ def test_queue_reorder_cancel_and_stop(stack: Stack, tmp_path: Path) -> None:
         expect(queue).to_have_count(0)
         expect(page.locator("#current")).to_have_text("idle")
         expect(page.locator("#history tr").nth(0)).to_contain_text("cancelled")
+        # the stop latches: new orders are refused until it is released
+        expect(page.locator("#held")).to_contain_text("Emergency stop")
+        page.fill("#text", "wait two seconds")
+        page.press("#text", "Enter")
+        page.click("#send")
+        expect(page.locator("#status")).to_contain_text("the emergency stop is on")
+        page.click("#release")
+        expect(page.locator("#held")).to_be_hidden()
+        page.click("#send")
+        expect(page.locator("#current")).to_contain_text("wait 2 s")
 
 
 def test_speak_a_command_and_a_non_command(stack: Stack, speech: Speak, tmp_path: Path) -> None:

@@ -138,6 +138,18 @@ def test_cmd_vel_is_applied_while_fresh_and_zero_after_the_watchdog() -> None:
     assert robot.cmd_vel(20.0) == (0.0, 0.0)
 
 
+@pytest.mark.parametrize("bad", [math.nan, math.inf, -math.inf])
+def test_a_velocity_that_is_not_a_number_means_stop(bad: float) -> None:
+    robot = Robot(LIMITS)
+    robot.set_cmd_vel(bad, 0.2, now=1.0)
+    assert robot.cmd_vel(1.0) == (0.0, 0.2)
+    robot.set_cmd_vel(0.3, bad, now=2.0)
+    assert robot.cmd_vel(2.0) == (0.3, 0.0)
+    robot.step(*robot.cmd_vel(2.0), 1.0)
+    assert math.isfinite(robot.pose.x)
+    assert math.isfinite(robot.pose.yaw)
+
+
 def test_step_clamps_to_the_limits() -> None:
     robot = Robot(LIMITS)
     robot.step(3.0, -9.0, 1.0)

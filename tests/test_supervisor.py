@@ -24,6 +24,7 @@ from shared.messages import (
     Order,
     OrderStatus,
     Reorder,
+    Resume,
     Submit,
     Submitted,
     TargetPose,
@@ -99,9 +100,13 @@ def test_sigkill_with_orders_in_flight_loses_nothing_and_resumes(site: Site) -> 
         assert state.current is not None
         assert state.current.id == running
         assert [r.id for r in state.queue] == [queued_1, queued_2]
+        assert state.paused  # nothing new starts after a restart unasked
 
-        # The executor was still running it: resumed, not interrupted, then the queue runs.
+        # The executor was still running it: resumed, not interrupted; the queue waits
+        # until the user resumes it.
         assert (await client.finished(running)).status == OrderStatus.SUCCEEDED
+        assert [r.id for r in (await client.state()).queue] == [queued_1, queued_2]
+        assert isinstance(await client.ask(Resume()), Done)
         assert (await client.finished(queued_2)).message == "4 x 4 = 16"
         page = await client.history()
         assert [r.id for r in page.records] == [queued_2, queued_1, running, done_before]
@@ -130,6 +135,7 @@ def test_running_order_is_interrupted_when_no_executor_runs_it(site: Site) -> No
         state = await client.state()
         assert [r.id for r in state.queue] == [other]  # paused, not drained
         site.start_executor()
+        assert isinstance(await client.ask(Resume()), Done)
         assert (await client.finished(other)).message == "5 x 5 = 25"
 
     site.run(body)
@@ -223,6 +229,7 @@ def test_reorder_is_served_and_survives_a_restart(site: Site) -> None:
         await client_wait_ready(client, executor=False)
         assert [r.id for r in (await client.state()).queue] == [c, a, b]
         site.start_executor()
+        assert isinstance(await client.ask(Resume()), Done)
         await client.finished(b)
         assert [r.id for r in (await client.history()).records] == [b, a, c]
 
@@ -275,7 +282,7 @@ def test_history_pages(site: Site) -> None:
         assert all(r.started_at and r.ended_at and r.submitted_at for r in last.records)
         bad = await client.ask(GetHistory(offset=-1, limit=0))
         assert isinstance(bad, Failed)
-        assert "offset >= 0" in bad.reason
+        assert bad.reason == "undecodable request: Expected `int` >= 0 - at `$.offset`"
 
     site.run(body)
 

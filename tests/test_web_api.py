@@ -68,6 +68,8 @@ class AudioListener:
         ("POST", "/api/cancel"),
         ("POST", "/api/cancel_all"),
         ("POST", "/api/stop"),
+        ("POST", "/api/release"),
+        ("POST", "/api/resume"),
         ("POST", "/api/reorder"),
     ],
 )

@@ -35,7 +35,9 @@ from shared.messages import (
     Message,
     ParseReply,
     ParseRequest,
+    Release,
     Reorder,
+    Resume,
     StateReply,
     Submit,
     Submitted,
@@ -113,8 +115,15 @@ def build_parser() -> argparse.ArgumentParser:
     add_engine_arguments(transcribe)
     transcribe.add_argument("audio", type=Path, nargs="+", metavar="AUDIO.wav")
 
-    say = sub.add_parser("say", help="convert a text on the bus and submit its orders")
+    say = sub.add_parser(
+        "say", help="convert a text on the bus and submit its orders if all of it made orders"
+    )
     say.add_argument("--robot", type=robot_name, default="robot")
+    say.add_argument(
+        "--partial",
+        action="store_true",
+        help="submit the orders that were understood even if some words were not",
+    )
     add_bus_arguments(say)
     say.add_argument("text")
 
@@ -130,7 +139,9 @@ def build_parser() -> argparse.ArgumentParser:
     history.add_argument("--limit", type=int, default=20)
     supervisor_command("cancel", "cancel a queued or running order").add_argument("order_id")
     supervisor_command("cancel-all", "cancel the queue and the running order")
-    supervisor_command("stop", "emergency stop: halt the robot now and clear the queue")
+    supervisor_command("stop", "emergency stop: halt the robot now, clear the queue, latch")
+    supervisor_command("release", "release the emergency stop: accept orders again")
+    supervisor_command("resume", "run orders that wait since a restart")
     reorder = supervisor_command("reorder", "move a queued order (position 0 is next)")
     reorder.add_argument("order_id")
     reorder.add_argument("position", type=int)
@@ -174,6 +185,10 @@ def main(argv: list[str] | None = None) -> int:
             return asyncio.run(_ask_supervisor(args, CancelAll()))
         case "stop":
             return asyncio.run(_ask_supervisor(args, EmergencyStop()))
+        case "release":
+            return asyncio.run(_ask_supervisor(args, Release()))
+        case "resume":
+            return asyncio.run(_ask_supervisor(args, Resume()))
         case "reorder":
             request = Reorder(order_id=args.order_id, position=args.position)
             return asyncio.run(_ask_supervisor(args, request))
@@ -301,21 +316,32 @@ async def _say(args: argparse.Namespace) -> int:
                 return 1
             result = parsed.result
             order_ids: list[str] = []
-            if result.orders:
+            sending = result.orders if args.partial or not result.errors else []
+            if sending:
                 reply = await bus.request(
                     keys.supervisor,
-                    Submit(request_id=uuid.uuid4().hex, orders=result.orders, transcript=args.text),
+                    Submit(request_id=uuid.uuid4().hex, orders=sending, transcript=args.text),
                     json_decoder(SupervisorReply),
                     timeout=5.0,
                 )
+                if isinstance(reply, Failed):
+                    print(f"voicectl say: supervisor: {reply.reason}", file=sys.stderr)
+                    return 1
                 if not isinstance(reply, Submitted):
-                    print(f"voicectl say: supervisor: {reply}", file=sys.stderr)
+                    print(f"voicectl say: supervisor answered {reply!r}", file=sys.stderr)
                     return 1
                 order_ids = reply.order_ids
         except BusError as exc:
             print(f"voicectl say: {exc}", file=sys.stderr)
             return 3
     _print_json({"orders": result.orders, "errors": result.errors, "order_ids": order_ids})
+    for error in result.errors:
+        print(f"voicectl say: {error.text!r}: {error.reason}", file=sys.stderr)
+    if result.errors and not args.partial:
+        print(
+            "voicectl say: nothing submitted (--partial submits what was understood)",
+            file=sys.stderr,
+        )
     return 0 if result.orders and not result.errors else 1
 
 

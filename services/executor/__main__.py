@@ -86,6 +86,7 @@ async def main(argv: list[str] | None = None) -> int:
             bus, RobotKeys(args.robot), robot, bindings, cancel_deadline=args.cancel_deadline
         )
         service.start()
+        await service.end_stray_motion()
         _LOGGER.info("executor ready for %s; labels: %s", args.robot, ", ".join(bindings.labels))
         try:
             await wait_for_stop()

@@ -103,7 +103,7 @@ class RobotLink:
 
     async def halt(self) -> None:
         """Zero velocity now, then cancel every navigation goal."""
-        self.drive(0.0, 0.0)
+        self.bus.publish_bytes(self.keys.cmd_vel, self.codec.twist(0.0, 0.0), urgent=True)
         with contextlib.suppress(BusError):
             await self.bus.request_bytes(
                 self.keys.action(NAVIGATE, "cancel_goal"),

@@ -15,6 +15,7 @@ from shared.messages import (
     CancelOrder,
     Done,
     Execute,
+    ExecutorInfo,
     ExecutorRequest,
     Failed,
     GetRunning,
@@ -45,6 +46,7 @@ class _Running:
         self.reported = False
         """True once its result has been published, so it is published once."""
         self.cancel_reason = "cancelled"
+        self.cancel_status = OrderStatus.CANCELLED
 
 
 class ExecutorService:
@@ -80,6 +82,15 @@ class ExecutorService:
             except ValueError as exc:  # still served; only not announced
                 _LOGGER.warning("label not announced: %s", exc)
         self._withdraw = self._bus.announce(self._keys.alive("executor"))
+        # What a supervisor needs to stop the robot itself if this process dies.
+        info = ExecutorInfo(namespace=self._robot.keys.namespace, distro=self._robot.codec.distro)
+        self._bus.latest(self._keys.executor_info).publish(info)
+
+    async def end_stray_motion(self) -> None:
+        """At start nothing of this executor runs: whatever moves the robot (a goal an
+        earlier executor left, a last velocity command) is stray, and is stopped."""
+        await self._robot.halt()
+        _LOGGER.info("robot halted at start: zero velocity, every navigation goal cancelled")
 
     async def handle(self, request: ExecutorRequest) -> Message:
         match request:
@@ -115,7 +126,11 @@ class ExecutorService:
         # Offline first, so the supervisor holds its queue instead of sending the next order.
         self._withdraw()
         if self._running is not None:
-            await self._cancel(self._running, "executor shutting down")
+            # Interrupted, not cancelled: the rest of its command is dropped, as after a
+            # failure, so that the next start does not carry on with it unasked.
+            await self._cancel(
+                self._running, "executor shutting down", status=OrderStatus.INTERRUPTED
+            )
 
     def _start(self, order_id: str, order: Order) -> Message:
         executor = self._bindings.get(order.label)
@@ -144,8 +159,10 @@ class ExecutorService:
             message = await executor.execute(order, ctx) or "done"
         except asyncio.CancelledError:
             running = self._running
-            reason = running.cancel_reason if running is not None else "cancelled"
-            status, message = OrderStatus.CANCELLED, reason
+            if running is not None:
+                status, message = running.cancel_status, running.cancel_reason
+            else:
+                status, message = OrderStatus.CANCELLED, "cancelled"
         except OrderFailed as exc:
             status, message = OrderStatus.FAILED, str(exc)
         except Exception as exc:
@@ -166,10 +183,13 @@ class ExecutorService:
             self._recent.popitem(last=False)
         self._bus.publish(self._keys.executor_events, finished)
 
-    async def _cancel(self, running: _Running, why: str) -> None:
+    async def _cancel(
+        self, running: _Running, why: str, status: OrderStatus = OrderStatus.CANCELLED
+    ) -> None:
         """Cancel cooperatively; an executor that ignores it past the deadline is abandoned
         and the robot is halted, so a stuck executor can never keep it moving."""
         running.cancel_reason = why
+        running.cancel_status = status
         running.task.cancel()
         done, _ = await asyncio.wait({running.task}, timeout=self._cancel_deadline)
         if not done:
@@ -182,9 +202,7 @@ class ExecutorService:
             running.task.add_done_callback(self.abandoned.discard)
             await self._robot.halt()
             self._report(
-                running.order_id,
-                OrderStatus.CANCELLED,
-                f"{why}; executor did not stop in time, robot halted",
+                running.order_id, status, f"{why}; executor did not stop in time, robot halted"
             )
         else:
-            self._report(running.order_id, OrderStatus.CANCELLED, why)
+            self._report(running.order_id, status, why)

@@ -107,8 +107,12 @@ class Robot:
         self._cmd_at = -math.inf
 
     def set_cmd_vel(self, linear: float, angular: float, now: float) -> None:
-        """Remember a velocity command received at sim time `now`."""
-        self._cmd = (linear, angular)
+        """Remember a velocity command received at sim time `now`; a value that is not a
+        finite number (NaN, infinity) means stop, never full speed."""
+        self._cmd = (
+            linear if math.isfinite(linear) else 0.0,
+            angular if math.isfinite(angular) else 0.0,
+        )
         self._cmd_at = now
 
     def cmd_vel(self, now: float) -> tuple[float, float]:

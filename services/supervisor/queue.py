@@ -51,6 +51,10 @@ class RobotQueue:
         self.current: OrderRecord | None = None
         self.current_verified = True
         """False while a current order restored from the store awaits the executor's word."""
+        self.stopped = False
+        """The emergency stop is latched: no order starts, none is accepted."""
+        self.paused = ""
+        """Why queued orders wait (restored after a restart); '' when they run."""
         self.queue: deque[OrderRecord] = deque()
         self.history: deque[OrderRecord] = deque(maxlen=history_limit)
         self._clock = clock
@@ -84,6 +88,11 @@ class RobotQueue:
                 self.queue.append(record)
         self.history.extend(history)
         self._requests.update(requests)
+        if self.queue:
+            # Nothing moves at start-up unasked: orders from before the restart wait.
+            self.paused = (
+                f"{len(self.queue)} order(s) restored after a restart: resume or cancel them"
+            )
 
     # --- changes ------------------------------------------------------------------------------
 
@@ -123,6 +132,8 @@ class RobotQueue:
     def start_next(self) -> OrderRecord | None:
         """The next order to hand to the executor, now marked running; None if not now."""
         if self.current is not None or not self.queue or not self.executor_online:
+            return None
+        if self.stopped or self.paused:
             return None
         record = self.queue.popleft()
         self.current = msgspec.structs.replace(
@@ -173,11 +184,12 @@ class RobotQueue:
             self._to_history(self.queue.popleft(), OrderStatus.CANCELLED, message)
         return count
 
-    def reorder(self, order_id: str, position: int) -> bool:
-        """Move a queued order to `position` (clamped to the queue); False if not queued."""
+    def reorder(self, order_id: str, position: int) -> int | None:
+        """Move a queued order to `position` (clamped to the queue); returns the position
+        it got, or None if it is not queued."""
         record = next((r for r in self.queue if r.id == order_id), None)
         if record is None:
-            return False
+            return None
         self.queue.remove(record)
         position = max(0, min(position, len(self.queue)))
         self.queue.insert(position, record)
@@ -196,9 +208,21 @@ class RobotQueue:
             self._next_position = max(self._next_position, new + 1.0)
         else:
             new = (before + after) / 2.0
+            if not before < new < after:
+                # Halving the gap again and again runs out of floats (about 50 times):
+                # number the whole queue afresh instead.
+                self._renumber()
+                return position
         self._positions[order_id] = new
         self._changed[order_id] = record
-        return True
+        return position
+
+    def _renumber(self) -> None:
+        start = self._positions[self.queue[0].id] if self.queue else self._next_position
+        for offset, record in enumerate(self.queue):
+            self._positions[record.id] = start + offset
+            self._changed[record.id] = record
+        self._next_position = max(self._next_position, start + len(self.queue))
 
     def take_changes(self) -> tuple[list[tuple[OrderRecord, float]], list[tuple[str, list[str]]]]:
         """What changed since the last call: records with their positions, and new requests."""
@@ -216,7 +240,13 @@ class RobotQueue:
             queue=[self.queue[i] for i in range(min(SNAPSHOT_QUEUE, len(self.queue)))],
             queue_length=len(self.queue),
             history=[self.history[i] for i in range(min(SNAPSHOT_HISTORY, len(self.history)))],
+            stopped=self.stopped,
+            paused=self.paused,
         )
+
+    def release(self) -> None:
+        """Let the latched emergency stop go."""
+        self.stopped = False
 
     def _to_history(self, record: OrderRecord, status: OrderStatus, message: str) -> None:
         ended = msgspec.structs.replace(
@@ -225,3 +255,5 @@ class RobotQueue:
         self.history.appendleft(ended)
         self._positions.pop(record.id, None)
         self._changed[record.id] = ended
+        if not self.queue:
+            self.paused = ""  # nothing left to resume

@@ -14,7 +14,7 @@ import sqlite3
 
 from shared.bus import Bus, json_decoder
 from shared.errors import BusError
-from shared.keys import RobotKeys, robot_of
+from shared.keys import BridgeKeys, RobotKeys, robot_of
 from shared.messages import (
     Accepted,
     Cancel,
@@ -24,6 +24,7 @@ from shared.messages import (
     EmergencyStop,
     Execute,
     ExecutorEvent,
+    ExecutorInfo,
     ExecutorReply,
     Failed,
     GetHistory,
@@ -36,7 +37,9 @@ from shared.messages import (
     OrderProgress,
     OrderStatus,
     Rejected,
+    Release,
     Reorder,
+    Resume,
     Running,
     StateReply,
     StateUpdate,
@@ -44,6 +47,7 @@ from shared.messages import (
     Submitted,
     SupervisorRequest,
 )
+from shared.ros2 import CancelCode, Ros2Codec, RosDistro
 
 from .queue import RobotQueue
 from .store import OrderStore
@@ -58,7 +62,17 @@ order interrupted."""
 LOST_GRACE = 0.5
 """After the executor's token goes, how long its running order may still report a result."""
 PUBLISH_INTERVAL = 0.02
-MAX_HISTORY_PAGE = 500
+STOP_REPEAT = 3
+"""Zero-velocity commands sent by an emergency stop (each blocks for room, never dropped)."""
+STOP_TIMEOUT = 2.0
+"""How long an emergency stop waits for navigation to answer its cancel."""
+NAVIGATE = "navigate_to_pose"
+CANCEL_ANSWERS = {
+    CancelCode.NONE: "navigation cancelled its goals",
+    CancelCode.REJECTED: "NAVIGATION REFUSED TO CANCEL its goals",
+    CancelCode.UNKNOWN_GOAL_ID: "navigation had no goal to cancel",
+    CancelCode.GOAL_TERMINATED: "navigation's goals had already ended",
+}
 
 
 class RobotSupervisor:
@@ -74,6 +88,8 @@ class RobotSupervisor:
         self._publish_handle: asyncio.TimerHandle | None = None
         self._last_publish = 0.0
         self._tasks: list[asyncio.Task[None]] = []
+        self.executor_info = ExecutorInfo()
+        """How to reach the robot without its executor: the executor's last word on it."""
 
     @property
     def robot(self) -> str:
@@ -100,6 +116,11 @@ class RobotSupervisor:
             case Submit(request_id=request_id, orders=orders, transcript=transcript):
                 if not request_id:
                     return Failed(reason="submit needs a non-empty request_id")
+                if self._queue.stopped:
+                    return Failed(
+                        reason="the emergency stop is on: release it first "
+                        "(voicectl release, or Release in the panel)"
+                    )
                 ids = self._queue.submit(request_id, orders, transcript)
                 stored = self._changed()
                 if stored is not None:
@@ -121,28 +142,29 @@ class RobotSupervisor:
                     await self._cancel(current.id, "cancelled by user")
                 return Done(detail=f"cancelled {cleared} queued order(s) and the current one")
             case EmergencyStop():
-                # Clear the queue first (in memory, instant) so that nothing is dispatched
-                # when the current order ends; then the halt goes straight to the executor,
-                # outside any queue.
-                cleared = self._queue.clear_queue("emergency stop")
+                return await self._emergency_stop()
+            case Release():
+                if not self._queue.stopped:
+                    return Done(detail="the emergency stop was not on")
+                self._queue.release()
+                self._store.write([self._store.save_stopped(self.robot, False)])
                 self._changed()
-                halted = await self._send_control(Halt())
-                if isinstance(halted, Failed):
-                    return halted
-                return Done(detail=f"halted; cancelled {cleared} queued order(s)")
+                return Done(detail="emergency stop released")
+            case Resume():
+                if not self._queue.paused:
+                    return Done(detail="the queue was not paused")
+                self._queue.paused = ""
+                self._changed()
+                return Done(detail="the queue runs again")
             case Reorder(order_id=order_id, position=position):
-                if not self._queue.reorder(order_id, position):
+                moved = self._queue.reorder(order_id, position)
+                if moved is None:
                     return Failed(reason=f"order '{order_id}' is not queued")
                 self._changed()
-                return Done(detail=f"moved {order_id} to position {position}")
+                return Done(detail=f"moved {order_id} to position {moved}")
             case GetState():
                 return StateReply(state=self._queue.snapshot())
             case GetHistory(offset=offset, limit=limit):
-                if offset < 0 or not 0 < limit <= MAX_HISTORY_PAGE:
-                    return Failed(
-                        reason=f"history page needs offset >= 0 and 1 <= limit <= "
-                        f"{MAX_HISTORY_PAGE}, got offset {offset}, limit {limit}"
-                    )
                 records, total = await self._store.call(
                     self._store.history_page(self.robot, offset, limit)
                 )
@@ -163,6 +185,47 @@ class RobotSupervisor:
             case Failed(reason=reason):
                 self._finish(order_id, OrderStatus.CANCELLED, f"{why}; executor: {reason}")
         return Done(detail=f"cancelling {order_id}")
+
+    async def _emergency_stop(self) -> Message:
+        """Latch, clear the queue, halt through the executor, and stop the robot directly
+        too: zero velocity and every navigation goal cancelled on the bridge's keys, so
+        that STOP stops the robot whatever process has died."""
+        self._queue.stopped = True
+        cleared = self._queue.clear_queue("emergency stop")
+        self._store.write([self._store.save_stopped(self.robot, True)])
+        self._changed()
+        halted = await self._send_control(Halt())
+        direct = await self._halt_robot()
+        current = self._queue.current
+        if isinstance(halted, Failed):
+            if current is not None:
+                self._finish(current.id, OrderStatus.CANCELLED, f"emergency stop; {halted.reason}")
+            return Done(detail=f"{halted.reason}; {direct}; cancelled {cleared} queued order(s)")
+        return Done(detail=f"halted by the executor; {direct}; cancelled {cleared} queued order(s)")
+
+    async def _halt_robot(self) -> str:
+        """Zero velocity and cancel every navigation goal on the robot's bridge keys, as
+        the executor announced them; says what it did."""
+        info = self.executor_info
+        keys = BridgeKeys(info.namespace)
+        codec = Ros2Codec(RosDistro(info.distro))
+        for _ in range(STOP_REPEAT):  # a lost sample must not leave the robot moving
+            self._bus.publish_bytes(keys.cmd_vel, codec.twist(0.0, 0.0), urgent=True)
+        try:
+            reply = await self._bus.request_bytes(
+                keys.action(NAVIGATE, "cancel_goal"), codec.cancel_goal_request(), STOP_TIMEOUT
+            )
+        except BusError as exc:
+            cancelled = f"no navigation to cancel ({exc})"
+        else:
+            try:
+                answer = codec.read_cancel_goal_response(reply)
+            except Exception as exc:  # a reply that does not decode is the robot's problem
+                cancelled = f"navigation's answer to the cancel does not decode: {exc}"
+            else:
+                cancelled = CANCEL_ANSWERS[answer.return_code]
+        where = f"'{keys.cmd_vel}'"
+        return f"sent zero velocity on {where}; {cancelled}"
 
     async def _send_control(self, request: CancelOrder | Halt | GetRunning) -> Message:
         try:
@@ -230,8 +293,16 @@ class RobotSupervisor:
         self._changed()
 
     def _lost(self, order_id: str) -> None:
-        if not self._queue.executor_online:
-            self._finish(order_id, OrderStatus.FAILED, "executor lost")
+        current = self._queue.current
+        if self._queue.executor_online or current is None or current.id != order_id:
+            return
+        # Nobody is in charge of that motion any more: the robot must not go on with it.
+        self._finish(order_id, OrderStatus.FAILED, "executor lost; halting the robot")
+        self._tasks.append(asyncio.get_running_loop().create_task(self._halt_after_loss()))
+
+    async def _halt_after_loss(self) -> None:
+        what = await self._halt_robot()
+        _LOGGER.warning("%s: executor lost while an order ran: %s", self.robot, what)
 
     async def _verify(self, order_id: str) -> None:
         """After a restart: resume the restored order if the executor still runs it."""
@@ -313,6 +384,7 @@ class SupervisorService:
         for name, robot in saved.items():
             queue = self._new_queue(name)
             queue.restore(robot.open_orders, robot.history, robot.requests)
+            queue.stopped = robot.stopped
             self._add(queue)
             if robot.open_orders:
                 _LOGGER.info("%s: restored %d open order(s)", name, len(robot.open_orders))
@@ -325,6 +397,12 @@ class SupervisorService:
             RobotKeys.any_robot().executor_events, json_decoder(ExecutorEvent), self._on_event
         )
         self._bus.watch(RobotKeys.any_robot().alive("executor"), self._on_executor)
+        self._bus.subscribe(
+            RobotKeys.any_robot().executor_info,
+            json_decoder(ExecutorInfo),
+            self._on_info,
+            history=True,
+        )
         for name in robots:
             self._bus.announce(RobotKeys(name).alive("supervisor"))
 
@@ -354,3 +432,6 @@ class SupervisorService:
 
     def _on_executor(self, key: str, alive: bool) -> None:
         self.robot(robot_of(key)).on_executor(alive)
+
+    def _on_info(self, key: str, info: ExecutorInfo) -> None:
+        self.robot(robot_of(key)).executor_info = info

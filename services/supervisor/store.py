@@ -11,6 +11,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import os
 import queue
 import sqlite3
 import threading
@@ -38,6 +39,10 @@ CREATE TABLE IF NOT EXISTS orders (
 );
 CREATE INDEX IF NOT EXISTS orders_open ON orders (robot, position) WHERE ended_at IS NULL;
 CREATE INDEX IF NOT EXISTS orders_ended ON orders (robot, ended_at) WHERE ended_at IS NOT NULL;
+CREATE TABLE IF NOT EXISTS robots (
+    robot TEXT PRIMARY KEY,
+    stopped INTEGER NOT NULL DEFAULT 0
+);
 CREATE TABLE IF NOT EXISTS requests (
     robot TEXT NOT NULL,
     request_id TEXT NOT NULL,
@@ -65,6 +70,8 @@ class SavedRobot:
     history: list[OrderRecord] = field(default_factory=list)
     """The most recent finished orders, most recent first."""
     requests: dict[str, list[str]] = field(default_factory=dict)
+    stopped: bool = False
+    """The emergency stop was latched when the supervisor stopped."""
 
 
 Operation = Callable[[sqlite3.Connection], Any]
@@ -146,6 +153,16 @@ class OrderStore:
 
         return save
 
+    def save_stopped(self, robot: str, stopped: bool) -> Operation:
+        def save(db: sqlite3.Connection) -> None:
+            db.execute(
+                "INSERT INTO robots (robot, stopped) VALUES (?, ?)"
+                " ON CONFLICT (robot) DO UPDATE SET stopped = excluded.stopped",
+                (robot, int(stopped)),
+            )
+
+        return save
+
     def save_request(self, robot: str, request_id: str, order_ids: list[str]) -> Operation:
         ids = self._encoder.encode(order_ids)
 
@@ -191,6 +208,8 @@ class OrderStore:
             ):
                 saved = robots.setdefault(robot, SavedRobot())
                 saved.requests[request_id] = ids_decoder.decode(ids)
+            for robot, stopped in db.execute("SELECT robot, stopped FROM robots"):
+                robots.setdefault(robot, SavedRobot()).stopped = bool(stopped)
             return robots
 
         return load
@@ -198,6 +217,9 @@ class OrderStore:
     # --- the writer thread -------------------------------------------------------------------
 
     def _connect(self) -> sqlite3.Connection:
+        # It holds what people said: readable by its owner only, like the token file
+        # (SQLite gives its -wal and -shm files the database's permissions).
+        os.close(os.open(self.path, os.O_WRONLY | os.O_CREAT, 0o600))
         db = sqlite3.connect(self.path, isolation_level=None, check_same_thread=True)
         db.execute("PRAGMA journal_mode = WAL")
         sync = "FULL" if self._durability is Durability.POWER else "NORMAL"

@@ -42,7 +42,9 @@ from shared.messages import (
     Order,
     ParseReply,
     ParseRequest,
+    Release,
     Reorder,
+    Resume,
     StateReply,
     StateUpdate,
     Submit,
@@ -166,6 +168,8 @@ class Panel:
             Route("/api/cancel", api(self._cancel), methods=["POST"]),
             Route("/api/cancel_all", api(self._cancel_all), methods=["POST"]),
             Route("/api/stop", api(self._stop), methods=["POST"]),
+            Route("/api/release", api(self._release), methods=["POST"]),
+            Route("/api/resume", api(self._resume), methods=["POST"]),
             Route("/api/reorder", api(self._reorder), methods=["POST"]),
             Route("/api/state", api(self._state)),
             Route("/api/history", api(self._history)),
@@ -283,6 +287,12 @@ class Panel:
 
     async def _stop(self, request: Request) -> object:
         return await self._done(self._robot(request), EmergencyStop())
+
+    async def _release(self, request: Request) -> object:
+        return await self._done(self._robot(request), Release())
+
+    async def _resume(self, request: Request) -> object:
+        return await self._done(self._robot(request), Resume())
 
     async def _done(self, keys: RobotKeys, request: Message) -> object:
         reply = await self._ask_supervisor(keys, request)

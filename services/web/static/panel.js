@@ -400,6 +400,14 @@ function reorder(record, position) {
 
 function showState(state) {
   view.state = state;
+  const why = state.stopped
+    ? "Emergency stop: the robot is held and new orders are refused until you release it."
+    : state.paused;
+  $("held").hidden = !why;
+  $("held-why").textContent = why || "";
+  $("release").hidden = !state.stopped;
+  $("resume").hidden = state.stopped || !state.paused;
+  $("stop").classList.toggle("latched", state.stopped);
   const current = state.current;
   if (current) {
     const box = el("div", undefined, "current");
@@ -485,6 +493,8 @@ $("cancel-all").onclick = () => {
   }
 };
 $("stop").onclick = () => api("/api/stop", {}).catch(report); // never asks: it stops now
+$("release").onclick = () => api("/api/release", {}).catch(report);
+$("resume").onclick = () => api("/api/resume", {}).catch(report);
 $("newer").onclick = () => page(view.historyOffset - PAGE);
 $("older").onclick = () => page(view.historyOffset + PAGE);
 document.addEventListener("keydown", (event) => {

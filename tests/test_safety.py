@@ -1,0 +1,240 @@
+"""The robot under faults, with real processes on loopback and the simulator: STOP stops it
+with the executor dead, the stop latches, nothing moves at start-up unasked, a starting
+executor ends stray motion, and queue order survives many reorders and a restart."""
+
+from __future__ import annotations
+
+import asyncio
+import signal
+import subprocess
+from collections.abc import Awaitable, Callable
+from pathlib import Path
+
+import pytest
+
+from shared.bus import Bus, BusOptions
+from shared.keys import BridgeKeys
+from shared.messages import (
+    Done,
+    EmergencyStop,
+    Failed,
+    Order,
+    OrderStatus,
+    Release,
+    Reorder,
+    Resume,
+    TargetPose,
+)
+from shared.ros2 import Odometry, Pose2D, Ros2Codec, RosDistro, new_goal_id
+
+from .conftest import Processes, async_wait_until
+from .support import Client, client_wait_ready, order
+
+WAIT = 30.0
+CODEC = Ros2Codec(RosDistro.JAZZY)
+FAR = Order(
+    order="goal",
+    label="mbgoal",
+    description="reach far",
+    target_pose=TargetPose(frame="map", x=8.0, y=0.0),
+)
+
+
+class Robot:
+    """A simulated robot with its supervisor and executor, each one killable."""
+
+    def __init__(self, router: str, processes: Processes, db: Path) -> None:
+        self.router = router
+        self.processes = processes
+        self.db = db
+        self.sim = processes.start("services.sim", "--connect", router)
+        self.supervisor: subprocess.Popen[bytes] | None = None
+        self.executor: subprocess.Popen[bytes] | None = None
+        self.odometry: list[tuple[float, Odometry]] = []
+
+    def start_supervisor(self) -> None:
+        self.supervisor = self.processes.start(
+            "services.supervisor", "--connect", self.router, "--robot", "r1", "--db", str(self.db)
+        )
+
+    def start_executor(self) -> None:
+        self.executor = self.processes.start(
+            "services.executor", "--connect", self.router, "--robot", "r1"
+        )
+
+    @staticmethod
+    def kill(process: subprocess.Popen[bytes] | None) -> None:
+        assert process is not None
+        process.send_signal(signal.SIGKILL)
+        process.wait()
+
+    def run(self, body: Callable[[Bus, Client], Awaitable[None]]) -> None:
+        async def main() -> None:
+            loop = asyncio.get_running_loop()
+            with Bus.open(BusOptions(connect=[self.router]), loop) as bus:
+                bus.subscribe(
+                    BridgeKeys().odom,
+                    CODEC.read_odometry,
+                    lambda _key, odom: self.odometry.append((loop.time(), odom)),
+                )
+                await async_wait_until(lambda: self.odometry, WAIT, "odometry from the sim")
+                await body(bus, Client(bus, "r1"))
+
+        asyncio.run(main())
+
+    async def driving(self) -> None:
+        await async_wait_until(
+            lambda: self.odometry[-1][1].linear_x > 0.2, WAIT, "the robot to drive"
+        )
+
+    async def standing(self, since: float) -> Pose2D:
+        """Wait for zero velocity reported after `since`; the pose there."""
+        await async_wait_until(
+            lambda: self.odometry[-1][0] > since and self.odometry[-1][1].linear_x == 0.0,
+            WAIT,
+            "the robot to stand still",
+        )
+        return self.odometry[-1][1].pose
+
+
+@pytest.fixture
+def robot(router: str, processes: Processes, tmp_path: Path) -> Robot:
+    return Robot(router, processes, tmp_path / "supervisor.sqlite3")
+
+
+def test_a_lost_executor_leaves_no_motion_behind(robot: Robot) -> None:
+    robot.start_supervisor()
+    robot.start_executor()
+
+    async def body(bus: Bus, client: Client) -> None:
+        await client_wait_ready(client)
+        (moving,) = await client.submit(FAR)
+        await robot.driving()
+        lost = asyncio.get_running_loop().time()
+        robot.kill(robot.executor)  # Nav2 would drive on to the goal without anyone in charge
+        stopped = await robot.standing(lost)
+        assert stopped.x < 7.0
+        record = await client.finished(moving)
+        assert (record.status, record.message) == (
+            OrderStatus.FAILED,
+            "executor lost; halting the robot",
+        )
+        await asyncio.sleep(1.0)
+        assert abs(robot.odometry[-1][1].pose.x - stopped.x) < 0.01, "it moved again"
+
+    robot.run(body)
+
+
+def test_stop_stops_the_robot_when_the_executor_is_dead(robot: Robot) -> None:
+    robot.start_supervisor()
+
+    async def body(bus: Bus, client: Client) -> None:
+        await client_wait_ready(client, executor=False)
+        # Motion no executor of ours started (another client, or a crashed executor's goal).
+        reply = await bus.request_bytes(
+            BridgeKeys().action("navigate_to_pose", "send_goal"),
+            CODEC.send_goal_request(new_goal_id(), "map", Pose2D(x=8.0, y=0.0, yaw=0.0)),
+            timeout=WAIT,
+        )
+        assert CODEC.read_send_goal_response(reply)
+        await robot.driving()
+        asked = asyncio.get_running_loop().time()
+        stop = await client.ask(EmergencyStop())
+        assert isinstance(stop, Done), stop
+        assert stop.detail.startswith("executor unreachable: ")
+        assert "sent zero velocity on 'cmd_vel'" in stop.detail
+        assert "navigation cancelled its goals" in stop.detail
+        stopped = await robot.standing(asked)
+        await asyncio.sleep(1.0)
+        assert abs(robot.odometry[-1][1].pose.x - stopped.x) < 0.01, "it moved again"
+
+    robot.run(body)
+
+
+def test_the_emergency_stop_latches_until_released(robot: Robot) -> None:
+    robot.start_supervisor()
+    robot.start_executor()
+
+    async def body(bus: Bus, client: Client) -> None:
+        await client_wait_ready(client)
+        assert isinstance(await client.ask(EmergencyStop()), Done)
+        refused = await client.ask_submit(order("mul", a=2, b=3))
+        assert isinstance(refused, Failed)
+        assert refused.reason.startswith("the emergency stop is on: release it first")
+        assert (await client.state()).stopped
+        robot.kill(robot.supervisor)  # the latch is stored: a restart keeps it
+        robot.start_supervisor()
+        await client_wait_ready(client)
+        assert (await client.state()).stopped
+        assert isinstance(await client.ask(Release()), Done)
+        assert not (await client.state()).stopped
+        (ran,) = await client.submit(order("mul", a=2, b=3))
+        assert (await client.finished(ran)).message == "2 x 3 = 6"
+
+    robot.run(body)
+
+
+def test_orders_restored_after_a_restart_wait_for_resume(robot: Robot) -> None:
+    robot.start_supervisor()  # no executor yet: orders stay queued
+
+    async def body(bus: Bus, client: Client) -> None:
+        await client_wait_ready(client, executor=False)
+        first, second = await client.submit(order("mul", a=1, b=2), order("mul", a=3, b=4))
+        robot.kill(robot.supervisor)
+        robot.start_supervisor()
+        robot.start_executor()
+        await client_wait_ready(client)
+        state = await client.state()
+        assert state.paused == "2 order(s) restored after a restart: resume or cancel them"
+        await asyncio.sleep(1.0)  # an executor is there, and still nothing runs
+        state = await client.state()
+        assert state.current is None
+        assert [r.id for r in state.queue] == [first, second]
+        assert isinstance(await client.ask(Resume()), Done)
+        assert (await client.finished(second)).message == "3 x 4 = 12"
+        assert (await client.state()).paused == ""
+
+    robot.run(body)
+
+
+def test_a_starting_executor_ends_stray_motion(robot: Robot) -> None:
+    async def body(bus: Bus, client: Client) -> None:
+        # A goal nobody owns any more (as after an executor crash), sent straight to Nav2.
+        goal = new_goal_id()
+        reply = await bus.request_bytes(
+            BridgeKeys().action("navigate_to_pose", "send_goal"),
+            CODEC.send_goal_request(goal, "map", Pose2D(x=8.0, y=0.0, yaw=0.0)),
+            timeout=WAIT,
+        )
+        assert CODEC.read_send_goal_response(reply)
+        await robot.driving()
+        started = asyncio.get_running_loop().time()
+        robot.start_executor()
+        await robot.standing(started)
+
+    robot.run(body)
+
+
+def test_queue_order_survives_many_reorders_and_a_restart(robot: Robot) -> None:
+    robot.start_supervisor()
+
+    async def body(bus: Bus, client: Client) -> None:
+        await client_wait_ready(client, executor=False)
+        ids = await client.submit(*(order("mul", a=n, b=1) for n in range(4)))
+        expected = list(ids)
+        for turn in range(120):  # each move halves a gap between two stored positions
+            moving = expected[3] if turn % 2 == 0 else expected[2]
+            reply = await client.ask(Reorder(order_id=moving, position=2))
+            assert isinstance(reply, Done), reply
+            expected.remove(moving)
+            expected.insert(2, moving)
+        assert [r.id for r in (await client.state()).queue] == expected
+        robot.kill(robot.supervisor)
+        robot.start_supervisor()
+        await client_wait_ready(client, executor=False)
+        assert [r.id for r in (await client.state()).queue] == expected
+        beyond = await client.ask(Reorder(order_id=expected[0], position=99))
+        assert isinstance(beyond, Done)
+        assert beyond.detail == f"moved {expected[0]} to position 3"
+
+    robot.run(body)
