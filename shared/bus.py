@@ -14,6 +14,7 @@ import contextlib
 import json
 import logging
 import signal
+import threading
 from collections.abc import Awaitable, Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any, Literal, TypeVar
@@ -32,6 +33,8 @@ T = TypeVar("T")
 Decode = Callable[[bytes], T]
 
 DEFAULT_ROUTER = "tcp/127.0.0.1:7447"
+CLIENT_TIMEOUT = 3.0
+"""Seconds a command (voicectl state, stop...) waits for the router before it gives up."""
 JSON = zenoh.Encoding.APPLICATION_JSON
 CDR = zenoh.Encoding.APPLICATION_CDR
 
@@ -45,6 +48,9 @@ class BusOptions:
     mode: Literal["client", "peer", "router"] = "client"
     lease_ms: int | None = None
     """Shorter leases notice a lost peer sooner (tests on cut links use ~2000)."""
+    wait: bool = True
+    """Wait for the router however long it takes (services); a command someone typed
+    gives up after `CLIENT_TIMEOUT` seconds instead."""
 
     def zenoh_config(self) -> zenoh.Config:
         conf = zenoh.Config()
@@ -57,8 +63,9 @@ class BusOptions:
         if self.listen:
             conf.insert_json5("listen/endpoints", json.dumps(self.listen))
         if self.mode == "client":
-            # Wait for the router instead of failing when it is not up yet.
-            conf.insert_json5("connect/timeout_ms", "-1")
+            # A service waits for the router instead of failing when it is not up yet.
+            timeout = -1 if self.wait else int(CLIENT_TIMEOUT * 1000)
+            conf.insert_json5("connect/timeout_ms", str(timeout))
         if self.lease_ms is not None:
             conf.insert_json5("transport/link/tx/lease", str(self.lease_ms))
         return conf
@@ -83,8 +90,8 @@ def add_bus_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--debug", action="store_true", help="log at DEBUG level")
 
 
-def bus_options(args: argparse.Namespace) -> BusOptions:
-    return BusOptions(connect=args.connect or [DEFAULT_ROUTER])
+def bus_options(args: argparse.Namespace, wait: bool = True) -> BusOptions:
+    return BusOptions(connect=args.connect or [DEFAULT_ROUTER], wait=wait)
 
 
 def setup_logging(debug: bool) -> None:
@@ -111,7 +118,9 @@ class Bus:
     @classmethod
     @contextlib.contextmanager
     def open(cls, options: BusOptions, loop: asyncio.AbstractEventLoop) -> Iterator[Bus]:
-        session = zenoh.open(options.zenoh_config())
+        """Open the session; raises BusError naming the endpoints when a command cannot
+        reach the router, and SystemExit(0) on SIGINT/SIGTERM while a service waits."""
+        session = _open_session(options)
         bus = cls(session, loop)
         try:
             yield bus
@@ -449,6 +458,42 @@ class Latest:
             self._publisher.undeclare()
 
 
+def _open_session(options: BusOptions) -> zenoh.Session:
+    """zenoh.open on a thread of its own: waiting for a router blocks inside Zenoh, where
+    no signal handler runs, so the main thread waits for it and stays interruptible."""
+    opened: list[zenoh.Session] = []
+    failed: list[BaseException] = []
+
+    def open_it() -> None:
+        try:
+            opened.append(zenoh.open(options.zenoh_config()))
+        except BaseException as exc:  # handed to the caller below
+            failed.append(exc)
+
+    def stop(signum: int, _frame: object) -> None:
+        _LOGGER.info("stopped (%s) while waiting for the router", signal.Signals(signum).name)
+        raise SystemExit(0)
+
+    opener = threading.Thread(target=open_it, name="zenoh-open", daemon=True)
+    previous = {}
+    if threading.current_thread() is threading.main_thread():
+        previous = {sig: signal.signal(sig, stop) for sig in (signal.SIGINT, signal.SIGTERM)}
+    try:
+        opener.start()
+        while opener.is_alive():
+            opener.join(0.1)
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+    if failed:
+        where = ", ".join(options.connect)
+        why = str(failed[0]).split(" at /", 1)[0]  # Zenoh appends its source file
+        if not options.wait:
+            why = f"waited {CLIENT_TIMEOUT:g} s; is voicectl up or voicectl router running?"
+        raise BusError(f"cannot reach the router at {where} ({why})") from failed[0]
+    return opened[0]
+
+
 def _direct(callback: Callable[[T], None]) -> zenoh.handlers.Callback[T]:
     """Run `callback` on Zenoh's own thread: every callback here only decodes and hands
     over to the loop, so skipping the hop to a Python thread halves a round trip's cost."""
@@ -464,9 +509,10 @@ def json_decoder(kind: Any) -> Decode[Any]:
     return msgspec.json.Decoder(kind).decode
 
 
-async def wait_for_stop(*tasks: Awaitable[object]) -> None:
+async def wait_for_stop(*tasks: Awaitable[object], keep_running: bool = False) -> None:
     """Return on SIGINT or SIGTERM; with `tasks`, also when one of them ends (re-raising
-    its error), cancelling the others."""
+    its error), cancelling the others; with `keep_running`, tasks that end well do not
+    end the wait (work done once at start)."""
     loop = asyncio.get_running_loop()
     stop = asyncio.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -474,10 +520,14 @@ async def wait_for_stop(*tasks: Awaitable[object]) -> None:
     running = [asyncio.ensure_future(t) for t in tasks]
     stopper = asyncio.ensure_future(stop.wait())
     try:
-        done, _ = await asyncio.wait([stopper, *running], return_when=asyncio.FIRST_COMPLETED)
-        for task in done:
-            if task is not stopper:
-                task.result()
+        pending = {stopper, *running}
+        while stopper in pending:
+            done, pending = await asyncio.wait(pending, return_when=asyncio.FIRST_COMPLETED)
+            for task in done:
+                if task is not stopper:
+                    task.result()
+            if not keep_running:
+                break
     finally:
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.remove_signal_handler(sig)

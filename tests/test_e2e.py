@@ -164,7 +164,10 @@ def test_up_stops_every_child_on_sigint(stack: Stack) -> None:
     time.sleep(0.5)
     assert any("voicectl up: stopped" in line for line in stack.output)
     leftovers = subprocess.run(
-        ["pgrep", "-f", f"--connect {stack.router}"], capture_output=True, text=True, check=False
+        ["pgrep", "-f", "--", f"--connect {stack.router}"],
+        capture_output=True,
+        text=True,
+        check=False,
     )
     assert leftovers.stdout.strip() == "", leftovers.stdout
     # The executor stopped before the robot: the running order was interrupted, not lost,

@@ -16,7 +16,6 @@ from services.web.__main__ import add_tls_arguments, tls_problem
 from shared.bus import (
     DEFAULT_ROUTER,
     Bus,
-    BusOptions,
     add_bus_arguments,
     bus_options,
     json_decoder,
@@ -44,7 +43,7 @@ from shared.messages import (
     SupervisorReply,
 )
 
-from .stack import Child, Panel, run_stack
+from .stack import Child, Panel, port_in_use, run_stack
 
 SERVICES = ("router", "converter", "stt", "supervisor", "executor", "sim", "web")
 REPO_ORDERS = Path(__file__).resolve().parents[1] / "orders"
@@ -201,6 +200,10 @@ def main(argv: list[str] | None = None) -> int:
 
 
 def _up(args: argparse.Namespace) -> int:
+    busy = _busy_ports(args)
+    if busy:
+        print(f"voicectl up: {busy}", file=sys.stderr)
+        return 2
     connect = ["--connect", args.router]
     robot = ["--robot", args.robot]
     children = [
@@ -278,6 +281,17 @@ def _parse(args: argparse.Namespace) -> int:
     return 0
 
 
+def _busy_ports(args: argparse.Namespace) -> str:
+    """Why the stack cannot listen where it should (another stack runs), or ''."""
+    scheme, _, address = args.router.partition("/")
+    host, _, port = address.rpartition(":")
+    if scheme == "tcp" and port.isdigit() and port_in_use(host.strip("[]"), int(port)):
+        return f"{args.router} is in use: is another voicectl up or router running there?"
+    if not args.no_web and port_in_use(args.host, args.port):
+        return f"port {args.port} on {args.host} is in use (choose another with --port)"
+    return ""
+
+
 def _transcribe(args: argparse.Namespace) -> int:
     from services.converter.grammar import build_grammar
     from services.converter.orders import OrderSet
@@ -301,10 +315,10 @@ def _transcribe(args: argparse.Namespace) -> int:
 
 
 async def _say(args: argparse.Namespace) -> int:
-    options: BusOptions = bus_options(args)
     keys = RobotKeys(args.robot)
-    with Bus.open(options, asyncio.get_running_loop()) as bus:
-        try:
+    order_ids: list[str] = []
+    try:
+        with Bus.open(bus_options(args, wait=False), asyncio.get_running_loop()) as bus:
             parsed = await bus.request(
                 ConverterKeys().parse,
                 ParseRequest(text=args.text),
@@ -315,7 +329,6 @@ async def _say(args: argparse.Namespace) -> int:
                 print(f"voicectl say: converter: {parsed.reason}", file=sys.stderr)
                 return 1
             result = parsed.result
-            order_ids: list[str] = []
             sending = result.orders if args.partial or not result.errors else []
             if sending:
                 reply = await bus.request(
@@ -331,9 +344,9 @@ async def _say(args: argparse.Namespace) -> int:
                     print(f"voicectl say: supervisor answered {reply!r}", file=sys.stderr)
                     return 1
                 order_ids = reply.order_ids
-        except BusError as exc:
-            print(f"voicectl say: {exc}", file=sys.stderr)
-            return 3
+    except BusError as exc:  # no router, or no converter or supervisor answering
+        print(f"voicectl say: {exc}", file=sys.stderr)
+        return 3
     _print_json({"orders": result.orders, "errors": result.errors, "order_ids": order_ids})
     for error in result.errors:
         print(f"voicectl say: {error.text!r}: {error.reason}", file=sys.stderr)
@@ -348,14 +361,14 @@ async def _say(args: argparse.Namespace) -> int:
 async def _ask_supervisor(args: argparse.Namespace, request: Message) -> int:
     """Send one request to the robot's supervisor and print the answer as JSON."""
     keys = RobotKeys(args.robot)
-    with Bus.open(bus_options(args), asyncio.get_running_loop()) as bus:
-        try:
+    try:
+        with Bus.open(bus_options(args, wait=False), asyncio.get_running_loop()) as bus:
             reply = await bus.request(
                 keys.supervisor, request, json_decoder(SupervisorReply), timeout=10.0
             )
-        except BusError as exc:
-            print(f"voicectl {args.command}: {exc}", file=sys.stderr)
-            return 3
+    except BusError as exc:  # no router, or no supervisor answering
+        print(f"voicectl {args.command}: {exc}", file=sys.stderr)
+        return 3
     match reply:
         case Failed(reason=reason):
             print(f"voicectl {args.command}: {reason}", file=sys.stderr)

@@ -3,13 +3,15 @@
 from __future__ import annotations
 
 import contextlib
+import ctypes
+import ctypes.util
 import signal
 import socket
 import subprocess
 import sys
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from types import FrameType
 from typing import IO
@@ -19,6 +21,8 @@ import zenoh
 from shared.bus import BusOptions
 
 STOP_TIMEOUT = 10.0
+START_TIMEOUT = 60.0
+PR_SET_PDEATHSIG = 1
 
 
 @dataclass(frozen=True)
@@ -47,6 +51,7 @@ class Child:
             stdout=subprocess.PIPE,
             stderr=subprocess.STDOUT,
             start_new_session=True,
+            preexec_fn=_die_with_parent,
         )
         self._pump = threading.Thread(
             target=_prefix_lines, args=(self.name, self.process.stdout), daemon=True
@@ -70,6 +75,24 @@ class Child:
         if process.stdout is not None:
             process.stdout.close()
         return process.returncode
+
+
+def _die_with_parent() -> None:
+    """In the child, before it runs: SIGTERM when `voicectl up` dies, even by SIGKILL, so
+    that no service is left holding ports, the database or the robot (Linux only)."""
+    with contextlib.suppress(OSError, AttributeError):
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+        libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+
+
+def port_in_use(host: str, port: int) -> bool:
+    """Whether something already listens on `host:port`."""
+    with socket.socket() as sock:
+        try:
+            sock.bind((host, port))
+        except OSError:
+            return True
+    return False
 
 
 def _prefix_lines(name: str, stream: IO[bytes] | None) -> None:
@@ -104,16 +127,25 @@ def _stop_signals() -> Iterator[threading.Event]:
             signal.signal(sig, handler)
 
 
-def wait_for_tokens(router: str, keys: list[str], timeout: float) -> list[str]:
-    """Wait until a liveliness token is up on each of `keys`; return those still missing."""
+def wait_for_tokens(
+    router: str, keys: list[str], timeout: float, give_up: Callable[[], str]
+) -> list[str]:
+    """Wait until a liveliness token is up on each of `keys`, or until `give_up()` says
+    why not (a child died, Ctrl-C); return those still missing."""
     missing = list(keys)
     deadline = time.monotonic() + timeout
-    with zenoh.open(BusOptions(connect=[router]).zenoh_config()) as session:
-        while missing and time.monotonic() < deadline:
+    session = None
+    while session is None:  # the router is a child too: it may not listen yet
+        if give_up() or time.monotonic() > deadline:
+            return missing
+        with contextlib.suppress(zenoh.ZError):
+            session = zenoh.open(BusOptions(connect=[router], wait=False).zenoh_config())
+    with session:
+        while missing and time.monotonic() < deadline and not give_up():
             missing = [
                 key
                 for key in missing
-                if not any(r.ok is not None for r in session.liveliness().get(key, timeout=1.0))
+                if not any(r.ok is not None for r in session.liveliness().get(key, timeout=0.5))
             ]
             if missing:
                 time.sleep(0.1)
@@ -130,26 +162,40 @@ def run_stack(
     started: list[Child] = []
     exit_code = 0
     with _stop_signals() as stop:
+
+        def dead() -> list[Child]:
+            return [c for c in started if c.process is not None and c.process.poll() is not None]
+
+        def give_up() -> str:
+            if stop.is_set():
+                return "stopped"
+            return ", ".join(
+                f"{c.name} exited with {c.process.returncode}" for c in dead() if c.process
+            )
+
         try:
             for child in children:
                 child.start()
                 started.append(child)
-            missing = wait_for_tokens(router, ready_tokens, timeout=60.0)
-            if missing:
-                print(f"voicectl up: not up after 60 s: {', '.join(missing)}", flush=True)
-            if web is not None:
+            missing = wait_for_tokens(router, ready_tokens, START_TIMEOUT, give_up)
+            if web is not None and not give_up():
                 host = "127.0.0.1" if web.host in ("0.0.0.0", "::") else web.host
-                if wait_for_port(host, web.port, timeout=30.0):
-                    print(f"voicectl up: panel on {web.address}", flush=True)
-                else:
-                    print(f"voicectl up: the panel did not open port {web.port} in 30 s")
+                deadline = time.monotonic() + 30.0
+                while not give_up() and time.monotonic() < deadline:
+                    if wait_for_port(host, web.port, timeout=0.2):
+                        break
+            reason = give_up()
+            if reason:
+                print(f"voicectl up: {reason} while starting; stopping the stack", flush=True)
+                return 0 if reason == "stopped" else 1
+            if missing:
+                print(f"voicectl up: not up after {START_TIMEOUT:g} s: {', '.join(missing)}")
+            if web is not None:
+                print(f"voicectl up: panel on {web.address}", flush=True)
             print("voicectl up: ready; Ctrl-C stops everything", flush=True)
             while not stop.wait(0.2):
-                dead = [
-                    c for c in started if c.process is not None and c.process.poll() is not None
-                ]
-                if dead:
-                    for child in dead:
+                if dead():
+                    for child in dead():
                         assert child.process is not None
                         print(
                             f"voicectl up: {child.name} exited with {child.process.returncode};"
@@ -161,5 +207,5 @@ def run_stack(
         finally:
             for child in reversed(started):
                 child.stop()
-    print("voicectl up: stopped", flush=True)
+            print("voicectl up: stopped", flush=True)
     return exit_code

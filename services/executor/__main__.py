@@ -86,10 +86,10 @@ async def main(argv: list[str] | None = None) -> int:
             bus, RobotKeys(args.robot), robot, bindings, cancel_deadline=args.cancel_deadline
         )
         service.start()
-        await service.end_stray_motion()
         _LOGGER.info("executor ready for %s; labels: %s", args.robot, ", ".join(bindings.labels))
         try:
-            await wait_for_stop()
+            # Inside the wait, so that a stop signal during the halt is still a clean stop.
+            await wait_for_stop(service.end_stray_motion(), keep_running=True)
         finally:
             await service.shutdown()
     if service.abandoned:

@@ -14,7 +14,7 @@ from shared.bus import Bus, add_bus_arguments, bus_options, robot_name, setup_lo
 from shared.config import data_dir
 
 from .service import SupervisorService
-from .store import Durability, OrderStore
+from .store import Durability, OrderStore, StoreInUse
 
 _LOGGER = logging.getLogger(__name__)
 
@@ -59,6 +59,9 @@ async def main(argv: list[str] | None = None) -> int:
     with contextlib.ExitStack() as closing:
         try:
             store = closing.enter_context(OrderStore(db_path, args.durability))
+        except StoreInUse as exc:
+            print(f"voicectl supervisor: {exc}", file=sys.stderr)
+            return 2
         except (sqlite3.Error, OSError) as exc:
             print(f"voicectl supervisor: cannot open {db_path}: {exc}", file=sys.stderr)
             return 2

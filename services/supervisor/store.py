@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import fcntl
 import logging
 import os
 import queue
@@ -19,7 +20,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from enum import StrEnum
 from pathlib import Path
-from typing import Any, TypeVar
+from typing import IO, Any, TypeVar
 
 import msgspec
 
@@ -92,9 +93,11 @@ class OrderStore:
         self._decoder = msgspec.json.Decoder(OrderRecord)
         self._ready = threading.Event()
         self._open_error: BaseException | None = None
+        self._lock: IO[str] | None = None
 
     def __enter__(self) -> OrderStore:
         self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._lock = _exclusive(self.path.with_name(self.path.name + ".lock"))
         self._thread = threading.Thread(target=self._run, name="order-store", daemon=True)
         self._thread.start()
         self._ready.wait()
@@ -106,6 +109,8 @@ class OrderStore:
         self._inbox.put(None)
         if self._thread is not None:
             self._thread.join(timeout=10)
+        if self._lock is not None:
+            self._lock.close()  # closing the file releases the lock
 
     # --- calls from the event loop -------------------------------------------------------
 
@@ -284,6 +289,27 @@ class OrderStore:
         for (_, future, loop), (ok, value) in zip(batch, results, strict=True):
             with contextlib.suppress(RuntimeError):  # the loop closed: nobody is waiting
                 loop.call_soon_threadsafe(_settle, future, ok, value)
+
+
+class StoreInUse(OSError):
+    """Another supervisor holds the database: two would hand the same orders out twice."""
+
+
+def _exclusive(path: Path) -> IO[str]:
+    """An exclusive lock on `path`, held while the returned file stays open."""
+    handle = path.open("a+", encoding="utf-8")
+    try:
+        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        handle.seek(0)
+        holder = handle.read().strip() or "another process"
+        handle.close()
+        raise StoreInUse(f"{path.parent} is in use by another supervisor ({holder})") from None
+    handle.seek(0)
+    handle.truncate()
+    handle.write(f"pid {os.getpid()}\n")
+    handle.flush()
+    return handle
 
 
 def _settle(future: asyncio.Future[Any], ok: bool, value: Any) -> None:

@@ -1,0 +1,126 @@
+"""`voicectl up` and the commands under faults: nothing hangs, nothing is left behind,
+a second stack does not touch the first one's data."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from .conftest import REPO, Stack, free_port, voicectl, wait_until
+
+pytestmark = pytest.mark.e2e
+
+
+def test_a_command_without_a_router_fails_in_seconds_naming_it() -> None:
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    started = time.monotonic()
+    done = voicectl("state", "--connect", endpoint)
+    assert time.monotonic() - started < 15.0
+    assert done.returncode == 3
+    assert done.stderr.splitlines() == [
+        f"voicectl state: cannot reach the router at {endpoint} "
+        "(waited 3 s; is voicectl up or voicectl router running?)"
+    ]
+
+
+def test_a_service_waiting_for_the_router_stops_on_sigterm(tmp_path: Path) -> None:
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    with subprocess.Popen(
+        [sys.executable, "-m", "services.converter", "--connect", endpoint],
+        cwd=REPO,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    ) as process:
+        try:
+            time.sleep(2.0)  # well into the wait for the router
+            process.send_signal(signal.SIGTERM)
+            output, _ = process.communicate(timeout=10)
+        finally:
+            if process.poll() is None:
+                process.kill()
+    assert process.returncode == 0
+    assert "stopped (SIGTERM) while waiting for the router" in output
+
+
+def test_a_second_stack_refuses_to_start_on_a_busy_port(stack: Stack) -> None:
+    router_busy = stack.voicectl("up", "--router", stack.router, "--port", str(free_port()))
+    assert router_busy.returncode == 2
+    assert router_busy.stderr.strip() == (
+        f"voicectl up: {stack.router} is in use: is another voicectl up or router running there?"
+    )
+    other_router = f"tcp/127.0.0.1:{free_port()}"
+    panel_busy = stack.voicectl("up", "--router", other_router, "--port", str(stack.port))
+    assert panel_busy.returncode == 2
+    assert f"port {stack.port} on 127.0.0.1 is in use" in panel_busy.stderr
+
+
+def test_a_second_stack_on_the_same_data_stops_at_once(stack: Stack) -> None:
+    started = time.monotonic()
+    second = stack.voicectl(
+        "up",
+        *("--router", f"tcp/127.0.0.1:{free_port()}", "--port", str(free_port())),
+        "--no-stt",
+    )
+    assert time.monotonic() - started < 40.0
+    assert second.returncode == 1
+    assert "is in use by another supervisor" in second.stdout
+    assert "supervisor exited with 2 while starting; stopping the stack" in second.stdout
+    # the first stack still serves
+    assert stack.voicectl("state", "--connect", stack.router).returncode == 0
+
+
+def test_killing_up_leaves_no_service_behind(stack: Stack) -> None:
+    children = subprocess.run(
+        ["pgrep", "-f", "--", f"--connect {stack.router}"],
+        capture_output=True,
+        text=True,
+        check=False,
+    ).stdout.split()
+    assert len(children) >= 5
+    os.kill(stack.process.pid, signal.SIGKILL)
+
+    def none_left() -> bool:
+        found = subprocess.run(
+            ["pgrep", "-f", "--", f"--connect {stack.router}"],
+            capture_output=True,
+            text=True,
+            check=False,
+        )
+        return not found.stdout.strip()
+
+    wait_until(none_left, 20.0, "every service of the killed stack to exit")
+
+
+def test_ctrl_c_during_start_up_stops_everything(tmp_path: Path) -> None:
+    router = f"tcp/127.0.0.1:{free_port()}"
+    env = {**os.environ, "VOICECTL_DATA": str(tmp_path / "data")}
+    with subprocess.Popen(
+        [sys.executable, "-m", "voicectl", "up", "--router", router, "--port", str(free_port())],
+        cwd=REPO,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        start_new_session=True,
+    ) as process:
+        try:
+            time.sleep(1.0)  # children started, none of them ready yet
+            process.send_signal(signal.SIGINT)
+            output, _ = process.communicate(timeout=30)
+        finally:
+            if process.poll() is None:
+                os.killpg(process.pid, signal.SIGKILL)
+    assert process.returncode == 0, output
+    assert "voicectl up: stopped while starting; stopping the stack" in output
+    assert "voicectl up: ready" not in output
+    left = subprocess.run(
+        ["pgrep", "-f", "--", f"--connect {router}"], capture_output=True, text=True, check=False
+    )
+    assert not left.stdout.strip()
