@@ -214,6 +214,8 @@ def main() -> None:
                     f"{tmp}/bench.sqlite3",
                     "--durability",
                     args.durability,
+                    # Served from the start: "burst" never has an executor.
+                    *("--robot", "bench", "--robot", "burst"),
                 ],
                 cwd=REPO,
                 stderr=subprocess.DEVNULL,

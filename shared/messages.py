@@ -15,6 +15,15 @@ from typing import Annotated, Literal
 import msgspec
 
 ParamValue = str | int | float | bool
+LOGGED_TEXT = 120
+"""Characters of a person's text that a log line shows."""
+
+
+def excerpt(text: str) -> str:
+    """A person's text as a log line quotes it: a 5 MB transcript must not become one line."""
+    if len(text) <= LOGGED_TEXT:
+        return repr(text)
+    return f"{text[:LOGGED_TEXT]!r}... ({len(text)} characters)"
 
 
 class Message(msgspec.Struct, tag_field="type", tag=str.lower, kw_only=True, frozen=True):

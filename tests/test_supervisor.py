@@ -47,9 +47,11 @@ class Site:
         self.supervisor: subprocess.Popen[bytes] | None = None
         self.executors: dict[str, subprocess.Popen[bytes]] = {}
 
-    def start_supervisor(self) -> None:
+    def start_supervisor(self, *extra: str) -> None:
+        """A supervisor serving r1 from the start (other robots once an executor comes)."""
         self.supervisor = self.processes.start(
-            "services.supervisor", "--connect", self.router, "--db", str(self.db)
+            "services.supervisor",
+            *("--connect", self.router, "--db", str(self.db), "--robot", "r1", *extra),
         )
 
     def kill_supervisor(self) -> None:
@@ -288,7 +290,7 @@ def test_history_pages(site: Site) -> None:
 
 
 def test_each_robot_has_its_own_queue_and_executor(site: Site) -> None:
-    site.start_supervisor()
+    site.start_supervisor("--robot", "r2")  # r2 is known before its executor comes
     site.start_executor("r1")
 
     async def body(bus: Bus) -> None:
@@ -304,6 +306,17 @@ def test_each_robot_has_its_own_queue_and_executor(site: Site) -> None:
         site.start_executor("r2")
         assert (await two.finished(for_two)).message == "2 x 2 = 4"
         assert for_one not in {r.id for r in (await two.history()).records}
+        # a name nobody serves is refused, and asking about it creates nothing
+        made_up = Client(bus, "nobody")
+        refused = await made_up.ask_submit(order("mul", a=1, b=1))
+        assert isinstance(refused, Failed)
+        assert refused.reason.startswith(
+            "no executor has served robot 'nobody' (known robots: r1, r2)"
+        )
+        assert (await made_up.state()).queue == []
+        again = await made_up.ask_submit(order("mul", a=1, b=1))
+        assert isinstance(again, Failed)
+        assert "known robots: r1, r2)" in again.reason
 
     site.run(body)
 

@@ -87,7 +87,10 @@ def build_parser() -> argparse.ArgumentParser:
         help="bind a user executor in the executor process (repeatable)",
     )
 
-    parse = sub.add_parser("parse", help="print the orders a text becomes, as JSON")
+    parse = sub.add_parser(
+        "parse",
+        help="print the orders a text becomes, as JSON (exit 1 if any part did not make one)",
+    )
     parse.add_argument(
         "--orders",
         type=Path,
@@ -276,9 +279,10 @@ def _parse(args: argparse.Namespace) -> int:
         return 2
     if args.grammar:
         _print_json(build_grammar(orders))
-    else:
-        _print_json(Parser(orders).parse(args.text))
-    return 0
+        return 0
+    result = Parser(orders).parse(args.text)
+    _print_json(result)
+    return 0 if result.orders and not result.errors else 1
 
 
 def _busy_ports(args: argparse.Namespace) -> str:

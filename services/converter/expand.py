@@ -236,3 +236,40 @@ def _is_space(body: list[tuple[Any, Any]]) -> bool:
             for o, a in arg
         )
     return False
+
+
+def nested_repeat(pattern: str) -> str:
+    """The first repetition inside a repetition that can backtrack catastrophically
+    ('(a+)+', '(a|b*)*'), shown as regex; '' when there is none.
+
+    Python's regex engine backtracks: a repeated group whose body can itself match in
+    many ways takes exponential time on text that almost matches ('(a+)+b' on forty a's
+    froze the converter). Refused at load: an unbounded repeat around any repeat, or any
+    repeat around an unbounded one.
+    """
+
+    def walk(nodes: Iterable[tuple[Any, Any]], outer: tuple[int, int] | None) -> str:
+        for op, arg in nodes:
+            name = str(op)
+            if name in ("MAX_REPEAT", "MIN_REPEAT", "POSSESSIVE_REPEAT"):
+                low, high, body = arg
+                if _is_space(body):
+                    continue  # whitespace is normalised: one space, one way to match it
+                unbounded = high == _sre.MAXREPEAT
+                varies = high > 1 and low != high  # 'a{2}' matches one way only
+                if outer is not None and varies and (unbounded or outer[1] == _sre.MAXREPEAT):
+                    return f"{'unbounded ' if unbounded else ''}repeat inside a repeat"
+                found = walk(body, (low, high) if high > 1 else outer)
+            elif name == "SUBPATTERN":
+                found = walk(arg[3], outer)
+            elif name == "BRANCH":
+                found = next((f for f in (walk(b, outer) for b in arg[1]) if f), "")
+            elif name in ("ASSERT", "ASSERT_NOT"):
+                found = walk(arg[1], outer)
+            else:
+                found = ""
+            if found:
+                return found
+        return ""
+
+    return walk(_sre.parse(pattern, 0), None)

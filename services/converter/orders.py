@@ -33,7 +33,7 @@ import yaml
 from shared.errors import OrdersFileError
 from shared.messages import Order, ParamValue, TargetPose
 
-from .expand import Expansion, SlotRef, expand
+from .expand import Expansion, SlotRef, expand, nested_repeat
 from .slots import NUMBER_PATTERN, SlotSpec, format_value
 from .text import normalise
 
@@ -124,6 +124,17 @@ class OrderSpec:
     ) -> dict[str, ParamValue]:
         """The order's values, overridden by the case's, overridden by slot values."""
         return {**self.values, **(case.values if case else {}), **(filled or {})}
+
+    def example(self, case: CaseSpec) -> str:
+        """The case's description with an example number for each slot ("forward 0.5 m"),
+        for hints: a person reads it, so no raw placeholders."""
+        slots = {**self.slots, **case.slots}
+
+        def number(found: re.Match[str]) -> str:
+            slot = slots.get(found[1])
+            return format_value(slot.grid()[0]) if slot is not None else found[0]
+
+        return PLACEHOLDER.sub(number, case.description)
 
     def full_description(self, case: CaseSpec | None) -> str:
         return f"{self.description} {case.description}" if case else self.description
@@ -502,6 +513,12 @@ def _check_regex(pattern: str) -> None:
         raise _Problem(f"invalid regex {_plain(pattern)!r}: {exc}") from exc
     if compiled.match(""):
         raise _Problem(f"regex {_plain(pattern)!r} matches empty text")
+    nested = nested_repeat(pattern)
+    if nested:
+        raise _Problem(
+            f"regex {_plain(pattern)!r} repeats a repetition ({nested}): it can take "
+            "exponential time on text that almost matches; write it with one repetition"
+        )
 
 
 def _plain(pattern: str) -> str:
@@ -648,10 +665,19 @@ def _construct_mapping(loader: yaml.SafeLoader, node: yaml.MappingNode) -> Itera
     mapping.update(loader.construct_mapping(node))
     for key_node, _ in node.value:
         key = loader.construct_object(key_node)
+        line = key_node.start_mark.line + 1
         try:
-            mapping.key_lines.setdefault(key, key_node.start_mark.line + 1)
+            first = mapping.key_lines.setdefault(key, line)
         except TypeError:  # an unhashable key; construct_mapping has refused it already
             continue
+        if first != line:
+            # YAML would keep the last silently: an order defined twice is a mistake.
+            raise yaml.constructor.ConstructorError(
+                None,
+                None,
+                f"'{key}' is defined twice, at lines {first} and {line}",
+                key_node.start_mark,
+            )
 
 
 _LineLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)

@@ -178,7 +178,7 @@ class Parser:
         for matcher in self._prefixes.candidates(words):
             if matcher.regex.search(segment):
                 order = matcher.command.order
-                cases = ", ".join(c.description for c in order.cases)
+                cases = ", ".join(order.example(case) for case in order.cases)
                 reason = f"'{order.description}' needs one of: {cases}"
                 if suggestions:
                     return ParseError(

@@ -23,6 +23,7 @@ from shared.messages import (
     ParseRequest,
     Proposal,
     Transcript,
+    excerpt,
 )
 
 from .grammar import build_grammar
@@ -171,13 +172,13 @@ class ConverterService:
                 session=transcript.session,
                 utterance=transcript.utterance,
             )
-            _LOGGER.info("%s: %r rejected by the recogniser", robot, transcript.text)
+            _LOGGER.info("%s: %s rejected by the recogniser", robot, excerpt(transcript.text))
         else:
             result = self._loaded.parser.parse(transcript.text)
             _LOGGER.info(
-                "%s: %r -> %d order(s), %d error(s)",
+                "%s: %s -> %d order(s), %d error(s)",
                 robot,
-                transcript.text,
+                excerpt(transcript.text),
                 len(result.orders),
                 len(result.errors),
             )

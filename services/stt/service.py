@@ -34,6 +34,7 @@ from shared.messages import (
     PartialTranscript,
     SttStatus,
     Transcript,
+    excerpt,
 )
 
 from .audio import BYTES_PER_SECOND
@@ -337,10 +338,10 @@ class SttService:
             case Final():
                 transcript = await self._judge(session, event)
                 _LOGGER.info(
-                    "session %s utterance %d: %r%s",
+                    "session %s utterance %d: %s%s",
                     session,
                     event.utterance,
-                    transcript.text,
+                    excerpt(transcript.text),
                     f" rejected: {transcript.reason}" if transcript.rejected else "",
                 )
                 self.bus.publish(self._keys.transcript, transcript)
@@ -370,7 +371,7 @@ class SttService:
                 self._converter.parse, ParseRequest(text=text), self._parse_decode
             )
         except BusError as exc:
-            _LOGGER.warning("could not check %r with the converter: %s", text, exc)
+            _LOGGER.warning("could not check %s with the converter: %s", excerpt(text), exc)
             return ""
         if isinstance(reply, Failed):
             return ""

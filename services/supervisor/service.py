@@ -41,6 +41,7 @@ from shared.messages import (
     Reorder,
     Resume,
     Running,
+    State,
     StateReply,
     StateUpdate,
     Submit,
@@ -425,7 +426,21 @@ class SupervisorService:
         supervisor.start()
 
     async def _on_request(self, key: str, request: SupervisorRequest) -> Message:
-        return await self.robot(robot_of(key)).handle(request)
+        name = robot_of(key)
+        if name in self._robots or isinstance(request, EmergencyStop):
+            return await self.robot(name).handle(request)
+        # A name nobody has configured or served: answer without creating a robot, so that
+        # made-up names cannot grow the process without limit.
+        match request:
+            case GetState():
+                return StateReply(state=State(robot=name))
+            case GetHistory():
+                return HistoryPage(records=[], total=0)
+        known = ", ".join(sorted(self._robots)) or "none"
+        return Failed(
+            reason=f"no executor has served robot '{name}' (known robots: {known}); start "
+            "its executor, or the supervisor with --robot"
+        )
 
     def _on_event(self, key: str, event: ExecutorEvent) -> None:
         self.robot(robot_of(key)).on_event(event)
