@@ -414,7 +414,14 @@ class GetRunning(Message):
     """Which order is the executor running? Asked by a supervisor that restarted."""
 
 
-ExecutorRequest = Execute | CancelOrder | Halt | GetRunning
+class GetResult(Message):
+    """How did this order end? Asked by a supervisor that restarted while it ran; the
+    executor keeps its last results, and answers with OrderFinished or Failed."""
+
+    order_id: str
+
+
+ExecutorRequest = Execute | CancelOrder | Halt | GetRunning | GetResult
 
 
 class Accepted(Message):

@@ -6,19 +6,22 @@ from __future__ import annotations
 
 import asyncio
 import signal
+import stat
 import subprocess
 from collections.abc import Awaitable, Callable
 from pathlib import Path
 
 import pytest
 
-from shared.bus import Bus, BusOptions
-from shared.keys import BridgeKeys
+from shared.bus import Bus, BusOptions, json_decoder
+from shared.keys import BridgeKeys, RobotKeys
 from shared.messages import (
     Done,
     EmergencyStop,
     Failed,
     Order,
+    OrderFinished,
+    OrderProgress,
     OrderStatus,
     Release,
     Reorder,
@@ -236,5 +239,40 @@ def test_queue_order_survives_many_reorders_and_a_restart(robot: Robot) -> None:
         beyond = await client.ask(Reorder(order_id=expected[0], position=99))
         assert isinstance(beyond, Done)
         assert beyond.detail == f"moved {expected[0]} to position 3"
+
+    robot.run(body)
+
+
+def test_a_result_reached_while_the_supervisor_was_down_is_kept(robot: Robot) -> None:
+    robot.start_supervisor()
+    robot.start_executor()
+
+    async def body(bus: Bus, client: Client) -> None:
+        ended: list[OrderFinished] = []
+        bus.subscribe(
+            RobotKeys("r1").executor_events,
+            json_decoder(OrderProgress | OrderFinished),
+            lambda _key, event: ended.append(event) if isinstance(event, OrderFinished) else None,
+        )
+        await client_wait_ready(client)
+        waiting, after = await client.submit(order("wait", seconds=1.0), order("mul", a=2, b=2))
+        await client.wait_state(lambda s: s.current is not None, "the wait to run")
+        robot.kill(robot.supervisor)
+        await async_wait_until(lambda: ended, WAIT, "the wait to end with no supervisor")
+        robot.start_supervisor()
+        await client_wait_ready(client)
+        record = await client.finished(waiting)
+        assert (record.status, record.message) == (OrderStatus.SUCCEEDED, "waited 1 s")
+        assert [r.id for r in (await client.state()).queue] == [after]  # waits for resume
+
+    robot.run(body)
+
+
+def test_the_database_is_readable_by_its_owner_only(robot: Robot) -> None:
+    robot.start_supervisor()
+
+    async def body(bus: Bus, client: Client) -> None:
+        await client_wait_ready(client, executor=False)
+        assert stat.S_IMODE(robot.db.stat().st_mode) == 0o600
 
     robot.run(body)

@@ -101,6 +101,8 @@ def test_bad_bodies_and_parameters_are_4xx_and_change_nothing(client: TestClient
         ("/api/parse", b'{"text": "x", "extra": 1}', 400),
         ("/api/submit", b'{"orders": []}', 400),
         ("/api/reorder", b'{"order_id": "a"}', 400),
+        ("/api/reorder", b'{"order_id": "a", "position": -5}', 400),
+        ("/api/parse", b"[" * 20_000, 400),  # deeply nested, under the size limit
         ("/api/parse", b"x" * (MAX_BODY + 1), 413),
     ]
     for path, body, status in cases:

@@ -18,6 +18,7 @@ from shared.messages import (
     ExecutorInfo,
     ExecutorRequest,
     Failed,
+    GetResult,
     GetRunning,
     Halt,
     Message,
@@ -121,6 +122,11 @@ class ExecutorService:
             case GetRunning():
                 running = self._running
                 return Running(order_id=running.order_id if running is not None else None)
+            case GetResult(order_id=order_id):
+                finished = self._recent.get(order_id)
+                if finished is None:
+                    return Failed(reason=f"no result for order '{order_id}' here")
+                return finished
 
     async def shutdown(self) -> None:
         # Offline first, so the supervisor holds its queue instead of sending the next order.

@@ -28,6 +28,7 @@ from shared.messages import (
     ExecutorReply,
     Failed,
     GetHistory,
+    GetResult,
     GetRunning,
     GetState,
     Halt,
@@ -228,7 +229,7 @@ class RobotSupervisor:
         where = f"'{keys.cmd_vel}'"
         return f"sent zero velocity on {where}; {cancelled}"
 
-    async def _send_control(self, request: CancelOrder | Halt | GetRunning) -> Message:
+    async def _send_control(self, request: CancelOrder | Halt | GetRunning | GetResult) -> Message:
         try:
             return await self._bus.request(
                 self._keys.executor_control, request, self._reply_decode, EXECUTOR_TIMEOUT
@@ -315,6 +316,12 @@ class RobotSupervisor:
             _LOGGER.info("%s: resumed %s, still running on the executor", self.robot, order_id)
             self._queue.current_verified = True
             self._changed()
+            return
+        # It ended while the supervisor was away: the executor may still know how.
+        result = await self._send_control(GetResult(order_id=order_id))
+        if isinstance(result, OrderFinished) and result.order_id == order_id:
+            _LOGGER.info("%s: %s ended while the supervisor was away", self.robot, order_id)
+            self._finish(order_id, result.status, result.message)
         else:
             self._finish(
                 order_id,

@@ -18,7 +18,7 @@ import uuid
 from collections.abc import AsyncIterator, Awaitable, Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TypeVar
+from typing import Annotated, TypeVar
 
 import msgspec
 from starlette.applications import Starlette
@@ -80,7 +80,8 @@ class CancelBody(msgspec.Struct, forbid_unknown_fields=True):
 
 class ReorderBody(msgspec.Struct, forbid_unknown_fields=True):
     order_id: str
-    position: int
+    position: Annotated[int, msgspec.Meta(ge=0)]
+    """0 is next; beyond the end means last (the answer says where it went)."""
 
 
 class ApiError(VoicectlError):
