@@ -14,8 +14,8 @@ Per utterance, measured on generated speech (bench/stt.py), these choices matter
   56 of 75 commands right, carrying the mean over between utterances 64, batch 72.
 - Confidence is the final path's acoustic score per frame, which pocketsphinx measures
   against the best-scoring senone of each frame: a bound on any unconstrained decode. A
-  free phone-loop decode was measured beside it and ranked utterances the same way at
-  three times the cost, so it is not run.
+  free phone-loop decode was measured beside it and ranked utterances the same way for
+  1.5 times the CPU of the grammar pass itself, so it is not run.
 - Speech begins and ends where pocketsphinx's WebRTC-style voice activity detector says
   (30 ms frames, its most aggressive mode, which stopped flagging speech 80 to 120 ms after
   its true end where the default mode took 160 to 190 ms). The end is 0.24 s without
@@ -64,8 +64,6 @@ CONFIDENCE_MIDPOINT = -5.3
 """Acoustic score per 10 ms frame, in nats below the best senone, that maps to confidence
 0.5. Tuned on bench/speech_set.py's generated speech (docs/benchmarks.md)."""
 CONFIDENCE_WIDTH = 0.4
-DECODER_CONFIG: dict[str, str] = {}
-"""pocketsphinx options beyond its defaults."""
 POOL_SIZE = 2
 """Idle decoders kept for the next sessions (each holds the acoustic model, ~28 MB)."""
 
@@ -85,7 +83,7 @@ class _Decoder:
     """A pocketsphinx decoder and the grammar it has installed."""
 
     def __init__(self) -> None:
-        self.decoder: Any = pocketsphinx.Decoder(loglevel="FATAL", lm=None, **DECODER_CONFIG)
+        self.decoder: Any = pocketsphinx.Decoder(loglevel="FATAL", lm=None)
         # pocketsphinx 5.1.1 ignores the first switch of the cepstral mean's mode unless the
         # features were re-initialised once before: without this line every second pass
         # silently kept the live mean.
