@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import time
 from pathlib import Path
 
 import pytest
@@ -365,3 +366,22 @@ def test_files_that_disagree_on_skip_words_are_an_error_naming_them(tmp_path: Pa
 def test_any_skip_words_around_a_command_leave_its_order(extra: list[str]) -> None:
     said = " ".join([*extra, "reach", *extra, "kitchen", *extra])
     assert names(said, ALL) == [("goal", "kitchen")]
+
+
+def test_an_alias_that_backtracks_cannot_freeze_the_parser() -> None:
+    slow = Parser(
+        OrderSet.from_yaml(
+            "orders:\n"
+            "  echo: {voice_alias: '(a|aa)+\\\\1b', label: x}\n"
+            "  turn: {voice_alias: 'turn', label: x}\n"
+        )
+    )
+    started = time.monotonic()
+    result = slow.parse("a" * 60 + " then turn")
+    assert time.monotonic() - started < 2.0
+    [error] = result.errors
+    assert error.reason.startswith("order 'echo' took over 250 ms to match")
+    assert [o.order for o in result.orders] == ["turn"]
+    # The classic trap is refused when the file loads, with what is wrong.
+    with pytest.raises(OrdersFileError, match="repeats a repetition"):
+        OrderSet.from_yaml("orders:\n  trap: {voice_alias: '(a+)+b', label: x}\n")

@@ -7,6 +7,7 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -100,9 +101,13 @@ def test_killing_up_leaves_no_service_behind(stack: Stack) -> None:
 
 def test_ctrl_c_during_start_up_stops_everything(tmp_path: Path) -> None:
     router = f"tcp/127.0.0.1:{free_port()}"
-    env = {**os.environ, "VOICECTL_DATA": str(tmp_path / "data")}
+    env = {**os.environ, "VOICECTL_DATA": str(tmp_path / "data"), "PYTHONUNBUFFERED": "1"}
+    lines: list[str] = []
+    # The executor's start-up import takes a minute: the stack cannot be ready before.
+    slow = ["--executor", "tests.slow_import_executor:Never", "--no-stt"]
+    command = ["up", "--router", router, "--port", str(free_port()), *slow]
     with subprocess.Popen(
-        [sys.executable, "-m", "voicectl", "up", "--router", router, "--port", str(free_port())],
+        [sys.executable, "-m", "voicectl", *command],
         cwd=REPO,
         env=env,
         stdout=subprocess.PIPE,
@@ -110,13 +115,20 @@ def test_ctrl_c_during_start_up_stops_everything(tmp_path: Path) -> None:
         text=True,
         start_new_session=True,
     ) as process:
+        assert process.stdout is not None
+        reader = threading.Thread(target=lambda: lines.extend(process.stdout or ()), daemon=True)
+        reader.start()
         try:
-            time.sleep(1.0)  # children started, none of them ready yet
+            # A child has said something: the stack is starting, and not ready yet.
+            wait_until(lambda: any(" | " in line for line in lines), 60.0, "a child's output")
+            assert not any("voicectl up: ready" in line for line in lines)
             process.send_signal(signal.SIGINT)
-            output, _ = process.communicate(timeout=30)
+            process.wait(timeout=30)
+            reader.join(timeout=10)
         finally:
             if process.poll() is None:
                 os.killpg(process.pid, signal.SIGKILL)
+    output = "".join(lines)
     assert process.returncode == 0, output
     assert "voicectl up: stopped while starting; stopping the stack" in output
     assert "voicectl up: ready" not in output

@@ -10,9 +10,12 @@ expanded aliases keeps a parse of a 200-order file to a handful of regex searche
 from __future__ import annotations
 
 import re
+import time
 from collections import Counter
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
+
+import regex
 
 from shared.messages import Order, ParseError, ParseResult
 
@@ -26,6 +29,27 @@ __all__ = ["MAX_TEXT_CHARS", "Parser", "normalise"]
 
 MAX_TEXT_CHARS = 4096
 """Longer input is refused whole: no spoken command is that long."""
+PARSE_BUDGET = 0.25
+"""Seconds one parse may spend matching. Aliases are matched with `regex`, whose engine
+does not blow up on the usual backtracking traps, and within this time limit for the
+rest: an alias that still takes too long makes an error, and the converter answers."""
+
+
+class _TooSlow(Exception):
+    """A command's alias took longer than the parse budget allows."""
+
+
+def _finditer(matcher: _Matcher, segment: str, deadline: float) -> Iterator[regex.Match[str]]:
+    """The command's matches in `segment`, within what is left of the parse's time."""
+    left = deadline - time.monotonic()
+    try:
+        yield from matcher.regex.finditer(segment, timeout=max(left, 0.001))
+    except TimeoutError:
+        raise _TooSlow(
+            f"order '{matcher.command.name}' took over {PARSE_BUDGET * 1000:.0f} ms to "
+            "match: its alias backtracks too much; simplify it"
+        ) from None
+
 
 _NUMBER = "\x00number"
 """Index key of commands that start with a slot."""
@@ -36,7 +60,7 @@ _NUMBER_STARTS = NUMBER_WORDS | SIGN_WORDS | {"a"}
 @dataclass(frozen=True)
 class _Matcher:
     command: Command
-    regex: re.Pattern[str]
+    regex: regex.Pattern[str]
 
 
 class _Index:
@@ -51,7 +75,7 @@ class _Index:
         self, commands: Sequence[Command], skip_words: tuple[str, ...], enabled: bool
     ) -> None:
         self.matchers = [
-            _Matcher(c, re.compile(whole_words(c.pattern(skip_words)), re.IGNORECASE))
+            _Matcher(c, regex.compile(whole_words(c.pattern(skip_words)), regex.IGNORECASE))
             for c in commands
         ]
         self._by_word: dict[str, list[int]] = {}
@@ -120,11 +144,16 @@ class Parser:
         if not clean:
             return ParseResult(errors=[ParseError(text="", reason="empty text")])
         result = ParseResult()
+        deadline = time.monotonic() + PARSE_BUDGET
         for segment in self._separator.split(clean):
             segment = segment.strip()
             if not segment:
                 continue
-            match self._parse_segment(segment, suggest=True):
+            try:
+                parsed = self._parse_segment(segment, suggest=True, deadline=deadline)
+            except _TooSlow as exc:
+                parsed = ParseError(text=segment[:80], reason=str(exc))
+            match parsed:
                 case Order() as order:
                     result.orders.append(order)
                 case ParseError() as error:
@@ -133,15 +162,18 @@ class Parser:
 
     def _parse_alone(self, phrase: str) -> Order | None:
         """The order `phrase` makes as one segment, if it makes one."""
-        parsed = self._parse_segment(phrase, suggest=False)
+        try:
+            parsed = self._parse_segment(phrase, False, time.monotonic() + PARSE_BUDGET)
+        except _TooSlow:
+            return None
         return parsed if isinstance(parsed, Order) else None
 
-    def _parse_segment(self, segment: str, suggest: bool) -> Order | ParseError:
+    def _parse_segment(self, segment: str, suggest: bool, deadline: float) -> Order | ParseError:
         words = segment.split(" ")
-        best: list[tuple[_Matcher, re.Match[str]]] = []
+        best: list[tuple[_Matcher, regex.Match[str]]] = []
         best_words = 0
         for matcher in self._commands.candidates(words):
-            for found in matcher.regex.finditer(segment):
+            for found in _finditer(matcher, segment, deadline):
                 covered = len(found.group(0).split())
                 if covered > best_words:
                     best, best_words = [(matcher, found)], covered
@@ -176,7 +208,7 @@ class Parser:
             )
         suggestions = self._suggester.suggest(segment) if suggest else []
         for matcher in self._prefixes.candidates(words):
-            if matcher.regex.search(segment):
+            if next(_finditer(matcher, segment, deadline), None) is not None:
                 order = matcher.command.order
                 cases = ", ".join(order.example(case) for case in order.cases)
                 reason = f"'{order.description}' needs one of: {cases}"
