@@ -40,7 +40,7 @@ from .text import normalise
 RESERVED_KEYS = frozenset({"voice_alias", "label", "description", "cases", "slots"})
 POSE_KEYS = ("x", "y", "yaw")
 DEFAULT_SEPARATOR = "then"
-DEFAULT_SKIP_WORDS = ("a", "an", "the", "to", "please", "now")
+DEFAULT_SKIP_WORDS = ("a", "the", "to", "please", "now")
 """Words people add around and inside commands ("please reach the kitchen now"): the
 parser ignores them there and the recogniser's grammar makes them optional there."""
 
