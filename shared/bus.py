@@ -110,7 +110,7 @@ class Bus:
         self._loop = loop
         self._closers = contextlib.ExitStack()
         self._encoder = msgspec.json.Encoder()
-        self._running: set[asyncio.Task[tuple[bytes, zenoh.Encoding]]] = set()
+        self._running: set[asyncio.Task[tuple[bytes, zenoh.Encoding] | None]] = set()
         """Handler tasks in flight (the loop keeps only weak references to tasks)."""
         self._streams: set[Stream] = set()
         self._closers.callback(self._close_streams)
@@ -197,8 +197,9 @@ class Bus:
         handler: Callable[[str, T], None],
         on_loop: bool = True,
         history: bool = False,
-    ) -> None:
-        """Call `handler(key, message)` on the loop for every sample that decodes.
+    ) -> Callable[[], None]:
+        """Call `handler(key, message)` on the loop for every sample that decodes, until
+        the bus closes or the returned function ends the subscription.
 
         With `history`, also for the last message of every `latest` publisher on `key`,
         whenever either side starts. With `on_loop` False the handler runs on Zenoh's own
@@ -227,12 +228,28 @@ class Bus:
             )
         else:
             subscriber = self._session.declare_subscriber(key, _direct(on_sample))
-        self._closers.callback(subscriber.undeclare)
+        return self._undeclare_once(subscriber)
+
+    def _undeclare_once(self, declared: Any) -> Callable[[], None]:
+        """A function that undeclares `declared` once, now or when the bus closes."""
+        live = True
+
+        def undeclare() -> None:
+            nonlocal live
+            if live:
+                live = False
+                declared.undeclare()
+
+        self._closers.callback(undeclare)
+        return undeclare
 
     # --- request / reply ----------------------------------------------------------------
 
-    async def request_bytes(self, key: str, payload: bytes, timeout: float) -> bytes:
-        """Send one query and return the first good reply's payload."""
+    async def request_bytes(
+        self, key: str, payload: bytes, timeout: float, urgent: bool = False
+    ) -> bytes:
+        """Send one query and return the first good reply's payload. An `urgent` one (a
+        stop, a cancel) waits for room instead of being dropped, and goes first."""
         future: asyncio.Future[bytes] = self._loop.create_future()
 
         def settle(result: bytes | BaseException) -> None:
@@ -260,19 +277,32 @@ class Bus:
             if not answered:  # one loop wake-up per request, not two
                 self._call_soon(settle, BusError(f"{key}: no service answered"))
 
+        qos: dict[str, Any] = {}
+        if urgent:
+            qos = {
+                "congestion_control": zenoh.CongestionControl.BLOCK,
+                "priority": zenoh.Priority.REAL_TIME,
+                "express": True,
+            }
         self._session.get(
             key,
             zenoh.handlers.Callback(on_reply, on_done, indirect=False),
             payload=payload,
             timeout=timeout,
+            **qos,
         )
         return await future
 
     async def request(
-        self, key: str, message: Message, decode: Decode[T], timeout: float = 5.0
+        self,
+        key: str,
+        message: Message,
+        decode: Decode[T],
+        timeout: float = 5.0,
+        urgent: bool = False,
     ) -> T:
         """Send `message` as a query on `key` and decode the reply."""
-        payload = await self.request_bytes(key, self._encoder.encode(message), timeout)
+        payload = await self.request_bytes(key, self._encoder.encode(message), timeout, urgent)
         try:
             return decode(payload)
         except (msgspec.DecodeError, msgspec.ValidationError) as exc:
@@ -317,30 +347,37 @@ class Bus:
 
         self._answer_queries(key, respond)
 
-    def serve_bytes(self, key: str, handler: Callable[[bytes], Awaitable[bytes]]) -> None:
+    def serve_bytes(self, key: str, handler: Callable[[bytes], Awaitable[bytes | None]]) -> None:
         """Answer queries whose payloads are raw bytes (CDR), for ROS-side services; a
-        handler that raises is answered with a Zenoh error reply."""
+        handler that raises is answered with a Zenoh error reply, one that returns None is
+        not answered at all (the query ends with no reply, as when a route is lost)."""
 
-        async def respond(_query_key: str, raw: bytes) -> tuple[bytes, zenoh.Encoding]:
-            return await handler(raw), CDR
+        async def respond(_query_key: str, raw: bytes) -> tuple[bytes, zenoh.Encoding] | None:
+            answer = await handler(raw)
+            return None if answer is None else (answer, CDR)
 
         self._answer_queries(key, respond)
 
     def _answer_queries(
-        self, key: str, respond: Callable[[str, bytes], Awaitable[tuple[bytes, zenoh.Encoding]]]
+        self,
+        key: str,
+        respond: Callable[[str, bytes], Awaitable[tuple[bytes, zenoh.Encoding] | None]],
     ) -> None:
         """Declare a queryable on `key` whose answers `respond(query_key, payload)` makes,
         run as a task on the loop; the reply leaves from the loop when the task ends."""
 
-        def reply(query: zenoh.Query, done: asyncio.Task[tuple[bytes, zenoh.Encoding]]) -> None:
+        def reply(
+            query: zenoh.Query, done: asyncio.Task[tuple[bytes, zenoh.Encoding] | None]
+        ) -> None:
             self._running.discard(done)
             try:
                 if done.cancelled():
                     return
                 error = done.exception()
                 if error is None:
-                    payload, encoding = done.result()
-                    query.reply(query.key_expr, payload, encoding=encoding)
+                    answer = done.result()
+                    if answer is not None:
+                        query.reply(query.key_expr, answer[0], encoding=answer[1])
                 else:
                     _LOGGER.warning("query on %s failed: %s", key, error)
                     query.reply_err(str(error))
@@ -367,17 +404,7 @@ class Bus:
     def announce(self, key: str) -> Callable[[], None]:
         """Hold a liveliness token on `key` until the bus closes, or until the returned
         function withdraws it (a service going away says so before it stops serving)."""
-        token = self._session.liveliness().declare_token(key)
-        held = True
-
-        def withdraw() -> None:
-            nonlocal held
-            if held:
-                held = False
-                token.undeclare()
-
-        self._closers.callback(withdraw)
-        return withdraw
+        return self._undeclare_once(self._session.liveliness().declare_token(key))
 
     def watch(self, key: str, handler: Callable[[str, bool], None]) -> None:
         """Call `handler(token_key, alive)` on the loop as tokens under `key` come and go."""

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
+from enum import StrEnum
 
 ROOT = "voice"
 _CHUNK = re.compile(r"^[A-Za-z0-9_-]+$")
@@ -156,17 +157,44 @@ class ConverterKeys:
         return f"{ROOT}/*/stt/transcript"
 
 
+_ROS_TOKEN = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+
+
+def check_ros_name(name: str, what: str) -> str:
+    """`name` without its leading '/', if ROS 2 accepts it as a topic, action or namespace
+    ('bot1', 'diff_drive_controller/cmd_vel'); else ValueError naming `what`."""
+    parts = name.strip("/").split("/") if name.strip("/") else []
+    for part in parts:
+        if not _ROS_TOKEN.match(part) or "__" in part:
+            raise ValueError(
+                f"{what} {name!r}: {part!r} is not a ROS 2 name; use letters, digits and "
+                "single '_', not starting with a digit ('-' and '.' are not allowed)"
+            )
+    return "/".join(parts)
+
+
 @dataclass(frozen=True)
 class BridgeKeys:
-    """Keys of a ROS 2 graph as zenoh-bridge-ros2dds exposes it under `namespace`."""
+    """Keys of a ROS 2 graph as zenoh-bridge-ros2dds exposes it under `namespace`.
+
+    The robot's topic and action names can be remapped ('diff_drive_controller/cmd_vel'):
+    the bridge turns ROS name ``/a/b`` under namespace ``/ns`` into key ``ns/a/b``.
+    """
 
     namespace: str = ""
+    cmd_vel_name: str = "cmd_vel"
+    odom_name: str = "odom"
+    camera_name: str = "camera/image_raw"
+    navigate_name: str = "navigate_to_pose"
+    """Nav2's NavigateToPose action."""
 
     def __post_init__(self) -> None:
-        parts = [p for p in self.namespace.strip("/").split("/") if p]
-        for part in parts:
-            check_chunk(part, "ROS namespace part")
-        object.__setattr__(self, "namespace", "/".join(parts))
+        object.__setattr__(self, "namespace", check_ros_name(self.namespace, "ROS namespace"))
+        for field in ("cmd_vel_name", "odom_name", "camera_name", "navigate_name"):
+            name = check_ros_name(getattr(self, field), field.removesuffix("_name") + " name")
+            if not name:
+                raise ValueError(f"{field.removesuffix('_name')} name must not be empty")
+            object.__setattr__(self, field, name)
 
     def topic(self, name: str) -> str:
         """The key of a ROS topic, service or action member `name` ('/cmd_vel' or 'cmd_vel')."""
@@ -175,11 +203,11 @@ class BridgeKeys:
 
     @property
     def cmd_vel(self) -> str:
-        return self.topic("cmd_vel")
+        return self.topic(self.cmd_vel_name)
 
     @property
     def odom(self) -> str:
-        return self.topic("odom")
+        return self.topic(self.odom_name)
 
     @property
     def tf(self) -> str:
@@ -187,7 +215,7 @@ class BridgeKeys:
 
     @property
     def camera_image(self) -> str:
-        return self.topic("camera/image_raw")
+        return self.topic(self.camera_name)
 
     @property
     def simulator(self) -> str:
@@ -200,3 +228,61 @@ class BridgeKeys:
         if member not in {"send_goal", "get_result", "cancel_goal", "feedback", "status"}:
             raise ValueError(f"unknown action member {member!r}")
         return self.topic(f"{action.strip('/')}/_action/{member}")
+
+    def navigate(self, member: str) -> str:
+        """A route of the robot's NavigateToPose action."""
+        return self.action(self.navigate_name, member)
+
+
+# --- what zenoh-bridge-ros2dds announces ------------------------------------------------------
+# The bridge holds a liveliness token per ROS interface it discovered:
+# ``@/<zid>/@ros2_lv/<kind>/<key>/<type>[/<qos>]``, '/' inside key and type written '§'.
+
+BRIDGE_TOKENS = "@/*/@ros2_lv/**"
+_BRIDGE_SLASH = "§"
+
+
+class BridgeKind(StrEnum):
+    """What kind of ROS interface a bridge token stands for."""
+
+    PUBLISHER = "MP"
+    SUBSCRIBER = "MS"
+    SERVICE_SERVER = "SS"
+    SERVICE_CLIENT = "SC"
+    ACTION_SERVER = "AS"
+    ACTION_CLIENT = "AC"
+
+
+@dataclass(frozen=True)
+class BridgeToken:
+    """One ROS interface as the bridge announces it."""
+
+    kind: BridgeKind
+    key: str
+    """The interface's key ('bot1/cmd_vel')."""
+    ros_type: str
+    """Its ROS type ('geometry_msgs/msg/TwistStamped')."""
+
+    def token_key(self, zid: str, qos: str = ":1:0:0,10") -> str:
+        """The token's own key expression, as the bridge running as `zid` declares it
+        (topics carry a QoS chunk: keyless, reliable, volatile, keep last 10 by default)."""
+        parts = ["@", zid, "@ros2_lv", self.kind.value]
+        parts += [self.key.replace("/", _BRIDGE_SLASH), self.ros_type.replace("/", _BRIDGE_SLASH)]
+        if self.kind in (BridgeKind.PUBLISHER, BridgeKind.SUBSCRIBER):
+            parts.append(qos)
+        return "/".join(parts)
+
+    @staticmethod
+    def parse(token_key: str) -> BridgeToken | None:
+        """The interface behind a bridge token's key, or None for any other key (the
+        bridge's own ``@/<zid>/@ros2_lv`` token, or something else)."""
+        parts = token_key.split("/")
+        if len(parts) < 6 or parts[0] != "@" or parts[2] != "@ros2_lv":
+            return None
+        try:
+            kind = BridgeKind(parts[3])
+        except ValueError:
+            return None
+        return BridgeToken(
+            kind, parts[4].replace(_BRIDGE_SLASH, "/"), parts[5].replace(_BRIDGE_SLASH, "/")
+        )

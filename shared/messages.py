@@ -233,6 +233,12 @@ class ExecutorInfo(Message):
     namespace: str = ""
     """The bridge namespace ('' or 'bot1')."""
     distro: str = "jazzy"
+    cmd_vel: str = "cmd_vel"
+    """The velocity topic's name."""
+    cmd_vel_type: str = "twist"
+    """What it takes: 'twist' or 'stamped'."""
+    navigate: str = "navigate_to_pose"
+    """The NavigateToPose action's name."""
 
 
 class RobotPose(Message):

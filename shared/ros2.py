@@ -71,13 +71,72 @@ class CancelCode(IntEnum):
     GOAL_TERMINATED = 3
 
 
-class NavigateError(IntEnum):
-    """Jazzy's NavigateToPose_Result.error_code values (Humble's Result has no error code)."""
+class CmdVelType(StrEnum):
+    """What a robot's velocity topic takes: Humble's and most drivers' Twist, or the
+    TwistStamped of Jazzy's ros2_control diff drive controller and Kilted's Nav2."""
 
-    NONE = 0
-    UNKNOWN = 9000
-    FAILED_TO_LOAD_BEHAVIOR_TREE = 9001
-    TF_ERROR = 9002
+    TWIST = "twist"
+    STAMPED = "stamped"
+
+    @property
+    def ros_type(self) -> str:
+        return (
+            "geometry_msgs/msg/TwistStamped"
+            if self is CmdVelType.STAMPED
+            else ("geometry_msgs/msg/Twist")
+        )
+
+    @staticmethod
+    def of(ros_type: str) -> CmdVelType | None:
+        """The type a bridge token names, if it is one of these."""
+        return next((kind for kind in CmdVelType if kind.ros_type == ros_type), None)
+
+
+class CameraType(StrEnum):
+    """A camera topic's message: raw sensor_msgs/Image or a CompressedImage (JPEG, PNG)."""
+
+    RAW = "raw"
+    COMPRESSED = "compressed"
+
+    @property
+    def ros_type(self) -> str:
+        return (
+            "sensor_msgs/msg/CompressedImage"
+            if self is CameraType.COMPRESSED
+            else ("sensor_msgs/msg/Image")
+        )
+
+    @staticmethod
+    def of(ros_type: str) -> CameraType | None:
+        return next((kind for kind in CameraType if kind.ros_type == ros_type), None)
+
+
+NAVIGATION_ERRORS = {
+    100: "controller: unknown",
+    101: "controller: invalid controller",
+    102: "controller: TF error",
+    103: "controller: invalid path",
+    104: "controller: patience exceeded",
+    105: "controller: failed to make progress",
+    106: "controller: no valid control",
+    107: "controller: timed out",
+    200: "planner: unknown",
+    201: "planner: invalid planner",
+    202: "planner: TF error",
+    203: "planner: start outside the map",
+    204: "planner: goal outside the map",
+    205: "planner: start occupied",
+    206: "planner: goal occupied",
+    207: "planner: timed out",
+    208: "planner: no valid path",
+    9000: "navigator: unknown",
+    9001: "navigator: failed to load the behaviour tree",
+    9002: "navigator: TF error",
+    9003: "navigator: timed out",
+}
+"""What Nav2's NavigateToPose result codes mean. Humble's result has none. Jazzy passes on
+the code of the behaviour tree's FollowPath (100s) or ComputePathToPose (200s), the lowest
+one set, and no message; Kilted adds the navigator's own 9000s and an error message."""
 
 
 def new_goal_id() -> bytes:
@@ -152,6 +211,13 @@ class Image(NamedTuple):
     encoding: str
     data: bytes
     """Rows of `width` pixels, top row first, no padding."""
+
+
+class CompressedImage(NamedTuple):
+    format: str
+    """image_transport's description: 'rgb8; jpeg compressed bgr8', 'bgr8; png compressed bgr8'."""
+    data: bytes
+    """The encoded file (JPEG, PNG...)."""
 
 
 # Bytes per pixel of the encodings `Ros2Codec.image` writes.
@@ -265,6 +331,33 @@ class Ros2Codec:
         """(linear x, angular z) of a Twist; a planar base ignores the other axes."""
         msg = self._decode(raw, "geometry_msgs/msg/Twist")
         return float(msg.linear.x), float(msg.angular.z)
+
+    # --- geometry_msgs/msg/TwistStamped -------------------------------------------------
+
+    def twist_stamped(
+        self, linear_x: float, angular_z: float, stamp_s: float = 0.0, frame: str = "base_link"
+    ) -> bytes:
+        msg = self._types["geometry_msgs/msg/TwistStamped"](
+            header=self._header(stamp_s, frame), twist=self._twist(linear_x, angular_z)
+        )
+        return self._encode(msg, "geometry_msgs/msg/TwistStamped")
+
+    def read_twist_stamped(self, raw: bytes) -> tuple[float, float]:
+        msg = self._decode(raw, "geometry_msgs/msg/TwistStamped")
+        return float(msg.twist.linear.x), float(msg.twist.angular.z)
+
+    def velocity(
+        self, kind: CmdVelType, linear_x: float, angular_z: float, stamp_s: float = 0.0
+    ) -> bytes:
+        """A velocity command of the type the robot's cmd_vel takes."""
+        if kind is CmdVelType.STAMPED:
+            return self.twist_stamped(linear_x, angular_z, stamp_s)
+        return self.twist(linear_x, angular_z)
+
+    def read_velocity(self, kind: CmdVelType, raw: bytes) -> tuple[float, float]:
+        if kind is CmdVelType.STAMPED:
+            return self.read_twist_stamped(raw)
+        return self.read_twist(raw)
 
     # --- nav_msgs/msg/Odometry ----------------------------------------------------------
 
@@ -511,6 +604,22 @@ class Ros2Codec:
             data = b"".join(data[i * step : i * step + row] for i in range(height))
         return Image(width=width, height=height, encoding=str(msg.encoding), data=data)
 
+    # --- sensor_msgs/msg/CompressedImage --------------------------------------------------
+
+    def compressed_image(
+        self, image_format: str, data: bytes, stamp_s: float = 0.0, frame: str = "camera"
+    ) -> bytes:
+        msg = self._types["sensor_msgs/msg/CompressedImage"](
+            header=self._header(stamp_s, frame),
+            format=image_format,
+            data=np.frombuffer(data, dtype=np.uint8),
+        )
+        return self._encode(msg, "sensor_msgs/msg/CompressedImage")
+
+    def read_compressed_image(self, raw: bytes) -> CompressedImage:
+        msg = self._decode(raw, "sensor_msgs/msg/CompressedImage")
+        return CompressedImage(format=str(msg.format), data=bytes(msg.data))
+
     # --- helpers ------------------------------------------------------------------------
 
     def _encode(self, msg: object, typename: str) -> bytes:
@@ -559,6 +668,23 @@ class Ros2Codec:
                 x=0.0, y=0.0, z=math.sin(pose.yaw / 2), w=math.cos(pose.yaw / 2)
             ),
         )
+
+
+def distro_of_result(raw: bytes) -> RosDistro:
+    """Which distribution's NavigateToPose layout a get_result reply is in. Any reply
+    tells, even the one an action server gives at once for a goal it does not know, so an
+    executor can learn its robot's distribution before sending a goal."""
+    fits = []
+    for distro in RosDistro:
+        try:
+            Ros2Codec(distro).read_get_result_response(raw)
+        except CdrError:
+            continue
+        fits.append(distro)
+    if len(fits) != 1:
+        found = "every" if fits else "no"
+        raise CdrError(f"{len(raw)} bytes fit {found} known NavigateToPose result layout")
+    return fits[0]
 
 
 def _split_seconds(seconds: float) -> tuple[int, int]:

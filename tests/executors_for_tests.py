@@ -4,10 +4,18 @@ the way an integrator binds their own module."""
 from __future__ import annotations
 
 import asyncio
+from typing import Annotated
+
+import msgspec
 
 from services.executor import ExecutionContext, Executor
 from shared.errors import OrderFailed
 from shared.messages import Order
+
+
+class Speed(msgspec.Struct):
+    metres_per_second: Annotated[float, msgspec.Meta(gt=0, le=2)]
+    mode: str = "cruise"
 
 
 class Boom(Executor):
@@ -41,15 +49,60 @@ class Slow(Executor):
 
 
 class Stubborn(Executor):
-    """Ignores cancellation for a long time, as a badly written executor might."""
+    """Ignores cancellation for `seconds` (default 3), as a badly written executor might."""
 
     labels = ("stubborn",)
 
     async def execute(self, order: Order, ctx: ExecutionContext) -> str | None:
         ctx.progress("running, deaf to cancel")
-        for _ in range(600):
+        loop = asyncio.get_running_loop()
+        end = loop.time() + float(order.params.get("seconds", 3))
+        while loop.time() < end:
             try:
                 await asyncio.sleep(0.1)
             except asyncio.CancelledError:
                 continue
         return "finally"
+
+
+class Runaway(Executor):
+    """Drives forward and goes on driving whatever happens: cancels and errors are
+    swallowed. Only a revoked robot handle keeps it from moving the robot."""
+
+    labels = ("runaway",)
+
+    async def execute(self, order: Order, ctx: ExecutionContext) -> str | None:
+        while True:
+            try:
+                ctx.robot.drive(0.3, 0.0)
+                ctx.progress("driving")
+            except Exception as exc:
+                ctx.progress(f"swallowed: {exc}")
+            try:
+                await asyncio.sleep(0.05)
+            except asyncio.CancelledError:
+                continue
+
+
+class Strict(Executor):
+    """Declares typed parameters: the runner rejects orders that do not fit."""
+
+    labels = ("strict",)
+    params_type = Speed
+
+    async def execute(self, order: Order, ctx: ExecutionContext) -> str | None:
+        speed: Speed = ctx.params
+        return f"{speed.metres_per_second:g} m/s for {speed.mode}"
+
+
+class Greeter(Executor):
+    """Takes constructor arguments, as bound from an executors file."""
+
+    labels = ("greet",)
+
+    def __init__(self, greeting: str, times: int = 1) -> None:
+        self.greeting = greeting
+        self.times = times
+
+    async def execute(self, order: Order, ctx: ExecutionContext) -> str | None:
+        return " ".join([self.greeting] * self.times)

@@ -4,18 +4,26 @@ from __future__ import annotations
 
 import asyncio
 import uuid
-from collections.abc import Callable
+from collections.abc import Callable, Coroutine
+from pathlib import Path
 from typing import Any
 
-from shared.bus import Bus, json_decoder
+from shared.bus import Bus, BusOptions, json_decoder
 from shared.errors import BusError
-from shared.keys import RobotKeys
+from shared.keys import BridgeKeys, RobotKeys
 from shared.messages import (
+    Accepted,
+    CancelOrder,
+    Execute,
+    ExecutorEvent,
+    ExecutorReply,
     GetHistory,
     GetState,
+    Halt,
     HistoryPage,
     Message,
     Order,
+    OrderFinished,
     OrderRecord,
     State,
     StateReply,
@@ -23,6 +31,9 @@ from shared.messages import (
     Submitted,
     SupervisorReply,
 )
+from shared.ros2 import Odometry, Ros2Codec
+
+from .conftest import Processes, async_wait_until
 
 
 def order(label: str, **params: Any) -> Order:
@@ -105,3 +116,109 @@ async def client_wait_ready(client: Client, executor: bool = True) -> None:
             pass  # supervisor not up yet
         await asyncio.sleep(0.05)
     raise AssertionError("supervisor never saw the executor")
+
+
+class ExecutorHarness:
+    """Sends orders straight to an executor, in the supervisor's seat, and keeps what it
+    reports and the robot's odometry (with the loop time each arrived)."""
+
+    def __init__(self, bus: Bus, robot: str = "r1", bridge: BridgeKeys | None = None) -> None:
+        self.bus = bus
+        self.keys = RobotKeys(robot)
+        self.bridge = bridge or BridgeKeys()
+        self.events: dict[str, list[ExecutorEvent]] = {}
+        self.odometry: list[tuple[float, Odometry]] = []
+        self._decode = json_decoder(ExecutorReply)
+        loop = asyncio.get_running_loop()
+        bus.subscribe(self.keys.executor_events, json_decoder(ExecutorEvent), self._on_event)
+        bus.subscribe(
+            self.bridge.odom,
+            Ros2Codec().read_odometry,
+            lambda _key, odom: self.odometry.append((loop.time(), odom)),
+        )
+
+    def _on_event(self, _key: str, event: ExecutorEvent) -> None:
+        self.events.setdefault(event.order_id, []).append(event)
+
+    async def ready(self) -> None:
+        async def answered() -> bool:
+            replies = self.bus.session.liveliness().get(self.keys.alive("executor"), timeout=1)
+            return any(r.ok is not None for r in replies)
+
+        for _ in range(200):
+            if await answered() and self.odometry:
+                return
+            await asyncio.sleep(0.05)
+        raise AssertionError("executor or sim never came up")
+
+    async def offer(self, order: Order) -> tuple[str, ExecutorReply]:
+        """Send `order` for execution: its id and the executor's answer."""
+        order_id = uuid.uuid4().hex[:12]
+        reply = await self.bus.request(
+            self.keys.executor_execute, Execute(order_id=order_id, order=order), self._decode
+        )
+        return order_id, reply
+
+    async def execute(self, order: Order) -> str:
+        order_id, reply = await self.offer(order)
+        assert isinstance(reply, Accepted), reply
+        return order_id
+
+    async def control(self, request: CancelOrder | Halt) -> object:
+        return await self.bus.request(self.keys.executor_control, request, self._decode)
+
+    async def finished(self, order_id: str, timeout: float = 30.0) -> OrderFinished:
+        def done() -> OrderFinished | None:
+            return next(
+                (e for e in self.events.get(order_id, []) if isinstance(e, OrderFinished)), None
+            )
+
+        await async_wait_until(done, timeout, f"order {order_id} to finish")
+        result = done()
+        assert result is not None
+        return result
+
+    def pose(self) -> Odometry:
+        return self.odometry[-1][1]
+
+    def since(self, moment: float) -> list[Odometry]:
+        """Odometry that arrived after loop time `moment`."""
+        return [odom for at, odom in self.odometry if at > moment]
+
+
+def run_harness(
+    router: str,
+    body: Callable[[ExecutorHarness], Coroutine[Any, Any, None]],
+    bridge: BridgeKeys | None = None,
+) -> None:
+    """Run `body` with a harness on a bus connected to `router`, once the executor and
+    the robot are up."""
+
+    async def main() -> None:
+        with Bus.open(BusOptions(connect=[router]), asyncio.get_running_loop()) as bus:
+            harness = ExecutorHarness(bus, bridge=bridge)
+            await harness.ready()
+            await body(harness)
+
+    asyncio.run(main())
+
+
+def start_robot(
+    processes: Processes,
+    router: str,
+    photos: Path,
+    sim_args: tuple[str, ...] = (),
+    executor_args: tuple[str, ...] = (),
+) -> None:
+    """The simulator and an executor for robot 'r1' that saves photos in `photos`."""
+    processes.start("services.sim", "--connect", router, *sim_args)
+    processes.start(
+        "services.executor",
+        "--connect",
+        router,
+        "--robot",
+        "r1",
+        "--photo-dir",
+        str(photos),
+        *executor_args,
+    )

@@ -13,6 +13,10 @@ from pathlib import Path
 
 import pytest
 
+from services.executor.builtin.pic import TakePhoto
+from services.executor.framework import load_bindings_file
+from voicectl.cli import build_parser
+
 from .conftest import REPO, free_port, wait_until
 
 DOCS = REPO / "docs"
@@ -123,3 +127,30 @@ def test_executors_doc_tutorials_run_as_written(tmp_path: Path) -> None:
         assert product == "10 x 20 = 200"
         assert saved.startswith("saved 64x48 photo to ")
         assert Path(saved.removeprefix("saved 64x48 photo to ")).is_file()
+
+
+def test_executors_doc_executors_file_binds_and_its_typo_fails_as_shown(tmp_path: Path) -> None:
+    doc = DOCS / "executors.md"
+    text = block_after(doc, "save this as `executors.yaml`", "yaml")
+    (tmp_path / "executors.yaml").write_text(text)
+    ((executor, labels),) = load_bindings_file(tmp_path / "executors.yaml")
+    assert isinstance(executor, TakePhoto)
+    assert (labels, executor.directory) == (("snapshot",), Path("~/snapshots").expanduser())
+
+    up_line = block_after(doc, "`voicectl executor` or `voicectl up`", "sh").strip()
+    args = build_parser().parse_args(up_line.removeprefix(".venv/bin/voicectl ").split())
+    assert args.executors == ["executors.yaml"]
+
+    (tmp_path / "executors.yaml").write_text(text.replace("directory", "directry"))
+    shown = block_after(doc, "With `directry` for `directory`", "").strip()
+    done = subprocess.run(
+        [sys.executable, "-m", "services.executor", "--executors", "executors.yaml"],
+        capture_output=True,
+        text=True,
+        cwd=tmp_path,
+        env={"PYTHONPATH": str(REPO), "PATH": "/usr/bin:/bin"},
+        timeout=60,
+        check=False,
+    )
+    assert done.returncode == 2
+    assert done.stderr.strip().splitlines()[-1] == shown

@@ -5,116 +5,34 @@ from __future__ import annotations
 
 import asyncio
 import math
-import uuid
 from pathlib import Path
 
 import pytest
 from PIL import Image as PilImage
 
-from shared.bus import Bus, BusOptions, json_decoder
-from shared.keys import BridgeKeys, RobotKeys
+from shared.keys import BridgeKeys
 from shared.messages import (
-    Accepted,
     CancelOrder,
     Done,
-    Execute,
-    ExecutorEvent,
-    ExecutorReply,
     Halt,
     Order,
-    OrderFinished,
     OrderProgress,
     OrderStatus,
+    Rejected,
     TargetPose,
 )
-from shared.ros2 import Odometry, Ros2Codec, RosDistro
+from shared.ros2 import Ros2Codec, RosDistro
 
 from .conftest import Processes, async_wait_until
-
-
-class Harness:
-    """Sends orders straight to the executor and keeps what it reports."""
-
-    def __init__(self, bus: Bus, robot: str = "r1") -> None:
-        self.bus = bus
-        self.keys = RobotKeys(robot)
-        self.events: dict[str, list[ExecutorEvent]] = {}
-        self.odometry: list[tuple[float, Odometry]] = []
-        self._decode = json_decoder(ExecutorReply)
-        codec = Ros2Codec(RosDistro.JAZZY)
-        loop = asyncio.get_running_loop()
-        bus.subscribe(self.keys.executor_events, json_decoder(ExecutorEvent), self._on_event)
-        bus.subscribe(
-            BridgeKeys().odom,
-            codec.read_odometry,
-            lambda _key, odom: self.odometry.append((loop.time(), odom)),
-        )
-
-    def _on_event(self, _key: str, event: ExecutorEvent) -> None:
-        self.events.setdefault(event.order_id, []).append(event)
-
-    async def ready(self) -> None:
-        async def answered() -> bool:
-            replies = self.bus.session.liveliness().get(self.keys.alive("executor"), timeout=1)
-            return any(r.ok is not None for r in replies)
-
-        for _ in range(200):
-            if await answered() and self.odometry:
-                return
-            await asyncio.sleep(0.05)
-        raise AssertionError("executor or sim never came up")
-
-    async def execute(self, order: Order) -> str:
-        order_id = uuid.uuid4().hex[:12]
-        reply = await self.bus.request(
-            self.keys.executor_execute, Execute(order_id=order_id, order=order), self._decode
-        )
-        assert isinstance(reply, Accepted), reply
-        return order_id
-
-    async def control(self, request: CancelOrder | Halt) -> object:
-        return await self.bus.request(self.keys.executor_control, request, self._decode)
-
-    async def finished(self, order_id: str, timeout: float = 30.0) -> OrderFinished:
-        def done() -> OrderFinished | None:
-            return next(
-                (e for e in self.events.get(order_id, []) if isinstance(e, OrderFinished)), None
-            )
-
-        await async_wait_until(done, timeout, f"order {order_id} to finish")
-        result = done()
-        assert result is not None
-        return result
-
-    def pose(self) -> Odometry:
-        return self.odometry[-1][1]
+from .support import ExecutorHarness, run_harness, start_robot
 
 
 @pytest.fixture
 def robot(router: str, processes: Processes, tmp_path: Path) -> tuple[str, Path]:
-    processes.start("services.sim", "--connect", router)
     photos = tmp_path / "photos"
-    processes.start(
-        "services.executor",
-        "--connect",
-        router,
-        "--robot",
-        "r1",
-        "--photo-dir",
-        str(photos),
-    )
+    executor_args = ("--cancel-deadline", "0.5", "--executor", "tests.executors_for_tests:Runaway")
+    start_robot(processes, router, photos, executor_args=executor_args)
     return router, photos
-
-
-def run(router: str, body: object) -> None:
-    async def main() -> None:
-        with Bus.open(BusOptions(connect=[router]), asyncio.get_running_loop()) as bus:
-            harness = Harness(bus)
-            await harness.ready()
-            assert callable(body)
-            await body(harness)
-
-    asyncio.run(main())
 
 
 def order(label: str, **params: float) -> Order:
@@ -122,7 +40,7 @@ def order(label: str, **params: float) -> Order:
 
 
 def test_drive_and_rotate_close_the_loop_on_odometry(robot: tuple[str, Path]) -> None:
-    async def body(harness: Harness) -> None:
+    async def body(harness: ExecutorHarness) -> None:
         start = harness.pose().pose
         result = await harness.finished(await harness.execute(order("drive", distance=0.6)))
         assert (result.status, result.message) == (OrderStatus.SUCCEEDED, "drove 0.6 m")
@@ -150,11 +68,11 @@ def test_drive_and_rotate_close_the_loop_on_odometry(robot: tuple[str, Path]) ->
         assert bad.status == OrderStatus.FAILED
         assert "needs a 'distance' parameter or a base_link target pose" in bad.message
 
-    run(robot[0], body)
+    run_harness(robot[0], body)
 
 
 def test_pic_saves_the_next_camera_frame_as_png(robot: tuple[str, Path]) -> None:
-    async def body(harness: Harness) -> None:
+    async def body(harness: ExecutorHarness) -> None:
         result = await harness.finished(await harness.execute(order("pic", wait=1)))
         assert result.status == OrderStatus.SUCCEEDED, result.message
         (photo,) = robot[1].glob("*.png")
@@ -165,13 +83,13 @@ def test_pic_saves_the_next_camera_frame_as_png(robot: tuple[str, Path]) -> None
         progress = [e for e in harness.events[result.order_id] if isinstance(e, OrderProgress)]
         assert progress[0].progress.text == "photo in 1 s"
 
-    run(robot[0], body)
+    run_harness(robot[0], body)
 
 
 def test_mbgoal_reports_remaining_distance_and_cancel_stops_the_robot_fast(
     robot: tuple[str, Path],
 ) -> None:
-    async def body(harness: Harness) -> None:
+    async def body(harness: ExecutorHarness) -> None:
         far = Order(
             order="goal",
             label="mbgoal",
@@ -204,11 +122,11 @@ def test_mbgoal_reports_remaining_distance_and_cancel_stops_the_robot_fast(
         result = await harness.finished(order_id)
         assert (result.status, result.message) == (OrderStatus.CANCELLED, "cancelled")
 
-    run(robot[0], body)
+    run_harness(robot[0], body)
 
 
 def test_halt_stops_a_driving_robot_outside_any_order(robot: tuple[str, Path]) -> None:
-    async def body(harness: Harness) -> None:
+    async def body(harness: ExecutorHarness) -> None:
         order_id = await harness.execute(order("drive", distance=5.0))
         await async_wait_until(lambda: harness.pose().linear_x > 0.2, 10.0, "driving")
         assert isinstance(await harness.control(Halt()), Done)
@@ -218,22 +136,22 @@ def test_halt_stops_a_driving_robot_outside_any_order(robot: tuple[str, Path]) -
         await asyncio.sleep(0.3)
         assert all(odom.linear_x == 0.0 for t, odom in harness.odometry if t > halted_at + 0.1)
 
-    run(robot[0], body)
+    run_harness(robot[0], body)
 
 
 def test_executor_announces_its_labels(robot: tuple[str, Path]) -> None:
-    async def body(harness: Harness) -> None:
+    async def body(harness: ExecutorHarness) -> None:
         replies = harness.bus.session.liveliness().get("voice/r1/labels/*", timeout=2)
         labels = sorted(str(r.ok.key_expr).rsplit("/", 1)[1] for r in replies if r.ok)
-        assert labels == ["drive", "mbgoal", "mul", "pic", "rotate", "wait"]
+        assert labels == ["drive", "mbgoal", "mul", "pic", "rotate", "runaway", "wait"]
         simulator = harness.bus.session.liveliness().get(BridgeKeys().simulator, timeout=2)
         assert [str(r.ok.key_expr) for r in simulator if r.ok] == ["voicectl_sim/alive"]
 
-    run(robot[0], body)
+    run_harness(robot[0], body)
 
 
 def test_sim_publishes_tf_that_agrees_with_odometry(robot: tuple[str, Path]) -> None:
-    async def body(harness: Harness) -> None:
+    async def body(harness: ExecutorHarness) -> None:
         codec = Ros2Codec(RosDistro.JAZZY)
         transforms: list[list[tuple[str, str, object]]] = []
         harness.bus.subscribe(
@@ -246,17 +164,51 @@ def test_sim_publishes_tf_that_agrees_with_odometry(robot: tuple[str, Path]) -> 
         odom = harness.pose().pose
         assert pose == odom  # the robot stands still: the latest of each agree exactly
 
-    run(robot[0], body)
+    run_harness(robot[0], body)
 
 
 def test_wait_pauses_for_the_spoken_seconds(robot: tuple[str, Path]) -> None:
-    async def body(harness: Harness) -> None:
+    async def body(harness: ExecutorHarness) -> None:
         loop = asyncio.get_running_loop()
         started = loop.time()
         result = await harness.finished(await harness.execute(order("wait", seconds=1.5)))
         assert (result.status, result.message) == (OrderStatus.SUCCEEDED, "waited 1.5 s")
         assert loop.time() - started >= 1.5
-        bad = await harness.finished(await harness.execute(order("wait", seconds=-1)))
-        assert bad.status == OrderStatus.FAILED
+        _, bad = await harness.offer(order("wait", seconds=-1))
+        assert bad == Rejected(
+            order_id=bad.order_id if isinstance(bad, Rejected) else "",
+            reason="'wait test' (wait): parameter 'seconds': Expected `float` >= 0.0",
+        )
 
-    run(robot[0], body)
+    run_harness(robot[0], body)
+
+
+def test_an_executor_that_outlives_its_order_cannot_move_the_robot(
+    robot: tuple[str, Path],
+) -> None:
+    """`runaway` swallows its cancel and keeps calling drive: once cut off, its robot
+    handle is revoked, the robot stops and stays stopped, and no order runs beside it."""
+
+    async def body(harness: ExecutorHarness) -> None:
+        order_id = await harness.execute(order("runaway"))
+        await async_wait_until(lambda: harness.pose().linear_x > 0.2, 10.0, "driving")
+        assert isinstance(await harness.control(CancelOrder(order_id=order_id)), Done)
+        result = await harness.finished(order_id)
+        assert result.status == OrderStatus.CANCELLED
+        assert result.message == "cancelled; executor did not stop in time, robot halted"
+        cut_off = asyncio.get_running_loop().time()
+        # Still trying, every 50 ms: one second of odometry shows the robot at rest.
+        await async_wait_until(
+            lambda: len([o for o in harness.since(cut_off + 0.3)]) >= 20, 10.0, "1 s of odometry"
+        )
+        assert all(odom.linear_x == 0.0 for odom in harness.since(cut_off + 0.3))
+        assert not [e for e in harness.events[order_id][-1:] if isinstance(e, OrderProgress)]
+
+        _, refused = await harness.offer(order("mul", first=2, second=3))
+        assert isinstance(refused, Rejected)
+        assert refused.reason == (
+            f"the executor of order '{order_id}' ignored its cancel and still runs; "
+            "no new order until it ends (restarting the executor ends it)"
+        )
+
+    run_harness(robot[0], body)

@@ -41,7 +41,10 @@ def test_tutorial_orders_keep_extra_keys_as_params() -> None:
     assert photo.params(None) == {"wait": 5}
     assert photo.target_pose(None) is None
     multiply = by_name["multiply"]
-    assert [multiply.params(c) for c in multiply.cases] == [{"a": 7, "b": 5}, {"a": 10, "b": 20}]
+    assert [multiply.params(c) for c in multiply.cases] == [
+        {"first": 7, "second": 5},
+        {"first": 10, "second": 20},
+    ]
 
 
 def test_a_directory_loads_every_file() -> None:

@@ -7,6 +7,7 @@ import asyncio
 import signal
 from collections.abc import Callable, Coroutine
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -32,13 +33,25 @@ USER_EXECUTORS = [
     "tests.executors_for_tests:Slow=slow,slow2",
     "--executor",
     "tests.executors_for_tests:Stubborn",
+    "--executor",
+    "tests.executors_for_tests:Strict",
 ]
+EXECUTORS_FILE = """\
+# One class, two setups: an integrator's executor configured without code changes.
+executors:
+  - class: tests.executors_for_tests:Greeter
+    args: {greeting: hello, times: 2}
+  - class: tests.executors_for_tests:Greeter
+    labels: [welcome]
+    args: {greeting: welcome aboard}
+"""
 
 
 @dataclass
 class Robot:
     router: str
     processes: Processes
+    executors_file: Path
     name: str = "r1"
 
     def start_executor(self) -> Any:
@@ -51,13 +64,17 @@ class Robot:
             "--cancel-deadline",
             "0.5",
             *USER_EXECUTORS,
+            "--executors",
+            str(self.executors_file),
         )
 
 
 @pytest.fixture
-def robot(router: str, processes: Processes) -> Robot:
+def robot(router: str, processes: Processes, tmp_path: Path) -> Robot:
     processes.start("services.supervisor", "--connect", router, "--robot", "r1")
-    bot = Robot(router, processes)
+    executors_file = tmp_path / "executors.yaml"
+    executors_file.write_text(EXECUTORS_FILE)
+    bot = Robot(router, processes, executors_file)
     bot.start_executor()
     return bot
 
@@ -75,7 +92,7 @@ def scenario(robot: Robot, body: Callable[[Client], Coroutine[Any, Any, None]]) 
 
 def test_results_of_builtin_and_user_executors(robot: Robot) -> None:
     async def body(client: Client) -> None:
-        ids = await client.submit(order("mul", a=6, b=7))
+        ids = await client.submit(order("mul", first=6, second=7))
         ok = await client.finished(ids[0])
         assert (ok.status, ok.message) == (OrderStatus.SUCCEEDED, "6 x 7 = 42")
 
@@ -87,12 +104,16 @@ def test_results_of_builtin_and_user_executors(robot: Robot) -> None:
         record = await client.finished(nobody)
         assert record.status == OrderStatus.REJECTED
         assert record.message == (
-            "unknown label 'dance'; bound labels: boom, drive, mbgoal, mul, pic, refuse, "
-            "rotate, slow, slow2, stubborn, wait"
+            "unknown label 'dance'; bound labels: boom, drive, greet, mbgoal, mul, pic, "
+            "refuse, rotate, slow, slow2, strict, stubborn, wait, welcome"
         )
 
+        greetings = await client.submit(order("greet"), order("welcome"))
+        records = [await client.finished(order_id) for order_id in greetings]
+        assert [r.message for r in records] == ["hello hello", "welcome aboard"]
+
         # the executor survived all of that
-        (again,) = await client.submit(order("mul", a=2, b=3))
+        (again,) = await client.submit(order("mul", first=2, second=3))
         assert (await client.finished(again)).status == OrderStatus.SUCCEEDED
 
     scenario(robot, body)
@@ -100,7 +121,7 @@ def test_results_of_builtin_and_user_executors(robot: Robot) -> None:
 
 def test_a_failure_cancels_the_rest_of_the_utterance(robot: Robot) -> None:
     async def body(client: Client) -> None:
-        refused, after = await client.submit(order("refuse"), order("mul", a=1, b=1))
+        refused, after = await client.submit(order("refuse"), order("mul", first=1, second=1))
         first = await client.finished(refused)
         assert (first.status, first.message) == (OrderStatus.FAILED, "door is closed")
         rest = await client.finished(after)
@@ -141,9 +162,9 @@ def test_cancel_running_and_queued_orders(robot: Robot) -> None:
     scenario(robot, body)
 
 
-def test_an_executor_that_ignores_cancel_is_cut_off(robot: Robot) -> None:
+def test_an_executor_that_ignores_cancel_is_cut_off_and_runs_alone(robot: Robot) -> None:
     async def body(client: Client) -> None:
-        (stubborn,) = await client.submit(order("stubborn"))
+        (stubborn,) = await client.submit(order("stubborn", seconds=4))
         await client.wait_state(
             lambda s: s.current is not None and s.current.progress is not None,
             "the order to be running",
@@ -152,15 +173,53 @@ def test_an_executor_that_ignores_cancel_is_cut_off(robot: Robot) -> None:
         record = await client.finished(stubborn, timeout=10.0)
         assert record.status == OrderStatus.CANCELLED
         assert "did not stop in time" in record.message
-        (after,) = await client.submit(order("mul", a=1, b=2))
-        assert (await client.finished(after)).status == OrderStatus.SUCCEEDED
+        # Its code still runs for a few seconds: nothing runs beside it.
+        (refused,) = await client.submit(order("mul", first=1, second=2))
+        rejected = await client.finished(refused)
+        assert rejected.status == OrderStatus.REJECTED
+        assert f"order '{stubborn}' ignored its cancel and still runs" in rejected.message
+        for _ in range(40):  # then orders run again
+            (after,) = await client.submit(order("mul", first=1, second=2))
+            if (await client.finished(after)).status == OrderStatus.SUCCEEDED:
+                break
+            await asyncio.sleep(0.25)
+        else:
+            raise AssertionError("orders stayed refused after the stubborn executor ended")
+
+    scenario(robot, body)
+
+
+def test_orders_are_checked_against_the_executors_parameter_types(robot: Robot) -> None:
+    async def body(client: Client) -> None:
+        (fits,) = await client.submit(order("strict", metres_per_second=1))
+        assert (await client.finished(fits)).message == "1 m/s for cruise"
+        for params, why in (
+            (
+                {"metres_per_second": True},
+                "parameter 'metres_per_second': Expected `float`, got `bool`",
+            ),
+            ({"metres_per_second": 3}, "parameter 'metres_per_second': Expected `float` <= 2.0"),
+            ({}, "missing parameter `metres_per_second`"),
+            ({"metres_per_second": 1, "mode": 5}, "parameter 'mode': Expected `str`, got `int`"),
+        ):
+            (bad,) = await client.submit(order("strict", **params))
+            record = await client.finished(bad)
+            assert (record.status, record.message) == (
+                OrderStatus.REJECTED,
+                f"'do strict' (strict): {why}",
+            )
+        # the seed's tutorial: mul reads first and second, and True is not a number
+        (wrong,) = await client.submit(order("mul", first=True, second=2))
+        assert (await client.finished(wrong)).status == OrderStatus.REJECTED
 
     scenario(robot, body)
 
 
 def test_emergency_stop_clears_everything(robot: Robot) -> None:
     async def body(client: Client) -> None:
-        ids = await client.submit(order("slow"), order("mul", a=1, b=1), order("mul", a=2, b=2))
+        ids = await client.submit(
+            order("slow"), order("mul", first=1, second=1), order("mul", first=2, second=2)
+        )
         await client.wait_state(lambda s: s.current is not None, "the order to start")
         reply = await client.ask(EmergencyStop())
         assert isinstance(reply, Done), reply
@@ -174,9 +233,9 @@ def test_emergency_stop_clears_everything(robot: Robot) -> None:
 def test_executor_lost_mid_order_pauses_the_queue(robot: Robot) -> None:
     async def body(client: Client) -> None:
         running, waiting = await client.submit(
-            order("slow"), order("mul", a=3, b=3), request_id="a"
+            order("slow"), order("mul", first=3, second=3), request_id="a"
         )
-        (other,) = await client.submit(order("mul", a=4, b=4), request_id="b")
+        (other,) = await client.submit(order("mul", first=4, second=4), request_id="b")
         await client.wait_state(
             lambda s: s.current is not None and s.current.progress is not None,
             "the executor to be running the order",

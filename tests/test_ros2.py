@@ -15,13 +15,16 @@ from hypothesis import strategies as st
 from shared.errors import VoicectlError
 from shared.ros2 import (
     CANCEL_ALL,
+    CameraType,
     CancelCode,
     CdrError,
+    CmdVelType,
+    CompressedImage,
     GoalStatus,
-    NavigateError,
     Pose2D,
     Ros2Codec,
     RosDistro,
+    distro_of_result,
     typestore,
 )
 
@@ -81,7 +84,7 @@ def test_get_result(codec: Ros2Codec) -> None:
 
 
 def test_get_result_error_details_exist_on_jazzy_only() -> None:
-    failed = (GoalStatus.ABORTED, NavigateError.TF_ERROR, "no transform map -> base_link")
+    failed = (GoalStatus.ABORTED, 202, "no transform map -> base_link")
     jazzy = Ros2Codec(RosDistro.JAZZY)
     humble = Ros2Codec(RosDistro.HUMBLE)
     assert jazzy.read_get_result_response(jazzy.get_result_response(*failed)) == failed
@@ -124,6 +127,42 @@ def test_image(codec: Ros2Codec) -> None:
     assert codec.read_image(codec.image(64, 48, "rgb8", data)) == (64, 48, "rgb8", data)
 
 
+def test_twist_stamped_and_the_velocity_of_either_type(codec: Ros2Codec) -> None:
+    assert codec.read_twist_stamped(codec.twist_stamped(0.25, -1.5, 12.5)) == (0.25, -1.5)
+    for kind in CmdVelType:
+        payload = codec.velocity(kind, 0.3, 0.2, 5.0)
+        assert codec.read_velocity(kind, payload) == (0.3, 0.2)
+    assert codec.velocity(CmdVelType.TWIST, 0.3, 0.2) == codec.twist(0.3, 0.2)
+    with pytest.raises(CdrError):  # a robot that takes one cannot read the other
+        codec.read_twist_stamped(codec.twist(0.3, 0.2))
+
+
+def test_compressed_image(codec: Ros2Codec) -> None:
+    jpeg = b"\xff\xd8\xff\xe0" + bytes(range(40))
+    frame = codec.read_compressed_image(codec.compressed_image("rgb8; jpeg compressed bgr8", jpeg))
+    assert frame == CompressedImage(format="rgb8; jpeg compressed bgr8", data=jpeg)
+
+
+def test_message_types_are_known_by_the_names_bridge_tokens_give() -> None:
+    assert CmdVelType.of("geometry_msgs/msg/TwistStamped") is CmdVelType.STAMPED
+    assert CmdVelType.of("geometry_msgs/msg/Twist") is CmdVelType.TWIST
+    assert CmdVelType.of("std_msgs/msg/String") is None
+    assert CameraType.of("sensor_msgs/msg/CompressedImage") is CameraType.COMPRESSED
+    assert CameraType.of("sensor_msgs/msg/Image") is CameraType.RAW
+
+
+@pytest.mark.parametrize("status", [GoalStatus.UNKNOWN, GoalStatus.SUCCEEDED, GoalStatus.ABORTED])
+def test_any_get_result_reply_tells_its_distro(codec: Ros2Codec, status: GoalStatus) -> None:
+    """Even the reply for a goal the server does not know, which is how the executor
+    finds out before its first goal."""
+    assert distro_of_result(codec.get_result_response(status)) is codec.distro
+
+
+def test_a_get_result_reply_in_no_known_layout_says_so() -> None:
+    with pytest.raises(CdrError, match="3 bytes fit no known NavigateToPose result layout"):
+        distro_of_result(b"\x00\x01\x00")
+
+
 # --- the bytes on the wire ------------------------------------------------------------------
 
 
@@ -141,6 +180,8 @@ def every_message(codec: Ros2Codec) -> dict[str, bytes]:
         "cancel_goal_response": codec.cancel_goal_response(CancelCode.NONE, (GOAL_ID,)),
         "goal_status_array": codec.goal_status_array([(GOAL_ID, GoalStatus.EXECUTING)]),
         "image": codec.image(2, 1, "rgb8", b"\x01\x02\x03\x04\x05\x06"),
+        "twist_stamped": codec.twist_stamped(0.5, 0.1, 10.0),
+        "compressed_image": codec.compressed_image("rgb8; jpeg compressed bgr8", b"\xff\xd8"),
     }
 
 
@@ -259,6 +300,18 @@ def expected_messages(distro: RosDistro) -> dict[str, tuple[Any, str]]:
             ),
             "sensor_msgs/msg/Image",
         ),
+        "twist_stamped": (
+            t["geometry_msgs/msg/TwistStamped"](header=header(10, "base_link"), twist=twist),
+            "geometry_msgs/msg/TwistStamped",
+        ),
+        "compressed_image": (
+            t["sensor_msgs/msg/CompressedImage"](
+                header=header(0, "camera"),
+                format="rgb8; jpeg compressed bgr8",
+                data=np.array([0xFF, 0xD8], dtype=np.uint8),
+            ),
+            "sensor_msgs/msg/CompressedImage",
+        ),
     }
 
 
@@ -279,11 +332,9 @@ def test_humble_and_jazzy_results_differ_on_the_wire() -> None:
     assert humble == HEADER + b"\x04\x00"
     # Jazzy: int8 status, pad to 2, uint16 error_code, string error_msg (length 1: the NUL).
     assert jazzy == HEADER + b"\x04\x00" + b"\x00\x00" + b"\x01\x00\x00\x00" + b"\x00"
-    tf_error = Ros2Codec(RosDistro.JAZZY).get_result_response(
-        GoalStatus.ABORTED, NavigateError.TF_ERROR, "tf"
-    )
+    tf_error = Ros2Codec(RosDistro.JAZZY).get_result_response(GoalStatus.ABORTED, 202, "tf")
     assert (
-        tf_error == HEADER + b"\x06\x00" + (9002).to_bytes(2, "little") + b"\x03\x00\x00\x00tf\x00"
+        tf_error == HEADER + b"\x06\x00" + (202).to_bytes(2, "little") + b"\x03\x00\x00\x00tf\x00"
     )
 
 
@@ -340,6 +391,8 @@ READERS = [
     "read_cancel_goal_response",
     "read_goal_status_array",
     "read_image",
+    "read_twist_stamped",
+    "read_compressed_image",
 ]
 CODECS = {distro: Ros2Codec(distro) for distro in RosDistro}
 SAMPLES = [payload for codec in CODECS.values() for payload in every_message(codec).values()]

@@ -46,11 +46,21 @@ FAR = Order(
 class Robot:
     """A simulated robot with its supervisor and executor, each one killable."""
 
-    def __init__(self, router: str, processes: Processes, db: Path) -> None:
+    def __init__(
+        self,
+        router: str,
+        processes: Processes,
+        db: Path,
+        robot_args: tuple[str, ...] = (),
+        bridge: BridgeKeys | None = None,
+    ) -> None:
         self.router = router
         self.processes = processes
         self.db = db
-        self.sim = processes.start("services.sim", "--connect", router)
+        self.robot_args = robot_args
+        """Flags that say which robot the sim plays; the executor gets the names only."""
+        self.bridge = bridge or BridgeKeys()
+        self.sim = processes.start("services.sim", "--connect", router, *robot_args)
         self.supervisor: subprocess.Popen[bytes] | None = None
         self.executor: subprocess.Popen[bytes] | None = None
         self.odometry: list[tuple[float, Odometry]] = []
@@ -62,7 +72,12 @@ class Robot:
 
     def start_executor(self) -> None:
         self.executor = self.processes.start(
-            "services.executor", "--connect", self.router, "--robot", "r1"
+            "services.executor",
+            "--connect",
+            self.router,
+            "--robot",
+            "r1",
+            *_names_only(self.robot_args),
         )
 
     @staticmethod
@@ -76,7 +91,7 @@ class Robot:
             loop = asyncio.get_running_loop()
             with Bus.open(BusOptions(connect=[self.router]), loop) as bus:
                 bus.subscribe(
-                    BridgeKeys().odom,
+                    self.bridge.odom,
                     CODEC.read_odometry,
                     lambda _key, odom: self.odometry.append((loop.time(), odom)),
                 )
@@ -100,9 +115,36 @@ class Robot:
         return self.odometry[-1][1].pose
 
 
+def _names_only(robot_args: tuple[str, ...]) -> list[str]:
+    """The flags that name things, without those that give types (left to detection)."""
+    pairs = zip(robot_args[::2], robot_args[1::2], strict=True)
+    return [part for flag, value in pairs if not flag.endswith("-type") for part in (flag, value)]
+
+
 @pytest.fixture
 def robot(router: str, processes: Processes, tmp_path: Path) -> Robot:
     return Robot(router, processes, tmp_path / "supervisor.sqlite3")
+
+
+REMAPPED = (
+    "--namespace",
+    "bot1",
+    "--cmd-vel",
+    "base/cmd_vel",
+    "--cmd-vel-type",
+    "stamped",
+    "--odom",
+    "base/odom",
+    "--navigate",
+    "nav/navigate_to_pose",
+)
+
+
+@pytest.fixture
+def remapped_robot(router: str, processes: Processes, tmp_path: Path) -> Robot:
+    """A robot whose names are all remapped and whose cmd_vel takes TwistStamped."""
+    bridge = BridgeKeys("bot1", cmd_vel_name="base/cmd_vel", odom_name="base/odom")
+    return Robot(router, processes, tmp_path / "supervisor.sqlite3", REMAPPED, bridge)
 
 
 def test_a_lost_executor_leaves_no_motion_behind(robot: Robot) -> None:
@@ -124,6 +166,33 @@ def test_a_lost_executor_leaves_no_motion_behind(robot: Robot) -> None:
         )
         await asyncio.sleep(1.0)
         assert abs(robot.odometry[-1][1].pose.x - stopped.x) < 0.01, "it moved again"
+
+    robot.run(body)
+
+
+def test_a_lost_executor_stops_a_remapped_stamped_robot_too(remapped_robot: Robot) -> None:
+    """The supervisor stops the robot with what the executor told it: its names, and the
+    cmd_vel type the executor learnt from the bridge."""
+    robot = remapped_robot
+    robot.start_supervisor()
+    robot.start_executor()
+
+    async def body(bus: Bus, client: Client) -> None:
+        await client_wait_ready(client)
+        (moving,) = await client.submit(FAR)
+        sent: list[bytes] = []
+        bus.subscribe(robot.bridge.cmd_vel, bytes, lambda _key, raw: sent.append(raw))
+        await robot.driving()
+        lost = asyncio.get_running_loop().time()
+        robot.kill(robot.executor)
+        stopped = await robot.standing(lost)
+        assert stopped.x < 7.0
+        await asyncio.sleep(1.0)
+        assert abs(robot.odometry[-1][1].pose.x - stopped.x) < 0.01, "it moved again"
+        assert (await client.finished(moving)).status == OrderStatus.FAILED
+        # The zero velocity went out as the TwistStamped this robot takes.
+        assert sent
+        assert all(CODEC.read_twist_stamped(raw) == (0.0, 0.0) for raw in sent)
 
     robot.run(body)
 
@@ -161,7 +230,7 @@ def test_the_emergency_stop_latches_until_released(robot: Robot) -> None:
     async def body(bus: Bus, client: Client) -> None:
         await client_wait_ready(client)
         assert isinstance(await client.ask(EmergencyStop()), Done)
-        refused = await client.ask_submit(order("mul", a=2, b=3))
+        refused = await client.ask_submit(order("mul", first=2, second=3))
         assert isinstance(refused, Failed)
         assert refused.reason.startswith("the emergency stop is on: release it first")
         assert (await client.state()).stopped
@@ -171,7 +240,7 @@ def test_the_emergency_stop_latches_until_released(robot: Robot) -> None:
         assert (await client.state()).stopped
         assert isinstance(await client.ask(Release()), Done)
         assert not (await client.state()).stopped
-        (ran,) = await client.submit(order("mul", a=2, b=3))
+        (ran,) = await client.submit(order("mul", first=2, second=3))
         assert (await client.finished(ran)).message == "2 x 3 = 6"
 
     robot.run(body)
@@ -182,7 +251,9 @@ def test_orders_restored_after_a_restart_wait_for_resume(robot: Robot) -> None:
 
     async def body(bus: Bus, client: Client) -> None:
         await client_wait_ready(client, executor=False)
-        first, second = await client.submit(order("mul", a=1, b=2), order("mul", a=3, b=4))
+        first, second = await client.submit(
+            order("mul", first=1, second=2), order("mul", first=3, second=4)
+        )
         robot.kill(robot.supervisor)
         robot.start_supervisor()
         robot.start_executor()
@@ -223,7 +294,7 @@ def test_queue_order_survives_many_reorders_and_a_restart(robot: Robot) -> None:
 
     async def body(bus: Bus, client: Client) -> None:
         await client_wait_ready(client, executor=False)
-        ids = await client.submit(*(order("mul", a=n, b=1) for n in range(4)))
+        ids = await client.submit(*(order("mul", first=n, second=1) for n in range(4)))
         expected = list(ids)
         for turn in range(120):  # each move halves a gap between two stored positions
             moving = expected[3] if turn % 2 == 0 else expected[2]
@@ -255,7 +326,9 @@ def test_a_result_reached_while_the_supervisor_was_down_is_kept(robot: Robot) ->
             lambda _key, event: ended.append(event) if isinstance(event, OrderFinished) else None,
         )
         await client_wait_ready(client)
-        waiting, after = await client.submit(order("wait", seconds=1.0), order("mul", a=2, b=2))
+        waiting, after = await client.submit(
+            order("wait", seconds=1.0), order("mul", first=2, second=2)
+        )
         await client.wait_state(lambda s: s.current is not None, "the wait to run")
         robot.kill(robot.supervisor)
         await async_wait_until(lambda: ended, WAIT, "the wait to end with no supervisor")

@@ -15,10 +15,9 @@ from services.sim.robot import (
     Limits,
     Phase,
     Robot,
-    compose,
     integrate,
-    normalize_angle,
 )
+from shared.geometry import compose, normalize_angle
 from shared.ros2 import Pose2D
 
 LIMITS = Limits(max_linear=0.5, max_angular=1.5)

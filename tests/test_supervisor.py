@@ -88,10 +88,12 @@ def test_sigkill_with_orders_in_flight_loses_nothing_and_resumes(site: Site) -> 
     async def body(bus: Bus) -> None:
         client = Client(bus, "r1")
         await client_wait_ready(client)
-        (done_before,) = await client.submit(order("mul", a=2, b=2))
+        (done_before,) = await client.submit(order("mul", first=2, second=2))
         await client.finished(done_before)
         running, queued_1, queued_2 = await client.submit(
-            order("slow", seconds=2), order("mul", a=3, b=3), order("mul", a=4, b=4)
+            order("slow", seconds=2),
+            order("mul", first=3, second=3),
+            order("mul", first=4, second=4),
         )
         await client.wait_state(lambda s: s.current is not None, "the slow order to run")
 
@@ -123,8 +125,8 @@ def test_running_order_is_interrupted_when_no_executor_runs_it(site: Site) -> No
     async def body(bus: Bus) -> None:
         client = Client(bus, "r1")
         await client_wait_ready(client)
-        running, sibling = await client.submit(order("slow"), order("mul", a=1, b=1))
-        (other,) = await client.submit(order("mul", a=5, b=5))
+        running, sibling = await client.submit(order("slow"), order("mul", first=1, second=1))
+        (other,) = await client.submit(order("mul", first=5, second=5))
         await client.wait_state(lambda s: s.current is not None, "the slow order to run")
         site.kill_supervisor()
         site.kill_executor()
@@ -217,9 +219,9 @@ def test_reorder_is_served_and_survives_a_restart(site: Site) -> None:
     async def body(bus: Bus) -> None:
         client = Client(bus, "r1")
         await client_wait_ready(client, executor=False)
-        a, b, c = await client.submit(order("mul", a=1, b=1), order("mul", a=2, b=2)) + (
-            await client.submit(order("mul", a=3, b=3))
-        )
+        a, b, c = await client.submit(
+            order("mul", first=1, second=1), order("mul", first=2, second=2)
+        ) + (await client.submit(order("mul", first=3, second=3)))
         assert isinstance(await client.ask(Reorder(order_id=c, position=0)), Done)
         assert [r.id for r in (await client.state()).queue] == [c, a, b]
         missing = await client.ask(Reorder(order_id="nope", position=0))
@@ -274,7 +276,7 @@ def test_history_pages(site: Site) -> None:
     async def body(bus: Bus) -> None:
         client = Client(bus, "r1")
         await client_wait_ready(client)
-        ids = await client.submit(*(order("mul", a=i, b=1) for i in range(25)))
+        ids = await client.submit(*(order("mul", first=i, second=1) for i in range(25)))
         await client.finished(ids[-1])
         first = await client.history(0, 10)
         assert first.total == 25
@@ -296,8 +298,8 @@ def test_each_robot_has_its_own_queue_and_executor(site: Site) -> None:
     async def body(bus: Bus) -> None:
         one, two = Client(bus, "r1"), Client(bus, "r2")
         await client_wait_ready(one)
-        (for_two,) = await two.submit(order("mul", a=2, b=2))  # r2 has no executor yet
-        (for_one,) = await one.submit(order("mul", a=1, b=1))
+        (for_two,) = await two.submit(order("mul", first=2, second=2))  # r2 has no executor yet
+        (for_one,) = await one.submit(order("mul", first=1, second=1))
         assert (await one.finished(for_one)).status == OrderStatus.SUCCEEDED
         state_two = await two.state()
         assert not state_two.executor_online
@@ -308,13 +310,13 @@ def test_each_robot_has_its_own_queue_and_executor(site: Site) -> None:
         assert for_one not in {r.id for r in (await two.history()).records}
         # a name nobody serves is refused, and asking about it creates nothing
         made_up = Client(bus, "nobody")
-        refused = await made_up.ask_submit(order("mul", a=1, b=1))
+        refused = await made_up.ask_submit(order("mul", first=1, second=1))
         assert isinstance(refused, Failed)
         assert refused.reason.startswith(
             "no executor has served robot 'nobody' (known robots: r1, r2)"
         )
         assert (await made_up.state()).queue == []
-        again = await made_up.ask_submit(order("mul", a=1, b=1))
+        again = await made_up.ask_submit(order("mul", first=1, second=1))
         assert isinstance(again, Failed)
         assert "known robots: r1, r2)" in again.reason
 
@@ -344,7 +346,7 @@ def test_emergency_stop_halts_a_moving_robot_at_once(site: Site) -> None:
             description="reach far",
             target_pose=TargetPose(frame="map", x=8.0, y=0.0),
         )
-        (moving, queued) = await client.submit(far, order("mul", a=1, b=1))
+        (moving, queued) = await client.submit(far, order("mul", first=1, second=1))
         await client.wait_state(lambda s: s.current is not None, "navigation to start")
         await async_wait_until(
             lambda: odometry and odometry[-1][1].linear_x > 0.3, 20.0, "the robot to drive"

@@ -86,6 +86,13 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="MODULE:CLASS[=LABEL,...]",
         help="bind a user executor in the executor process (repeatable)",
     )
+    up.add_argument(
+        "--executors",
+        action="append",
+        default=[],
+        metavar="FILE",
+        help="YAML file of executor bindings with constructor arguments (repeatable)",
+    )
 
     parse = sub.add_parser(
         "parse",
@@ -219,7 +226,8 @@ def _up(args: argparse.Namespace) -> int:
         Child(
             "executor",
             ["services.executor", *robot, *connect]
-            + [arg for spec in args.executor for arg in ("--executor", spec)],
+            + [arg for spec in args.executor for arg in ("--executor", spec)]
+            + [arg for path in args.executors for arg in ("--executors", path)],
         ),
     ]
     if not args.no_stt:
@@ -368,7 +376,11 @@ async def _ask_supervisor(args: argparse.Namespace, request: Message) -> int:
     try:
         with Bus.open(bus_options(args, wait=False), asyncio.get_running_loop()) as bus:
             reply = await bus.request(
-                keys.supervisor, request, json_decoder(SupervisorReply), timeout=10.0
+                keys.supervisor,
+                request,
+                json_decoder(SupervisorReply),
+                timeout=10.0,
+                urgent=isinstance(request, EmergencyStop),
             )
     except BusError as exc:  # no router, or no supervisor answering
         print(f"voicectl {args.command}: {exc}", file=sys.stderr)

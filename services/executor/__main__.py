@@ -11,12 +11,12 @@ from pathlib import Path
 
 from shared.bus import Bus, add_bus_arguments, bus_options, robot_name, setup_logging, wait_for_stop
 from shared.config import data_dir
-from shared.keys import BridgeKeys, RobotKeys
-from shared.ros2 import Ros2Codec, RosDistro
+from shared.keys import RobotKeys
+from shared.robot_options import add_robot_arguments, robot_options
 
 from .builtin import builtin_executors
-from .framework import BindingError, Bindings, load_binding
-from .robot import RobotLink
+from .framework import BindingError, Bindings, load_binding, load_bindings_file
+from .robot import RESULT_GRACE, RobotLink
 from .runner import ExecutorService
 
 _LOGGER = logging.getLogger(__name__)
@@ -31,23 +31,19 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         help="robot name on the voice bus (default: robot)",
     )
     parser.add_argument(
-        "--namespace",
-        default="",
-        help="zenoh-bridge-ros2dds namespace of the robot (default: none)",
-    )
-    parser.add_argument(
-        "--distro",
-        type=RosDistro,
-        choices=list(RosDistro),
-        default=RosDistro.JAZZY,
-        help="ROS 2 distribution of the robot (message layouts differ)",
-    )
-    parser.add_argument(
         "--executor",
         action="append",
         default=[],
         metavar="MODULE:CLASS[=LABEL,...]",
         help="bind a user executor class to labels (repeatable)",
+    )
+    parser.add_argument(
+        "--executors",
+        action="append",
+        default=[],
+        type=Path,
+        metavar="FILE",
+        help="YAML file of executor bindings with constructor arguments (repeatable)",
     )
     parser.add_argument(
         "--photo-dir",
@@ -61,7 +57,16 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         default=2.0,
         help="seconds an executor has to honour a cancel before the robot is halted",
     )
+    parser.add_argument(
+        "--result-grace",
+        type=float,
+        default=RESULT_GRACE,
+        metavar="SECONDS",
+        help="how long navigation's result may stay out of reach (a link down) before the "
+        f"goal is cancelled and the order fails (default: {RESULT_GRACE:g})",
+    )
     add_bus_arguments(parser)
+    add_robot_arguments(parser, detect=True)
     return parser.parse_args(argv)
 
 
@@ -72,6 +77,9 @@ async def main(argv: list[str] | None = None) -> int:
     for executor in builtin_executors(args.photo_dir or data_dir() / "photos"):
         bindings.bind(executor, executor.labels)
     try:
+        for path in args.executors:
+            for executor, labels in load_bindings_file(path):
+                bindings.bind(executor, labels)
         for spec in args.executor:
             bindings.bind(*load_binding(spec))
     except BindingError as exc:
@@ -80,7 +88,11 @@ async def main(argv: list[str] | None = None) -> int:
     loop = asyncio.get_running_loop()
     with Bus.open(bus_options(args), loop) as bus:
         robot = RobotLink(
-            bus, BridgeKeys(args.namespace), Ros2Codec(args.distro), RobotKeys(args.robot).pose
+            bus,
+            robot_options(args),
+            RobotKeys(args.robot).pose,
+            on_change=lambda: service.publish_info(),
+            result_grace=args.result_grace,
         )
         service = ExecutorService(
             bus, RobotKeys(args.robot), robot, bindings, cancel_deadline=args.cancel_deadline

@@ -1,62 +1,222 @@
-"""The robot as executors see it: ROS 2 through zenoh-bridge-ros2dds' keys, CDR payloads."""
+"""The robot as executors see it: ROS 2 through zenoh-bridge-ros2dds' keys, CDR payloads.
+
+`RobotLink` is the one connection of the process: it follows odometry, learns what the
+robot's topics take from the bridge's liveliness tokens, learns the ROS distribution from
+a get_result reply, and does the navigation and stop work. Each order gets an
+`OrderRobot`, a handle onto the link that is revoked when the order ends, so that an
+executor that outlives its order can never move the robot again.
+"""
 
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import logging
+import time
 from collections.abc import Callable
 
 from shared.bus import Bus
 from shared.errors import BusError, OrderFailed
-from shared.keys import BridgeKeys
+from shared.geometry import compose
+from shared.keys import BRIDGE_TOKENS, BridgeKeys, BridgeKind, BridgeToken
 from shared.messages import RobotPose, TargetPose
+from shared.robot_options import RobotOptions
 from shared.ros2 import (
+    NAVIGATION_ERRORS,
+    CameraType,
+    CancelCode,
+    CdrError,
+    CmdVelType,
+    CompressedImage,
     GoalStatus,
     Image,
     NavigateFeedback,
+    NavigateResult,
     Odometry,
     Pose2D,
     Ros2Codec,
+    RosDistro,
+    distro_of_result,
     new_goal_id,
 )
 
 _LOGGER = logging.getLogger(__name__)
 
-NAVIGATE = "navigate_to_pose"
 POSE_EVERY = 0.5
 """Seconds between two poses published for panels."""
 SEND_GOAL_TIMEOUT = 10.0
 RESULT_TIMEOUT = 24 * 3600.0
 """get_result answers when navigation ends, which can take as long as the robot needs."""
+RESULT_GRACE = 10.0
+"""Seconds get_result may keep failing (a link down) before the goal is cancelled."""
+RESULT_RETRY = 0.5
+CANCEL_TIMEOUT = 2.0
+PROBE_TIMEOUT = 3.0
+STOP_REPEAT = 3
+"""Zero velocity is sent this many times: one lost sample must not leave the robot moving."""
+ROBOT_FRAME = "base_link"
+ODOM_FRAME = "odom"
+
+
+class RobotRevoked(OrderFailed):
+    """A call through the robot handle of an order that has ended."""
 
 
 class RobotLink:
-    """Topics and actions of one robot, shared by every executor of the process."""
+    """Topics and actions of one robot, shared by every order of the process."""
 
     def __init__(
-        self, bus: Bus, keys: BridgeKeys, codec: Ros2Codec, pose_key: str | None = None
+        self,
+        bus: Bus,
+        options: RobotOptions,
+        pose_key: str | None = None,
+        on_change: Callable[[], None] = lambda: None,
+        result_grace: float = RESULT_GRACE,
     ) -> None:
         self.bus = bus
-        self.keys = keys
-        self.codec = codec
+        self._result_grace = result_grace
+        self.options = options
+        self.keys = options.keys
         self._pose_key = pose_key
         """Where to publish the pose for panels (`voice/<robot>/robot/pose`), if anywhere."""
+        self._on_change = on_change
+        """Called when what is known about the robot changes (a detected type)."""
         self._pose_sent = 0.0
         self.pose: Pose2D | None = None
         """Latest pose from odometry, None until the first message."""
-        self.image: Image | None = None
-        """Latest camera frame, None until the first one."""
-        self._feedback: dict[bytes, Callable[[Pose2D, float], None]] = {}
         self._odometry = asyncio.Event()
-        self._frame = asyncio.Event()
+        self._feedback: dict[bytes, Callable[[Pose2D, float], None]] = {}
+        self.distro: RosDistro | None = options.distro
+        """The robot's distribution: as configured, or once detected; None until then."""
+        self.distro_problem: str | None = None
+        """Why navigation cannot be used (the configured distribution is not the robot's)."""
+        self._distro_checked = False
+        self._probing: asyncio.Task[None] | None = None
+        self.navigation_seen = False
+        """Whether the robot's NavigateToPose server has shown itself (token or reply)."""
+        self.bridge_cmd_vel: CmdVelType | None = None
+        """What the bridge says the robot's cmd_vel subscribers take."""
+        self.bridge_camera: CameraType | None = None
+        self._warned_cmd_vel = False
+
+    # --- what the robot takes -------------------------------------------------------------
+
+    @property
+    def codec(self) -> Ros2Codec:
+        """A codec for the robot's messages (topics are the same in every distribution)."""
+        return Ros2Codec(self.distro or RosDistro.JAZZY)
+
+    @property
+    def cmd_vel_type(self) -> CmdVelType:
+        """As configured, else as the bridge announced it, else plain Twist."""
+        return self.options.cmd_vel_type or self.bridge_cmd_vel or CmdVelType.TWIST
+
+    @property
+    def camera_type(self) -> CameraType:
+        if self.options.camera_type is not None:
+            return self.options.camera_type
+        if self.bridge_camera is not None:
+            return self.bridge_camera
+        compressed = self.keys.camera_name.endswith("/compressed")
+        return CameraType.COMPRESSED if compressed else CameraType.RAW
 
     def start(self) -> None:
-        self.bus.subscribe(self.keys.odom, self.codec.read_odometry, self._on_odom)
-        self.bus.subscribe(
-            self.keys.action(NAVIGATE, "feedback"), self.codec.read_feedback, self._on_feedback
-        )
-        self.bus.subscribe(self.keys.camera_image, self.codec.read_image, self._on_image)
+        codec = self.codec
+        self.bus.subscribe(self.keys.odom, codec.read_odometry, self._on_odom)
+        self.bus.subscribe(self.keys.navigate("feedback"), codec.read_feedback, self._on_feedback)
+        self.bus.watch(BRIDGE_TOKENS, self._on_bridge_token)
+        self._probe_soon()
+
+    def _on_bridge_token(self, token_key: str, alive: bool) -> None:
+        token = BridgeToken.parse(token_key)
+        if token is None or not alive:
+            return
+        keys = self.keys
+        match token.kind:
+            case BridgeKind.SUBSCRIBER if token.key == keys.cmd_vel:
+                self._learn_cmd_vel(token.ros_type)
+            case BridgeKind.PUBLISHER if token.key == keys.camera_image:
+                self.bridge_camera = CameraType.of(token.ros_type)
+            case BridgeKind.ACTION_SERVER if token.key == keys.topic(keys.navigate_name):
+                self.navigation_seen = True
+                self._probe_soon()
+
+    def _learn_cmd_vel(self, ros_type: str) -> None:
+        found = CmdVelType.of(ros_type)
+        if found is None:
+            _LOGGER.error("'%s' takes %s, which voicectl cannot send", self.keys.cmd_vel, ros_type)
+            return
+        configured = self.options.cmd_vel_type
+        if configured is not None and configured is not found:
+            _LOGGER.error(
+                "'%s' takes %s, says the bridge, but --cmd-vel-type is %s: the robot will "
+                "not understand its velocity commands",
+                self.keys.cmd_vel,
+                ros_type,
+                configured,
+            )
+        if found is not self.bridge_cmd_vel:
+            self.bridge_cmd_vel = found
+            _LOGGER.info("'%s' takes %s (from the bridge)", self.keys.cmd_vel, ros_type)
+            self._on_change()
+
+    # --- the distribution -----------------------------------------------------------------
+
+    def _probe_soon(self) -> None:
+        if self._distro_checked or (self._probing is not None and not self._probing.done()):
+            return
+        self._probing = asyncio.get_running_loop().create_task(self._probe_distro())
+
+    async def _probe_distro(self) -> None:
+        """Ask get_result about a goal that does not exist: an action server answers at
+        once, in its distribution's layout, and nothing moves."""
+        key = self.keys.navigate("get_result")
+        try:
+            reply = await self.bus.request_bytes(
+                key, self.codec.get_result_request(new_goal_id()), PROBE_TIMEOUT
+            )
+        except BusError as exc:
+            _LOGGER.debug("no answer to the distribution probe: %s", exc)
+            return
+        self.navigation_seen = True
+        try:
+            found = distro_of_result(reply)
+        except CdrError as exc:
+            self.distro_problem = f"navigation's get_result reply is in no known layout: {exc}"
+            _LOGGER.error("%s", self.distro_problem)
+            return
+        self._distro_checked = True
+        configured = self.options.distro
+        if configured is not None and configured is not found:
+            self.distro_problem = (
+                f"the robot's navigation speaks ROS 2 {found.title()}, not {configured.title()} "
+                f"as --distro says; restart the executor with --distro {found} (or auto)"
+            )
+            _LOGGER.error("%s", self.distro_problem)
+            return
+        if self.distro is not found:
+            self.distro = found
+            _LOGGER.info("the robot's navigation speaks ROS 2 %s", found.title())
+            self._on_change()
+
+    async def _known_distro(self) -> RosDistro:
+        """The distribution, probing now if it is not known yet; OrderFailed if it cannot
+        be told or does not match the configuration. Found before any goal is sent."""
+        if not self._distro_checked:
+            if self._probing is not None and not self._probing.done():
+                await asyncio.shield(self._probing)
+            else:
+                await self._probe_distro()
+        if self.distro_problem is not None:
+            raise OrderFailed(self.distro_problem)
+        if self.distro is None:
+            raise OrderFailed(
+                f"cannot tell the robot's ROS distribution: nothing answered on "
+                f"'{self.keys.navigate('get_result')}' (is Nav2 up, and the bridge routing "
+                "its NavigateToPose?); or start the executor with --distro"
+            )
+        return self.distro
+
+    # --- topics ---------------------------------------------------------------------------
 
     def _on_odom(self, _key: str, odometry: Odometry) -> None:
         self.pose = odometry.pose
@@ -66,10 +226,6 @@ class RobotLink:
             self._pose_sent = now
             pose = RobotPose(x=self.pose.x, y=self.pose.y, yaw=self.pose.yaw)
             self.bus.publish(self._pose_key, pose, superseded=True)
-
-    def _on_image(self, _key: str, image: Image) -> None:
-        self.image = image
-        self._frame.set()
 
     async def next_pose(self, timeout: float = 5.0) -> Pose2D:
         """The next odometry pose (fresher than any seen so far)."""
@@ -81,16 +237,31 @@ class RobotLink:
         assert self.pose is not None
         return self.pose
 
-    async def next_image(self, timeout: float = 5.0) -> Image:
-        """The next camera frame (taken after this call)."""
-        self._frame.clear()
+    async def next_image(self, timeout: float = 5.0) -> Image | CompressedImage:
+        """The next camera frame. The camera is subscribed only for this call: the bridge
+        streams a topic across the network whenever someone subscribes to it."""
+        frame: asyncio.Future[Image | CompressedImage] = asyncio.get_running_loop().create_future()
+
+        def on_frame(_key: str, image: Image | CompressedImage) -> None:
+            if not frame.done():
+                frame.set_result(image)
+
+        codec = self.codec
+        decode: Callable[[bytes], Image | CompressedImage] = (
+            codec.read_compressed_image
+            if self.camera_type is CameraType.COMPRESSED
+            else codec.read_image
+        )
+        unsubscribe = self.bus.subscribe(self.keys.camera_image, decode, on_frame)
         try:
-            await asyncio.wait_for(self._frame.wait(), timeout)
+            return await asyncio.wait_for(frame, timeout)
         except TimeoutError:
             key = self.keys.camera_image
-            raise OrderFailed(f"no camera frame on '{key}' for {timeout:g} s") from None
-        assert self.image is not None
-        return self.image
+            raise OrderFailed(
+                f"no {self.camera_type.ros_type} on '{key}' for {timeout:g} s"
+            ) from None
+        finally:
+            unsubscribe()
 
     def _on_feedback(self, _key: str, feedback: NavigateFeedback) -> None:
         listener = self._feedback.get(feedback.goal_id)
@@ -98,69 +269,206 @@ class RobotLink:
             listener(feedback.pose, feedback.distance_remaining)
 
     def drive(self, linear_x: float, angular_z: float) -> None:
-        """Publish one velocity command on cmd_vel."""
-        self.bus.publish_bytes(self.keys.cmd_vel, self.codec.twist(linear_x, angular_z))
+        """Publish one velocity command on cmd_vel, in the type the robot takes. A zero
+        one is a stop: it waits for room rather than being dropped, and goes first."""
+        kind = self.cmd_vel_type
+        if kind is CmdVelType.TWIST and self.bridge_cmd_vel is None and not self._warned_cmd_vel:
+            self._warned_cmd_vel = self.options.cmd_vel_type is None
+            if self._warned_cmd_vel:
+                _LOGGER.warning(
+                    "the bridge has not announced '%s'; sending Twist (see --cmd-vel-type)",
+                    self.keys.cmd_vel,
+                )
+        stop = linear_x == 0.0 and angular_z == 0.0
+        payload = self.codec.velocity(kind, linear_x, angular_z, time.time())
+        self.bus.publish_bytes(self.keys.cmd_vel, payload, urgent=stop)
 
-    async def halt(self) -> None:
-        """Zero velocity now, then cancel every navigation goal."""
-        self.bus.publish_bytes(self.keys.cmd_vel, self.codec.twist(0.0, 0.0), urgent=True)
-        with contextlib.suppress(BusError):
-            await self.bus.request_bytes(
-                self.keys.action(NAVIGATE, "cancel_goal"),
-                self.codec.cancel_goal_request(),
-                timeout=2.0,
+    def stop_moving(self) -> None:
+        for _ in range(STOP_REPEAT):
+            self.drive(0.0, 0.0)
+
+    # --- stopping -------------------------------------------------------------------------
+
+    async def halt(self) -> str | None:
+        """Zero velocity now, then cancel every navigation goal. Returns None when the
+        robot confirmed, else what is in doubt."""
+        self.stop_moving()
+        return await self.cancel_goals()
+
+    async def cancel_goals(self, goal_id: bytes | None = None) -> str | None:
+        """Cancel one navigation goal (or all); None when navigation confirmed it or had
+        nothing to cancel, else what went wrong, logged, with zero velocity sent again."""
+        codec = self.codec
+        key = self.keys.navigate("cancel_goal")
+        what = f"goal {goal_id.hex()[:8]}" if goal_id is not None else "every goal"
+        request = codec.cancel_goal_request(goal_id) if goal_id else codec.cancel_goal_request()
+        problem = None
+        try:
+            reply = codec.read_cancel_goal_response(
+                await self.bus.request_bytes(key, request, CANCEL_TIMEOUT, urgent=True)
             )
+        except BusError as exc:
+            if self.navigation_seen or goal_id is not None:
+                problem = f"navigation did not answer the cancel of {what} ({exc})"
+        except CdrError as exc:
+            problem = f"navigation's answer to the cancel of {what} does not decode: {exc}"
+        else:
+            self.navigation_seen = True
+            match reply.return_code:
+                case CancelCode.REJECTED:
+                    problem = f"navigation refused to cancel {what}"
+                case CancelCode.UNKNOWN_GOAL_ID:
+                    _LOGGER.info("navigation does not know %s: nothing to cancel", what)
+                case CancelCode.NONE | CancelCode.GOAL_TERMINATED:
+                    pass
+        if problem is not None:
+            _LOGGER.warning("%s; the robot may still be moving", problem)
+            self.stop_moving()
+        return problem
+
+    # --- navigation -----------------------------------------------------------------------
 
     async def navigate(
-        self, target: TargetPose, on_feedback: Callable[[Pose2D, float], None]
+        self,
+        target: TargetPose,
+        on_feedback: Callable[[Pose2D, float], None],
+        on_problem: Callable[[str], None],
     ) -> None:
         """Run Nav2's NavigateToPose to `target`; return on success, raise otherwise.
 
-        The goal keeps its frame: Nav2 resolves a 'base_link' goal against the robot's
-        pose when it receives it, that is when this order starts executing.
+        On Jazzy a 'base_link' goal is sent as it is: the navigator transforms it once,
+        on receipt, that is when this order starts. Humble's navigator would transform it
+        again at every replan, so that it moves with the robot: there it is turned into an
+        'odom' goal from the current odometry first.
         """
+        distro = await self._known_distro()
+        codec = Ros2Codec(distro)
+        frame, pose = target.frame, Pose2D(x=target.x, y=target.y, yaw=target.yaw)
+        if distro is RosDistro.HUMBLE and frame == ROBOT_FRAME:
+            pose, frame = compose(await self.next_pose(), pose), ODOM_FRAME
         goal_id = new_goal_id()
-        pose = Pose2D(x=target.x, y=target.y, yaw=target.yaw)
         try:
             reply = await self.bus.request_bytes(
-                self.keys.action(NAVIGATE, "send_goal"),
-                self.codec.send_goal_request(goal_id, target.frame, pose),
+                self.keys.navigate("send_goal"),
+                codec.send_goal_request(goal_id, frame, pose),
                 timeout=SEND_GOAL_TIMEOUT,
             )
         except BusError as exc:
             raise OrderFailed(f"navigation unavailable: {exc}") from exc
-        if not self.codec.read_send_goal_response(reply):
+        if not codec.read_send_goal_response(reply):
             raise OrderFailed(
                 f"navigation rejected the goal ({target.frame} {target.x:g}, {target.y:g})"
             )
         self._feedback[goal_id] = on_feedback
         try:
-            result = await self.bus.request_bytes(
-                self.keys.action(NAVIGATE, "get_result"),
-                self.codec.get_result_request(goal_id),
-                timeout=RESULT_TIMEOUT,
-            )
+            result = await self._result(goal_id, codec)
         except asyncio.CancelledError:
-            await asyncio.shield(self._cancel_goal(goal_id))
+            problem = await asyncio.shield(self.cancel_goals(goal_id))
+            if problem is not None:
+                on_problem(problem)
             raise
-        except BusError as exc:
-            raise OrderFailed(f"navigation result lost: {exc}") from exc
         finally:
             self._feedback.pop(goal_id, None)
-        status = self.codec.read_get_result_response(result).status
-        if status == GoalStatus.SUCCEEDED:
-            return
-        if status == GoalStatus.CANCELED:
-            raise OrderFailed("navigation was cancelled on the robot")
-        raise OrderFailed(f"navigation ended with status {GoalStatus(status).name}")
+        _raise_unless_succeeded(result, distro)
 
-    async def _cancel_goal(self, goal_id: bytes) -> None:
-        try:
-            await self.bus.request_bytes(
-                self.keys.action(NAVIGATE, "cancel_goal"),
-                self.codec.cancel_goal_request(goal_id),
-                timeout=2.0,
-            )
-        except BusError as exc:
-            _LOGGER.warning("cancel of navigation goal failed: %s; halting", exc)
-            self.drive(0.0, 0.0)
+    async def _result(self, goal_id: bytes, codec: Ros2Codec) -> NavigateResult:
+        """get_result, asked again while it fails (it is safe to repeat). If it cannot be
+        had within the result grace, the goal is cancelled before the order fails, so that
+        the robot does not drive on while the order is reported over."""
+        loop = asyncio.get_running_loop()
+        failing_since: float | None = None
+        while True:
+            try:
+                raw = await self.bus.request_bytes(
+                    self.keys.navigate("get_result"),
+                    codec.get_result_request(goal_id),
+                    timeout=RESULT_TIMEOUT,
+                )
+                return codec.read_get_result_response(raw)
+            except (BusError, CdrError) as exc:
+                now = loop.time()
+                failing_since = now if failing_since is None else failing_since
+                if now - failing_since >= self._result_grace:
+                    problem = await self.cancel_goals(goal_id)
+                    outcome = problem or "the goal was cancelled"
+                    raise OrderFailed(f"navigation result lost ({exc}); {outcome}") from exc
+                _LOGGER.warning("navigation result not received (%s); asking again", exc)
+            await asyncio.sleep(RESULT_RETRY)
+
+
+def _raise_unless_succeeded(result: NavigateResult, distro: RosDistro) -> None:
+    status = result.status
+    if status == GoalStatus.SUCCEEDED:
+        return
+    if status == GoalStatus.CANCELED:
+        raise OrderFailed("navigation was cancelled on the robot")
+    if distro is RosDistro.HUMBLE:
+        raise OrderFailed(f"navigation ended {status.name} (Humble's Nav2 gives no reason)")
+    detail = ""
+    if result.error_code:
+        meaning = NAVIGATION_ERRORS.get(result.error_code, "unknown code")
+        detail = f": error {result.error_code} ({meaning})"
+    if result.error_msg:
+        detail += f"{': ' if not detail else ', '}{result.error_msg}"
+    raise OrderFailed(f"navigation ended {status.name}{detail}")
+
+
+class OrderRobot:
+    """The robot as one order sees it. Calls go to the process's `RobotLink` until the
+    order ends or is abandoned; then the handle is revoked, and every call raises
+    `RobotRevoked` and sends nothing."""
+
+    def __init__(self, link: RobotLink, order_id: str) -> None:
+        self._link = link
+        self._order_id = order_id
+        self._revoked = False
+        self.problems: list[str] = []
+        """What the robot did not confirm while this order ran (a refused cancel)."""
+
+    def revoke(self) -> None:
+        self._revoked = True
+
+    @property
+    def revoked(self) -> bool:
+        return self._revoked
+
+    def _live(self) -> RobotLink:
+        if self._revoked:
+            raise RobotRevoked(f"order '{self._order_id}' has ended: its robot handle is revoked")
+        return self._link
+
+    @property
+    def pose(self) -> Pose2D | None:
+        """The latest odometry pose, None until the first."""
+        return self._link.pose
+
+    @property
+    def keys(self) -> BridgeKeys:
+        return self._link.keys
+
+    @property
+    def codec(self) -> Ros2Codec:
+        return self._link.codec
+
+    def drive(self, linear_x: float, angular_z: float) -> None:
+        """Publish one velocity command on the robot's cmd_vel."""
+        self._live().drive(linear_x, angular_z)
+
+    async def next_pose(self, timeout: float = 5.0) -> Pose2D:
+        return await self._live().next_pose(timeout)
+
+    async def next_image(self, timeout: float = 5.0) -> Image | CompressedImage:
+        return await self._live().next_image(timeout)
+
+    async def navigate(
+        self, target: TargetPose, on_feedback: Callable[[Pose2D, float], None]
+    ) -> None:
+        await self._live().navigate(target, on_feedback, self.problems.append)
+
+    def publish(self, key: str, payload: bytes) -> None:
+        """Publish CDR bytes on any other key of the robot (`keys.topic(name)`)."""
+        self._live().bus.publish_bytes(key, payload)
+
+    async def request(self, key: str, payload: bytes, timeout: float) -> bytes:
+        """Call any other service of the robot with CDR bytes; its reply's bytes."""
+        return await self._live().bus.request_bytes(key, payload, timeout)

@@ -7,7 +7,7 @@ import collections
 import logging
 from collections.abc import Callable
 
-from shared.bus import Bus, json_decoder
+from shared.bus import Bus, Latest, json_decoder
 from shared.errors import OrderFailed
 from shared.keys import RobotKeys
 from shared.messages import (
@@ -31,19 +31,20 @@ from shared.messages import (
     Running,
 )
 
-from .framework import Bindings, ExecutionContext, Executor
-from .robot import RobotLink
+from .framework import Bindings, ExecutionContext, Executor, ParamsMismatch, order_params
+from .robot import OrderRobot, RobotLink
 
 _LOGGER = logging.getLogger(__name__)
 RECENT_RESULTS = 32
 
 
-class _Running:
-    """The order being executed and the task that runs it."""
+class _Execution:
+    """The order being executed, the task that runs it and its robot handle."""
 
-    def __init__(self, order_id: str, task: asyncio.Task[None]) -> None:
+    def __init__(self, order_id: str, task: asyncio.Task[None], robot: OrderRobot) -> None:
         self.order_id = order_id
         self.task = task
+        self.robot = robot
         self.reported = False
         """True once its result has been published, so it is published once."""
         self.cancel_reason = "cancelled"
@@ -66,12 +67,14 @@ class ExecutorService:
         self._robot = robot
         self._bindings = bindings
         self._cancel_deadline = cancel_deadline
-        self._running: _Running | None = None
+        self._running: _Execution | None = None
         self._withdraw: Callable[[], None] = lambda: None
         self._recent: collections.OrderedDict[str, OrderFinished] = collections.OrderedDict()
         """The last results, to answer a cancel that crossed its order's end."""
-        self.abandoned: set[asyncio.Task[None]] = set()
-        """Tasks of executors that ignored a cancel; they may still be running."""
+        self.abandoned: dict[asyncio.Task[None], str] = {}
+        """Tasks of executors that ignored a cancel, with their order ids: while one runs,
+        no other order starts, so that no two `execute` ever run at once."""
+        self._info: Latest | None = None
 
     def start(self) -> None:
         self._robot.start()
@@ -83,15 +86,31 @@ class ExecutorService:
             except ValueError as exc:  # still served; only not announced
                 _LOGGER.warning("label not announced: %s", exc)
         self._withdraw = self._bus.announce(self._keys.alive("executor"))
-        # What a supervisor needs to stop the robot itself if this process dies.
-        info = ExecutorInfo(namespace=self._robot.keys.namespace, distro=self._robot.codec.distro)
-        self._bus.latest(self._keys.executor_info).publish(info)
+        self._info = self._bus.latest(self._keys.executor_info)
+        self.publish_info()
+
+    def publish_info(self) -> None:
+        """What a supervisor needs to stop the robot itself if this process dies; sent
+        again when something about the robot is learnt (the type its cmd_vel takes)."""
+        robot = self._robot
+        info = ExecutorInfo(
+            namespace=robot.keys.namespace,
+            distro=robot.codec.distro,
+            cmd_vel=robot.keys.cmd_vel_name,
+            cmd_vel_type=robot.cmd_vel_type,
+            navigate=robot.keys.navigate_name,
+        )
+        if self._info is not None:
+            self._info.publish(info)
 
     async def end_stray_motion(self) -> None:
         """At start nothing of this executor runs: whatever moves the robot (a goal an
         earlier executor left, a last velocity command) is stray, and is stopped."""
-        await self._robot.halt()
-        _LOGGER.info("robot halted at start: zero velocity, every navigation goal cancelled")
+        problem = await self._robot.halt()
+        if problem is None:
+            _LOGGER.info("robot halted at start: zero velocity, every navigation goal cancelled")
+        else:
+            _LOGGER.warning("robot halted at start: zero velocity sent, but %s", problem)
 
     async def handle(self, request: ExecutorRequest) -> Message:
         match request:
@@ -110,14 +129,16 @@ class ExecutorService:
             case Halt():
                 # Zero velocity first; then cancel the order's task before the robot's goals,
                 # so the order ends as cancelled, not as a navigation the robot dropped.
-                self._robot.drive(0.0, 0.0)
+                self._robot.stop_moving()
                 running = self._running
                 if running is not None:
                     running.cancel_reason = "emergency stop"
                     running.task.cancel()
-                await self._robot.halt()
+                problem = await self._robot.halt()
                 if running is not None:
                     await self._cancel(running, "emergency stop")
+                if problem is not None:
+                    return Failed(reason=f"robot did not confirm the stop: {problem}")
                 return Done(detail="halted")
             case GetRunning():
                 running = self._running
@@ -148,17 +169,33 @@ class ExecutorService:
             )
         if self._running is not None:
             return Rejected(order_id=order_id, reason=f"busy with order '{self._running.order_id}'")
-        task = asyncio.create_task(self._run(order_id, executor, order))
-        self._running = _Running(order_id, task)
+        if self.abandoned:
+            stuck = ", ".join(f"'{stuck}'" for stuck in self.abandoned.values())
+            return Rejected(
+                order_id=order_id,
+                reason=f"the executor of order {stuck} ignored its cancel and still runs; "
+                "no new order until it ends (restarting the executor ends it)",
+            )
+        try:
+            params = order_params(executor, order)
+        except ParamsMismatch as exc:
+            return Rejected(order_id=order_id, reason=str(exc))
+        robot = OrderRobot(self._robot, order_id)
+        task = asyncio.create_task(self._run(order_id, executor, order, robot, params))
+        self._running = _Execution(order_id, task, robot)
         return Accepted(order_id=order_id)
 
-    async def _run(self, order_id: str, executor: Executor, order: Order) -> None:
+    async def _run(
+        self, order_id: str, executor: Executor, order: Order, robot: OrderRobot, params: object
+    ) -> None:
         def report(progress: Progress) -> None:
+            if robot.revoked:  # an executor that outlived its order has nothing to say
+                return
             self._bus.publish(
                 self._keys.executor_events, OrderProgress(order_id=order_id, progress=progress)
             )
 
-        ctx = ExecutionContext(order_id, self._robot, report)
+        ctx = ExecutionContext(order_id, robot, report, params)
         _LOGGER.info("executing %s: %s (%s)", order_id, order.description, order.label)
         status, message = OrderStatus.SUCCEEDED, ""
         try:
@@ -181,7 +218,10 @@ class ExecutorService:
         if running is None or running.order_id != order_id or running.reported:
             return
         running.reported = True
+        running.robot.revoke()
         self._running = None
+        if running.robot.problems:
+            message = "; ".join([message, *running.robot.problems])
         _LOGGER.info("order %s %s: %s", order_id, status, message)
         finished = OrderFinished(order_id=order_id, status=status, message=message)
         self._recent[order_id] = finished
@@ -189,14 +229,21 @@ class ExecutorService:
             self._recent.popitem(last=False)
         self._bus.publish(self._keys.executor_events, finished)
 
+    def _forget_abandoned(self, task: asyncio.Task[None]) -> None:
+        order_id = self.abandoned.pop(task, None)
+        _LOGGER.info("the abandoned executor of order %s has ended", order_id)
+
     async def _cancel(
-        self, running: _Running, why: str, status: OrderStatus = OrderStatus.CANCELLED
+        self, running: _Execution, why: str, status: OrderStatus = OrderStatus.CANCELLED
     ) -> None:
         """Cancel cooperatively; an executor that ignores it past the deadline is abandoned
         and the robot is halted, so a stuck executor can never keep it moving."""
         running.cancel_reason = why
         running.cancel_status = status
-        running.task.cancel()
+        if not running.task.cancelling():
+            # Once is enough: a second cancel would cut short the executor's own clean-up
+            # (cancelling its navigation goal and hearing whether the robot agreed).
+            running.task.cancel()
         done, _ = await asyncio.wait({running.task}, timeout=self._cancel_deadline)
         if not done:
             _LOGGER.warning(
@@ -204,11 +251,13 @@ class ExecutorService:
                 running.order_id,
                 self._cancel_deadline,
             )
-            self.abandoned.add(running.task)
-            running.task.add_done_callback(self.abandoned.discard)
-            await self._robot.halt()
+            running.robot.revoke()
+            self.abandoned[running.task] = running.order_id
+            running.task.add_done_callback(self._forget_abandoned)
+            problem = await self._robot.halt()
+            halted = "robot halted" if problem is None else f"zero velocity sent, but {problem}"
             self._report(
-                running.order_id, status, f"{why}; executor did not stop in time, robot halted"
+                running.order_id, status, f"{why}; executor did not stop in time, {halted}"
             )
         else:
             self._report(running.order_id, status, why)

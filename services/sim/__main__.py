@@ -9,10 +9,10 @@ import logging
 import sys
 
 from shared.bus import Bus, add_bus_arguments, bus_options, setup_logging, wait_for_stop
-from shared.keys import BridgeKeys
-from shared.ros2 import Ros2Codec, RosDistro
+from shared.robot_options import add_robot_arguments, robot_options
+from shared.ros2 import CameraType, CmdVelType, Ros2Codec, RosDistro
 
-from .node import SimConfig, SimNode
+from .node import SimConfig, SimFault, SimNode
 from .robot import Bounds, Limits
 
 _LOGGER = logging.getLogger(__name__)
@@ -23,14 +23,6 @@ def _bounds(text: str) -> Bounds:
         return Bounds.parse(text)
     except ValueError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from exc
-
-
-def _namespace(text: str) -> str:
-    try:
-        BridgeKeys(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from exc
-    return text
 
 
 def _positive(text: str) -> float:
@@ -47,21 +39,18 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="voicectl sim",
         description="A 2-D robot behind a simulated zenoh-bridge-ros2dds: cmd_vel, odom, "
-        "a camera and Nav2's navigate_to_pose action.",
+        "a camera and Nav2's navigate_to_pose action. The robot flags choose which kind of "
+        "robot it plays; --fault makes it misbehave.",
     )
     add_bus_arguments(parser)
+    add_robot_arguments(parser, detect=False)
     parser.add_argument(
-        "--namespace",
-        type=_namespace,
-        default="",
-        help="bridge namespace of the robot's keys (default: none)",
-    )
-    parser.add_argument(
-        "--distro",
-        type=RosDistro,
-        choices=list(RosDistro),
-        default=RosDistro.JAZZY,
-        help="ROS 2 distribution whose message definitions to speak (default: jazzy)",
+        "--fault",
+        action="append",
+        type=SimFault,
+        choices=list(SimFault),
+        default=[],
+        help="misbehave this way (repeatable)",
     )
     parser.add_argument(
         "--time-scale",
@@ -93,18 +82,22 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 async def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     setup_logging(args.debug)
+    robot = robot_options(args)
     config = SimConfig(
-        namespace=args.namespace,
+        keys=robot.keys,
+        cmd_vel_type=robot.cmd_vel_type or CmdVelType.TWIST,
+        camera_type=robot.camera_type or CameraType.RAW,
+        faults=frozenset(args.fault),
         time_scale=args.time_scale,
         bounds=args.bounds,
         limits=Limits(max_linear=args.max_linear, max_angular=args.max_angular),
     )
-    codec = Ros2Codec(args.distro)
+    codec = Ros2Codec(robot.distro or RosDistro.JAZZY)
     loop = asyncio.get_running_loop()
     with Bus.open(bus_options(args), loop) as bus:
         node = SimNode(bus, codec, config)
         node.declare()
-        bus.announce(BridgeKeys(args.namespace).simulator)
+        bus.announce(robot.keys.simulator)
         ticking = asyncio.create_task(node.run())
         try:
             await wait_for_stop()

@@ -3,21 +3,29 @@
 Keys and payloads are exactly the bridge's (`BridgeKeys`, CDR from `Ros2Codec`), so code that
 drives this node drives a real robot behind the real bridge unchanged:
 
-- ``cmd_vel`` (geometry_msgs/Twist) in; ``odom`` (nav_msgs/Odometry) out at 20 Hz;
-  ``camera/image_raw`` (sensor_msgs/Image, 64x48 rgb8) out at 2 Hz;
+- ``cmd_vel`` (geometry_msgs/Twist, or TwistStamped) in; ``odom`` (nav_msgs/Odometry) out
+  at 20 Hz; ``camera/image_raw`` (sensor_msgs/Image, 64x48 rgb8, or a JPEG
+  CompressedImage) out at 2 Hz; every name can be remapped;
 - ``navigate_to_pose/_action/{send_goal,get_result,cancel_goal}`` queryables and
-  ``.../{feedback,status}`` publications, behaving like Nav2's bt_navigator.
+  ``.../{feedback,status}`` publications, behaving like Nav2's bt_navigator;
+- a liveliness token per interface, in the bridge's format, naming its ROS type.
 
 Decisions, where Nav2 leaves a choice:
 
-- 'map' and 'odom' are the same world frame here; a 'base_link' goal is taken relative to
-  the robot's pose when the goal is accepted; other frames, and goals outside the bounds, are
-  rejected.
+- 'map' and 'odom' are the same world frame here. A 'base_link' goal is taken relative to
+  the robot's pose when the goal is accepted, as Jazzy's navigator does; playing Humble, it
+  is taken again relative to the current pose at every replan (once a second), as Humble's
+  planner does, so such a goal moves with the robot. Other frames, and goals outside the
+  bounds, are rejected.
 - One goal at a time: a new goal preempts the active one, which ends ABORTED, as Nav2's
   SimpleActionServer does.
 - While a goal is active the controller drives and cmd_vel is ignored (Nav2 itself would be
   the one publishing cmd_vel); it cancels nothing.
 - A cancel stops the robot at once: the next odom (one tick later) shows zero velocity.
+- A cancel of every goal when none is active answers "no error" with no goal, as rclcpp's
+  action server does.
+
+`SimFault`s make it misbehave the way links and robots do, for tests.
 
 Simulated time runs `time_scale` times faster than the wall clock: ticks stay at 20 Hz wall
 and each advances the model by the scaled wall time since the previous tick. Header stamps
@@ -29,6 +37,8 @@ from __future__ import annotations
 import asyncio
 import collections
 import contextlib
+import enum
+import io
 import logging
 import math
 import time
@@ -36,16 +46,26 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
+from PIL import Image as PilImage
 
 from shared.bus import Bus
-from shared.keys import BridgeKeys
-from shared.ros2 import CANCEL_ALL, CancelCode, GoalStatus, Ros2Codec
+from shared.geometry import compose
+from shared.keys import BridgeKeys, BridgeKind, BridgeToken
+from shared.ros2 import (
+    CANCEL_ALL,
+    CameraType,
+    CancelCode,
+    CmdVelType,
+    GoalStatus,
+    Pose2D,
+    Ros2Codec,
+    RosDistro,
+)
 
-from .robot import Bounds, GoToPose, Limits, Robot, compose
+from .robot import Bounds, GoToPose, Limits, Robot
 
 _LOGGER = logging.getLogger(__name__)
 
-ACTION = "navigate_to_pose"
 TICK_S = 0.05
 """Wall seconds between ticks: odom at 20 Hz."""
 FEEDBACK_EVERY = 2
@@ -57,12 +77,36 @@ HISTORY = 16
 """Finished goals remembered for get_result and status."""
 WORLD_FRAMES = ("map", "odom")
 ROBOT_FRAME = "base_link"
+REPLAN_S = 1.0
+"""Sim seconds between two replans of Humble's navigator (its default BT replans at 1 Hz)."""
+ABORT_AFTER_S = 1.0
+"""Sim seconds a goal runs before `SimFault.GOAL_ABORTS` aborts it."""
+ABORT_CODE = 105
+"""What an aborted goal's result says on Jazzy: FollowPath's FAILED_TO_MAKE_PROGRESS."""
+
+
+class SimFault(enum.StrEnum):
+    """Ways the simulated robot misbehaves, on purpose."""
+
+    CANCEL_REJECTED = "cancel-rejected"
+    """cancel_goal answers REJECTED and the goal goes on."""
+    CANCEL_UNANSWERED = "cancel-unanswered"
+    """cancel_goal is never answered (and cancels nothing)."""
+    RESULT_LOST_ONCE = "result-lost-once"
+    """The first get_result of each goal ends with no reply, as over a dropped link."""
+    RESULT_LOST = "result-lost"
+    """No get_result is ever answered."""
+    GOAL_ABORTS = "goal-aborts"
+    """Every goal aborts after a second, with an error code on Jazzy."""
 
 
 @dataclass(frozen=True)
 class SimConfig:
-    namespace: str = ""
-    """The bridge namespace the robot's keys live under ('' or 'bot1')."""
+    keys: BridgeKeys = field(default_factory=BridgeKeys)
+    """The robot's namespace and the names of its topics and action."""
+    cmd_vel_type: CmdVelType = CmdVelType.TWIST
+    camera_type: CameraType = CameraType.RAW
+    faults: frozenset[SimFault] = frozenset()
     time_scale: float = 1.0
     """Simulated seconds per wall second."""
     bounds: Bounds = field(default_factory=Bounds)
@@ -81,8 +125,14 @@ class _Goal:
     """Sim time of acceptance."""
     accepted_stamp: float
     """Wall time of acceptance."""
+    relative: Pose2D | None = None
+    """A 'base_link' goal as sent, which Humble's navigator takes again at every replan."""
+    planned_at: float = 0.0
+    """Sim time of the last (re)plan."""
     status: GoalStatus = GoalStatus.EXECUTING
+    error_code: int = 0
     error_msg: str = ""
+    result_asks: int = 0
     ended: asyncio.Event = field(default_factory=asyncio.Event)
 
 
@@ -99,7 +149,7 @@ class SimNode:
         self._bus = bus
         self._codec = codec
         self._config = config
-        self._keys = BridgeKeys(config.namespace)
+        self._keys = config.keys
         self._clock = clock
         self._epoch = clock()
         self._robot = Robot(config.limits)
@@ -113,17 +163,37 @@ class SimNode:
         return (self._clock() - self._epoch) * self._config.time_scale
 
     def declare(self) -> None:
-        """Subscribe and serve; call before `run()` so that odom means 'ready'."""
+        """Subscribe, serve and announce; call before `run()` so that odom means 'ready'."""
         keys = self._keys
-        self._bus.subscribe(keys.cmd_vel, self._codec.read_twist, self._on_cmd_vel)
-        self._bus.serve_bytes(keys.action(ACTION, "send_goal"), self._on_send_goal)
-        self._bus.serve_bytes(keys.action(ACTION, "get_result"), self._on_get_result)
-        self._bus.serve_bytes(keys.action(ACTION, "cancel_goal"), self._on_cancel_goal)
+        kind = self._config.cmd_vel_type
+        self._bus.subscribe(
+            keys.cmd_vel, lambda raw: self._codec.read_velocity(kind, raw), self._on_cmd_vel
+        )
+        self._bus.serve_bytes(keys.navigate("send_goal"), self._on_send_goal)
+        self._bus.serve_bytes(keys.navigate("get_result"), self._on_get_result)
+        self._bus.serve_bytes(keys.navigate("cancel_goal"), self._on_cancel_goal)
+        zid = str(self._bus.session.zid())
+        for token in (
+            BridgeToken(BridgeKind.SUBSCRIBER, keys.cmd_vel, kind.ros_type),
+            BridgeToken(BridgeKind.PUBLISHER, keys.odom, "nav_msgs/msg/Odometry"),
+            BridgeToken(BridgeKind.PUBLISHER, keys.tf, "tf2_msgs/msg/TFMessage"),
+            BridgeToken(BridgeKind.PUBLISHER, keys.camera_image, self._config.camera_type.ros_type),
+            BridgeToken(
+                BridgeKind.ACTION_SERVER,
+                keys.topic(keys.navigate_name),
+                "nav2_msgs/action/NavigateToPose",
+            ),
+        ):
+            self._bus.announce(token.token_key(zid))
+        faults = ", ".join(sorted(self._config.faults)) or "none"
         _LOGGER.info(
-            "simulated robot on '%s' (%s), time x%g",
+            "simulated robot on '%s' (%s, cmd_vel %s, camera %s), time x%g; faults: %s",
             keys.namespace or "/",
             self._codec.distro,
+            kind,
+            self._config.camera_type,
             self._config.time_scale,
+            faults,
         )
 
     async def run(self) -> None:
@@ -166,14 +236,26 @@ class SimNode:
         if goal is None:
             robot.step(*robot.cmd_vel(now), dt)
             return
+        if SimFault.GOAL_ABORTS in self._config.faults and now - goal.started_at >= ABORT_AFTER_S:
+            robot.stop()
+            code = ABORT_CODE if self._codec.distro is not RosDistro.HUMBLE else 0
+            self._finish(goal, GoalStatus.ABORTED, error_code=code)
+            return
+        if goal.relative is not None and now - goal.planned_at >= REPLAN_S:
+            # Humble: the planner transforms the base_link goal again, from where the robot is.
+            goal.controller = GoToPose(compose(robot.pose, goal.relative), self._config.limits)
+            goal.planned_at = now
         linear, angular = goal.controller.command(robot.pose, dt)
         robot.step(linear, angular, dt)
         if goal.controller.done:
             robot.stop()
             self._finish(goal, GoalStatus.SUCCEEDED)
 
-    def _finish(self, goal: _Goal, status: GoalStatus, error_msg: str = "") -> None:
+    def _finish(
+        self, goal: _Goal, status: GoalStatus, error_msg: str = "", error_code: int = 0
+    ) -> None:
         goal.status = status
+        goal.error_code = error_code
         goal.error_msg = error_msg
         goal.ended.set()
         if self._active is goal:
@@ -195,7 +277,7 @@ class SimNode:
         goal = self._active
         if goal is not None and tick % FEEDBACK_EVERY == 0:
             self._bus.publish_bytes(
-                self._keys.action(ACTION, "feedback"),
+                self._keys.navigate("feedback"),
                 self._codec.feedback(
                     goal.goal_id,
                     robot.pose,
@@ -205,16 +287,24 @@ class SimNode:
                 ),
             )
         if tick % CAMERA_EVERY == 0:
-            width, height = CAMERA_SIZE
-            self._bus.publish_bytes(
-                self._keys.camera_image,
-                self._codec.image(width, height, "rgb8", self._camera_frame(), stamp_s=stamp),
-            )
+            self._bus.publish_bytes(self._keys.camera_image, self._camera_message(stamp))
 
     def _publish_status(self) -> None:
         goals = [*self._finished, *([self._active] if self._active else [])]
         payload = self._codec.goal_status_array([(g.goal_id, g.status) for g in goals])
-        self._bus.publish_bytes(self._keys.action(ACTION, "status"), payload)
+        self._bus.publish_bytes(self._keys.navigate("status"), payload)
+
+    def _camera_message(self, stamp: float) -> bytes:
+        width, height = CAMERA_SIZE
+        frame = self._camera_frame()
+        if self._config.camera_type is CameraType.COMPRESSED:
+            # What image_transport's compressed plugin sends for an rgb8 camera.
+            encoded = io.BytesIO()
+            PilImage.frombytes("RGB", CAMERA_SIZE, frame).save(encoded, format="JPEG")
+            return self._codec.compressed_image(
+                "rgb8; jpeg compressed bgr8", encoded.getvalue(), stamp_s=stamp
+            )
+        return self._codec.image(width, height, "rgb8", frame, stamp_s=stamp)
 
     def _camera_frame(self) -> bytes:
         """A picture that changes with the pose: colour from the position, a bar for the yaw."""
@@ -246,10 +336,13 @@ class SimNode:
     async def _on_send_goal(self, raw: bytes) -> bytes:
         request = self._codec.read_send_goal_request(raw)
         robot = self._robot
+        relative = None
         if request.frame in WORLD_FRAMES:
             target = request.pose
         elif request.frame == ROBOT_FRAME:
             target = compose(robot.pose, request.pose)
+            if self._codec.distro is RosDistro.HUMBLE:
+                relative = request.pose
         else:
             _LOGGER.warning(
                 "goal rejected: frame %r is not one of %s",
@@ -274,6 +367,8 @@ class SimNode:
             controller=GoToPose(target, self._config.limits),
             started_at=self.sim_time(),
             accepted_stamp=stamp,
+            relative=relative,
+            planned_at=self.sim_time(),
         )
         _LOGGER.info(
             "goal %s accepted: (%.2f, %.2f, %.2f) in %s",
@@ -286,10 +381,17 @@ class SimNode:
         self._publish_status()
         return self._codec.send_goal_response(True, stamp)
 
-    async def _on_get_result(self, raw: bytes) -> bytes:
+    async def _on_get_result(self, raw: bytes) -> bytes | None:
         goal = self._find(self._codec.read_get_result_request(raw))
         if goal is None:  # what an rclcpp action server answers for a goal it does not know
             return self._codec.get_result_response(GoalStatus.UNKNOWN)
+        goal.result_asks += 1
+        faults = self._config.faults
+        if SimFault.RESULT_LOST in faults or (
+            SimFault.RESULT_LOST_ONCE in faults and goal.result_asks == 1
+        ):
+            _LOGGER.info("get_result of goal %s lost (fault)", goal.goal_id.hex()[:8])
+            return None
         self._waiting += 1
         self._drained.clear()
         try:
@@ -298,10 +400,15 @@ class SimNode:
             self._waiting -= 1
             if self._waiting == 0:
                 self._drained.set()
-        return self._codec.get_result_response(goal.status, error_msg=goal.error_msg)
+        return self._codec.get_result_response(
+            goal.status, error_code=goal.error_code, error_msg=goal.error_msg
+        )
 
-    async def _on_cancel_goal(self, raw: bytes) -> bytes:
+    async def _on_cancel_goal(self, raw: bytes) -> bytes | None:
         request = self._codec.read_cancel_goal_request(raw)
+        if SimFault.CANCEL_UNANSWERED in self._config.faults:
+            _LOGGER.info("cancel_goal left unanswered (fault)")
+            return None
         if request.goal_id != CANCEL_ALL:
             goal = self._find(request.goal_id)
             if goal is None:
@@ -309,7 +416,12 @@ class SimNode:
             if goal.status.terminal and request.stamp_s == 0:
                 return self._codec.cancel_goal_response(CancelCode.GOAL_TERMINATED)
         active = self._active
+        if active is None and request.goal_id == CANCEL_ALL:
+            return self._codec.cancel_goal_response(CancelCode.NONE)
         if active is None or not self._cancels(request.goal_id, request.stamp_s, active):
+            return self._codec.cancel_goal_response(CancelCode.REJECTED)
+        if SimFault.CANCEL_REJECTED in self._config.faults:
+            _LOGGER.info("cancel of goal %s rejected (fault)", active.goal_id.hex()[:8])
             return self._codec.cancel_goal_response(CancelCode.REJECTED)
         self._robot.stop()
         active.status = GoalStatus.CANCELING

@@ -10,6 +10,7 @@ import enum
 import math
 from dataclasses import dataclass
 
+from shared.geometry import normalize_angle
 from shared.ros2 import Pose2D
 
 CMD_VEL_TIMEOUT = 0.5
@@ -61,21 +62,6 @@ class Bounds:
 
     def contains(self, x: float, y: float) -> bool:
         return self.xmin <= x <= self.xmax and self.ymin <= y <= self.ymax
-
-
-def normalize_angle(angle: float) -> float:
-    """The same angle in [-pi, pi)."""
-    return (angle + math.pi) % (2 * math.pi) - math.pi
-
-
-def compose(base: Pose2D, relative: Pose2D) -> Pose2D:
-    """`relative`, given in the frame of a robot standing at `base`, in the world frame."""
-    cos, sin = math.cos(base.yaw), math.sin(base.yaw)
-    return Pose2D(
-        x=base.x + cos * relative.x - sin * relative.y,
-        y=base.y + sin * relative.x + cos * relative.y,
-        yaw=normalize_angle(base.yaw + relative.yaw),
-    )
 
 
 def integrate(pose: Pose2D, linear: float, angular: float, dt: float) -> Pose2D:

@@ -11,6 +11,7 @@ from __future__ import annotations
 import asyncio
 import logging
 import sqlite3
+import time
 
 from shared.bus import Bus, json_decoder
 from shared.errors import BusError
@@ -49,7 +50,7 @@ from shared.messages import (
     Submitted,
     SupervisorRequest,
 )
-from shared.ros2 import CancelCode, Ros2Codec, RosDistro
+from shared.ros2 import CancelCode, CmdVelType, Ros2Codec, RosDistro
 
 from .queue import RobotQueue
 from .store import OrderStore
@@ -68,7 +69,6 @@ STOP_REPEAT = 3
 """Zero-velocity commands sent by an emergency stop (each blocks for room, never dropped)."""
 STOP_TIMEOUT = 2.0
 """How long an emergency stop waits for navigation to answer its cancel."""
-NAVIGATE = "navigate_to_pose"
 CANCEL_ANSWERS = {
     CancelCode.NONE: "navigation cancelled its goals",
     CancelCode.REJECTED: "NAVIGATION REFUSED TO CANCEL its goals",
@@ -209,13 +209,23 @@ class RobotSupervisor:
         """Zero velocity and cancel every navigation goal on the robot's bridge keys, as
         the executor announced them; says what it did."""
         info = self.executor_info
-        keys = BridgeKeys(info.namespace)
-        codec = Ros2Codec(RosDistro(info.distro))
+        try:
+            keys = BridgeKeys(
+                info.namespace, cmd_vel_name=info.cmd_vel, navigate_name=info.navigate
+            )
+            codec = Ros2Codec(RosDistro(info.distro))
+            stop = codec.velocity(CmdVelType(info.cmd_vel_type), 0.0, 0.0, time.time())
+        except ValueError as exc:  # an executor that says nonsense: fall back to the defaults
+            _LOGGER.warning(
+                "%s: unusable executor info (%s); stopping on default keys", self.robot, exc
+            )
+            keys, codec = BridgeKeys(), Ros2Codec()
+            stop = codec.twist(0.0, 0.0)
         for _ in range(STOP_REPEAT):  # a lost sample must not leave the robot moving
-            self._bus.publish_bytes(keys.cmd_vel, codec.twist(0.0, 0.0), urgent=True)
+            self._bus.publish_bytes(keys.cmd_vel, stop, urgent=True)
         try:
             reply = await self._bus.request_bytes(
-                keys.action(NAVIGATE, "cancel_goal"), codec.cancel_goal_request(), STOP_TIMEOUT
+                keys.navigate("cancel_goal"), codec.cancel_goal_request(), STOP_TIMEOUT, urgent=True
             )
         except BusError as exc:
             cancelled = f"no navigation to cancel ({exc})"
@@ -232,7 +242,11 @@ class RobotSupervisor:
     async def _send_control(self, request: CancelOrder | Halt | GetRunning | GetResult) -> Message:
         try:
             return await self._bus.request(
-                self._keys.executor_control, request, self._reply_decode, EXECUTOR_TIMEOUT
+                self._keys.executor_control,
+                request,
+                self._reply_decode,
+                EXECUTOR_TIMEOUT,
+                urgent=isinstance(request, Halt),
             )
         except BusError as exc:
             return Failed(reason=f"executor unreachable: {exc}")

@@ -236,7 +236,11 @@ class Panel:
     async def _ask_supervisor(self, keys: RobotKeys, request: Message) -> SupervisorReply:
         try:
             reply: SupervisorReply = await self.bus.request(
-                keys.supervisor, request, self._supervisor_decode, BUS_TIMEOUT
+                keys.supervisor,
+                request,
+                self._supervisor_decode,
+                BUS_TIMEOUT,
+                urgent=isinstance(request, EmergencyStop),
             )
         except BusError as exc:
             raise ApiError(503, f"supervisor unavailable: {exc}") from exc

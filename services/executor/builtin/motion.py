@@ -12,6 +12,9 @@ from __future__ import annotations
 import asyncio
 import math
 from collections.abc import Callable
+from typing import Annotated
+
+import msgspec
 
 from shared.errors import OrderFailed
 from shared.messages import Order
@@ -23,14 +26,28 @@ STALL_S = 3.0
 """No progress for this long while commanding motion: the robot is blocked."""
 
 
+class Straight(msgspec.Struct):
+    distance: float | None = None
+    """Metres, negative backwards; None: the x of a base_link target pose."""
+    speed: Annotated[float, msgspec.Meta(gt=0)] = 0.3
+
+
+class Turn(msgspec.Struct):
+    angle: float | None = None
+    """Radians, positive counter-clockwise; None: the yaw of a base_link target pose."""
+    angular_speed: Annotated[float, msgspec.Meta(gt=0)] = 1.0
+
+
 class Drive(Executor):
     """Drive straight by `distance` metres (negative: backwards)."""
 
     labels = ("drive",)
+    params_type = Straight
 
     async def execute(self, order: Order, ctx: ExecutionContext) -> str | None:
-        distance = _relative_target(order, "distance", "x")
-        speed = _number(order, "speed") or 0.3
+        params: Straight = ctx.params
+        distance = _relative_target(order, params.distance, "distance", "x")
+        speed = params.speed
         start = await ctx.robot.next_pose()
 
         def travelled(pose: Pose2D) -> float:
@@ -50,10 +67,12 @@ class Rotate(Executor):
     """Turn in place by `angle` radians (positive: counter-clockwise)."""
 
     labels = ("rotate",)
+    params_type = Turn
 
     async def execute(self, order: Order, ctx: ExecutionContext) -> str | None:
-        angle = _relative_target(order, "angle", "yaw")
-        speed = _number(order, "angular_speed") or 1.0
+        params: Turn = ctx.params
+        angle = _relative_target(order, params.angle, "angle", "yaw")
+        speed = params.angular_speed
         turned = _Unwrapped((await ctx.robot.next_pose()).yaw)
 
         def command(velocity: float, remaining: float) -> None:
@@ -107,17 +126,7 @@ class _Unwrapped:
         return self._total
 
 
-def _number(order: Order, key: str) -> float | None:
-    value = order.params.get(key)
-    if value is None:
-        return None
-    if isinstance(value, bool) or not isinstance(value, int | float):
-        raise OrderFailed(f"'{order.description}': parameter '{key}' must be a number")
-    return float(value)
-
-
-def _relative_target(order: Order, key: str, pose_field: str) -> float:
-    explicit = _number(order, key)
+def _relative_target(order: Order, explicit: float | None, key: str, pose_field: str) -> float:
     if explicit is not None:
         return explicit
     pose = order.target_pose

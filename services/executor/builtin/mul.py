@@ -2,18 +2,26 @@
 
 from __future__ import annotations
 
-from shared.errors import OrderFailed
+import msgspec
+
 from shared.messages import Order
 
 from ..framework import ExecutionContext, Executor
 
 
+class Factors(msgspec.Struct):
+    """The seed tutorial's two numbers."""
+
+    first: float
+    second: float
+
+
 class Multiply(Executor):
     labels = ("mul",)
+    params_type = Factors
 
     async def execute(self, order: Order, ctx: ExecutionContext) -> str | None:
-        a, b = order.params.get("a"), order.params.get("b")
-        if not isinstance(a, int | float) or not isinstance(b, int | float):
-            raise OrderFailed(f"'{order.description}' needs numeric parameters a and b")
-        ctx.progress(f"multiplying {a} by {b}")
-        return f"{a} x {b} = {a * b}"
+        factors: Factors = ctx.params
+        first, second = factors.first, factors.second
+        ctx.progress(f"multiplying {first:g} by {second:g}")
+        return f"{first:g} x {second:g} = {first * second:g}"

@@ -3,20 +3,25 @@
 from __future__ import annotations
 
 import asyncio
+from typing import Annotated
 
-from shared.errors import OrderFailed
+import msgspec
+
 from shared.messages import Order
 
 from ..framework import ExecutionContext, Executor
 
 
+class Pause(msgspec.Struct):
+    seconds: Annotated[float, msgspec.Meta(ge=0)] = 1.0
+
+
 class Wait(Executor):
     labels = ("wait",)
+    params_type = Pause
 
     async def execute(self, order: Order, ctx: ExecutionContext) -> str | None:
-        seconds = order.params.get("seconds", 1)
-        if isinstance(seconds, bool) or not isinstance(seconds, int | float) or seconds < 0:
-            raise OrderFailed(f"'{order.description}': 'seconds' must be a number >= 0")
+        seconds = ctx.params.seconds
         loop = asyncio.get_running_loop()
         end = loop.time() + seconds
         while (left := end - loop.time()) > 0:

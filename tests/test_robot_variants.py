@@ -1,0 +1,282 @@
+"""The executor against the robots it meets outside the simulator's defaults, each played
+by `voicectl sim` in the matching mode over real Zenoh: remapped names with a namespace,
+TwistStamped cmd_vel, a compressed camera, Humble's navigator, and navigation that
+refuses a cancel, never answers one, loses a result or aborts a goal.
+
+The executor is given names only; the types it must find out itself (bridge tokens for
+topics, a get_result probe for the distribution), as on a robot nobody documented."""
+
+from __future__ import annotations
+
+import asyncio
+import math
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+from PIL import Image as PilImage
+
+from shared.bus import json_decoder
+from shared.keys import BridgeKeys
+from shared.messages import (
+    CancelOrder,
+    Done,
+    ExecutorInfo,
+    Failed,
+    Halt,
+    Order,
+    OrderStatus,
+    TargetPose,
+)
+
+from .conftest import Processes, async_wait_until, voicectl
+from .support import ExecutorHarness, run_harness, start_robot
+
+Start = Callable[..., None]
+"""start(sim_args, executor_args): the simulator and an executor for robot 'r1'."""
+
+NAMES = (
+    "--namespace",
+    "bot1",
+    "--cmd-vel",
+    "diff_drive_controller/cmd_vel",
+    "--odom",
+    "diff_drive_controller/odom",
+    "--camera",
+    "front/image",
+    "--navigate",
+    "nav/navigate_to_pose",
+)
+REMAPPED = BridgeKeys(
+    "bot1",
+    cmd_vel_name="diff_drive_controller/cmd_vel",
+    odom_name="diff_drive_controller/odom",
+    camera_name="front/image",
+    navigate_name="nav/navigate_to_pose",
+)
+
+
+@pytest.fixture
+def start(router: str, processes: Processes, tmp_path: Path) -> Start:
+    def start(sim_args: tuple[str, ...] = (), executor_args: tuple[str, ...] = ()) -> None:
+        start_robot(processes, router, tmp_path / "photos", sim_args, executor_args)
+
+    return start
+
+
+def goal(frame: str, x: float) -> Order:
+    return Order(
+        order="goal",
+        label="mbgoal",
+        description=f"reach {x:g} m in {frame}",
+        target_pose=TargetPose(frame=frame, x=x),
+    )
+
+
+def task(label: str, **params: float) -> Order:
+    return Order(order=label, label=label, description=f"{label} test", params=params)
+
+
+async def executor_info(harness: ExecutorHarness, matches: Callable[[ExecutorInfo], bool]) -> None:
+    seen: list[ExecutorInfo] = []
+    harness.bus.subscribe(
+        harness.keys.executor_info,
+        json_decoder(ExecutorInfo),
+        lambda _key, info: seen.append(info),
+        history=True,
+    )
+    await async_wait_until(lambda: seen and matches(seen[-1]), 15.0, "the executor's info")
+
+
+async def moving(harness: ExecutorHarness) -> None:
+    await async_wait_until(lambda: harness.pose().linear_x > 0.2, 15.0, "the robot to drive")
+
+
+def test_a_remapped_robot_with_stamped_cmd_vel_and_a_compressed_camera(
+    router: str, start: Start, tmp_path: Path
+) -> None:
+    start(
+        (*NAMES, "--cmd-vel-type", "stamped", "--camera-type", "compressed"),
+        NAMES,
+    )
+
+    async def body(harness: ExecutorHarness) -> None:
+        # The stamped type comes from the bridge's token: Twist would not decode, and the
+        # robot would not move.
+        await executor_info(harness, lambda info: info.cmd_vel_type == "stamped")
+        begin = harness.pose().pose
+        result = await harness.finished(await harness.execute(task("drive", distance=0.5)))
+        assert (result.status, result.message) == (OrderStatus.SUCCEEDED, "drove 0.5 m")
+        moved = harness.pose().pose
+        assert math.hypot(moved.x - begin.x, moved.y - begin.y) == pytest.approx(0.5, abs=0.05)
+
+        result = await harness.finished(await harness.execute(task("pic", wait=0)))
+        assert result.status == OrderStatus.SUCCEEDED, result.message
+        (photo,) = (tmp_path / "photos").glob("*")
+        assert photo.suffix == ".jpg"  # the robot's JPEG, saved as it came
+        with PilImage.open(photo) as picture:
+            assert (picture.format, picture.size) == ("JPEG", (64, 48))
+
+        result = await harness.finished(await harness.execute(goal("map", 1.5)))
+        assert result.status == OrderStatus.SUCCEEDED, result.message
+        assert harness.pose().pose.x == pytest.approx(1.5, abs=0.15)
+
+    run_harness(router, body, REMAPPED)
+
+
+def test_the_camera_is_subscribed_only_while_a_photo_is_taken(router: str, start: Start) -> None:
+    start()
+
+    async def body(harness: ExecutorHarness) -> None:
+        camera = harness.bus.session.declare_publisher(BridgeKeys().camera_image)
+
+        def subscribed() -> bool:
+            return bool(getattr(camera.matching_status, "matching", False))
+
+        try:
+            await asyncio.sleep(1.0)  # time for a subscriber, were there one, to be seen
+            assert not subscribed()
+            order_id = await harness.execute(task("pic", wait=3))
+            await async_wait_until(subscribed, 10.0, "the executor to subscribe to the camera")
+            result = await harness.finished(order_id)
+            assert result.status == OrderStatus.SUCCEEDED, result.message
+            await async_wait_until(lambda: not subscribed(), 10.0, "the camera to be let go")
+        finally:
+            camera.undeclare()
+
+    run_harness(router, body)
+
+
+def test_humble_goals_relative_to_the_robot_stay_where_they_were_asked(
+    router: str, start: Start
+) -> None:
+    """Humble's navigator re-transforms a base_link goal at every replan (1 Hz here), so
+    sent as it is the goal would run ahead of the robot. The executor finds the distro
+    by itself and sends an odom goal instead."""
+    start(("--distro", "humble"))
+
+    async def body(harness: ExecutorHarness) -> None:
+        await executor_info(harness, lambda info: info.distro == "humble")
+        begin = harness.pose().pose
+        result = await harness.finished(await harness.execute(goal("base_link", 2.0)))
+        assert result.status == OrderStatus.SUCCEEDED, result.message
+        end = harness.pose().pose
+        assert end.x - begin.x == pytest.approx(2.0, abs=0.15)
+
+    run_harness(router, body)
+
+
+def test_a_distro_mismatch_fails_navigation_before_any_goal(router: str, start: Start) -> None:
+    start(("--distro", "humble"), ("--distro", "jazzy"))
+
+    async def body(harness: ExecutorHarness) -> None:
+        begin = harness.pose().pose
+        result = await harness.finished(await harness.execute(goal("map", 2.0)))
+        assert (result.status, result.message) == (
+            OrderStatus.FAILED,
+            "the robot's navigation speaks ROS 2 Humble, not Jazzy as --distro says; "
+            "restart the executor with --distro humble (or auto)",
+        )
+        await asyncio.sleep(0.5)
+        assert harness.pose().pose == begin
+        assert harness.pose().linear_x == 0.0
+
+    run_harness(router, body)
+
+
+@pytest.mark.parametrize(
+    ("fault", "problem"),
+    [
+        ("cancel-rejected", "navigation refused to cancel every goal"),
+        ("cancel-unanswered", "navigation did not answer the cancel of every goal"),
+    ],
+)
+def test_a_stop_the_robot_does_not_confirm_is_reported_not_assumed(
+    router: str, start: Start, fault: str, problem: str
+) -> None:
+    start(("--fault", fault))
+
+    async def body(harness: ExecutorHarness) -> None:
+        order_id = await harness.execute(goal("map", 8.0))
+        await moving(harness)
+        reply = await harness.control(Halt())
+        assert isinstance(reply, Failed)
+        assert reply.reason.startswith(f"robot did not confirm the stop: {problem}")
+        result = await harness.finished(order_id)
+        assert result.status == OrderStatus.CANCELLED
+        assert "navigation" in result.message  # the cancel of its own goal went unconfirmed
+
+    run_harness(router, body)
+
+
+def test_a_cancelled_goal_the_robot_keeps_is_named_in_the_result(router: str, start: Start) -> None:
+    start(("--fault", "cancel-rejected"))
+
+    async def body(harness: ExecutorHarness) -> None:
+        order_id = await harness.execute(goal("map", 8.0))
+        await moving(harness)
+        assert isinstance(await harness.control(CancelOrder(order_id=order_id)), Done)
+        result = await harness.finished(order_id)
+        assert result.status == OrderStatus.CANCELLED
+        assert result.message.startswith("cancelled; navigation refused to cancel goal ")
+
+    run_harness(router, body)
+
+
+def test_a_result_lost_once_is_asked_again(router: str, start: Start) -> None:
+    start(("--fault", "result-lost-once"))
+
+    async def body(harness: ExecutorHarness) -> None:
+        result = await harness.finished(await harness.execute(goal("map", 1.0)))
+        assert result.status == OrderStatus.SUCCEEDED, result.message
+        assert harness.pose().pose.x == pytest.approx(1.0, abs=0.15)
+
+    run_harness(router, body)
+
+
+def test_a_result_that_never_comes_cancels_the_goal_before_failing(
+    router: str, start: Start
+) -> None:
+    start(("--fault", "result-lost"), ("--result-grace", "2"))
+
+    async def body(harness: ExecutorHarness) -> None:
+        result = await harness.finished(await harness.execute(goal("map", 8.0)))
+        assert result.status == OrderStatus.FAILED
+        assert result.message.startswith("navigation result lost (")
+        assert result.message.endswith("); the goal was cancelled")
+        failed_at = asyncio.get_running_loop().time()
+        await async_wait_until(
+            lambda: len(harness.since(failed_at + 0.3)) >= 10, 10.0, "odometry after the failure"
+        )
+        assert all(odom.linear_x == 0.0 for odom in harness.since(failed_at + 0.3))
+        assert harness.pose().pose.x < 6.0  # stopped well short of the goal
+
+    run_harness(router, body)
+
+
+@pytest.mark.parametrize(
+    ("distro", "message"),
+    [
+        ("jazzy", "navigation ended ABORTED: error 105 (controller: failed to make progress)"),
+        ("humble", "navigation ended ABORTED (Humble's Nav2 gives no reason)"),
+    ],
+)
+def test_an_aborted_goal_reports_what_the_robot_said(
+    router: str, start: Start, distro: str, message: str
+) -> None:
+    start(("--distro", distro, "--fault", "goal-aborts"))
+
+    async def body(harness: ExecutorHarness) -> None:
+        result = await harness.finished(await harness.execute(goal("map", 8.0)))
+        assert (result.status, result.message) == (OrderStatus.FAILED, message)
+
+    run_harness(router, body)
+
+
+def test_a_namespace_ros_would_refuse_is_refused_with_what_is_allowed() -> None:
+    refused = voicectl("executor", "--namespace", "bot-1", timeout=30)
+    assert refused.returncode == 2
+    assert (
+        "argument --namespace: ROS namespace 'bot-1': 'bot-1' is not a ROS 2 name; use letters, "
+        "digits and single '_', not starting with a digit ('-' and '.' are not allowed)"
+    ) in refused.stderr
