@@ -13,10 +13,15 @@ import asyncio
 import contextlib
 import json
 import logging
+import os
+import re
 import signal
+import sys
 import threading
-from collections.abc import Awaitable, Callable, Iterator
+import time
+from collections.abc import Awaitable, Callable, Iterator, Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Literal, TypeVar
 
 import msgspec
@@ -34,41 +39,101 @@ Decode = Callable[[bytes], T]
 
 DEFAULT_ROUTER = "tcp/127.0.0.1:7447"
 CLIENT_TIMEOUT = 3.0
+WAIT_WARNING = 10.0
+"""Seconds between two warnings of a service still waiting for its router."""
 """Seconds a command (voicectl state, stop...) waits for the router before it gives up."""
 JSON = zenoh.Encoding.APPLICATION_JSON
 CDR = zenoh.Encoding.APPLICATION_CDR
 
 
+Mode = Literal["client", "peer", "router"]
+MODES: tuple[Mode, ...] = ("client", "peer", "router")
+
+
 @dataclass(frozen=True)
 class BusOptions:
-    """How a process joins the Zenoh network."""
+    """How a process joins the Zenoh network: a Zenoh configuration file if any, then
+    the options here on top of it, then the `settings`, as Zenoh's own tools do."""
 
     connect: list[str] = field(default_factory=lambda: [DEFAULT_ROUTER])
     listen: list[str] = field(default_factory=list)
-    mode: Literal["client", "peer", "router"] = "client"
+    mode: Mode | None = "client"
+    """None: as the configuration file says."""
     lease_ms: int | None = None
     """Shorter leases notice a lost peer sooner (tests on cut links use ~2000)."""
     wait: bool = True
     """Wait for the router however long it takes (services); a command someone typed
     gives up after `CLIENT_TIMEOUT` seconds instead."""
+    config_file: Path | None = None
+    """A Zenoh JSON5 configuration: TLS, credentials, anything Zenoh has a key for."""
+    settings: tuple[str, ...] = ()
+    """'KEY:VALUE' pairs, VALUE in JSON5, set last (zenohd's --cfg)."""
 
     def zenoh_config(self) -> zenoh.Config:
-        conf = zenoh.Config()
-        conf.insert_json5("mode", json.dumps(self.mode))
-        conf.insert_json5("scouting/multicast/enabled", "false")
+        """The configuration; BusError naming the file or setting that is wrong."""
+        if self.config_file is not None:
+            try:
+                conf = zenoh.Config.from_file(str(self.config_file))
+            except zenoh.ZError as exc:
+                raise BusError(f"--config {self.config_file}: {_zenoh_reason(exc)}") from None
+        else:
+            conf = zenoh.Config()
+            # Endpoints are always explicit: nothing joins by multicast.
+            conf.insert_json5("scouting/multicast/enabled", "false")
+        if self.mode is not None:
+            conf.insert_json5("mode", json.dumps(self.mode))
         # Publishers that keep their last value for late subscribers need timestamps.
         conf.insert_json5("timestamping/enabled", "true")
         if self.connect:
             conf.insert_json5("connect/endpoints", json.dumps(self.connect))
         if self.listen:
             conf.insert_json5("listen/endpoints", json.dumps(self.listen))
-        if self.mode == "client":
+        if self.lease_ms is not None:
+            conf.insert_json5("transport/link/tx/lease", str(self.lease_ms))
+        if json.loads(conf.get_json("mode")) == "client":
             # A service waits for the router instead of failing when it is not up yet.
             timeout = -1 if self.wait else int(CLIENT_TIMEOUT * 1000)
             conf.insert_json5("connect/timeout_ms", str(timeout))
-        if self.lease_ms is not None:
-            conf.insert_json5("transport/link/tx/lease", str(self.lease_ms))
+        for setting in self.settings:
+            key, colon, value = setting.partition(":")
+            if not colon or not key or not value:
+                raise BusError(f"--cfg {setting!r}: expected KEY:VALUE, VALUE in JSON5")
+            try:
+                conf.insert_json5(key, value)
+            except zenoh.ZError as exc:  # the value is not repeated: it may be a password
+                raise BusError(f"--cfg {key}: {_zenoh_reason(exc)}") from None
         return conf
+
+    @property
+    def where(self) -> str:
+        """The endpoints this process connects to (as the flags or the file say), for
+        messages."""
+        endpoints = self.connect
+        if not endpoints and self.config_file is not None:
+            with contextlib.suppress(zenoh.ZError, BusError, ValueError):
+                found = json.loads(self.zenoh_config().get_json("connect/endpoints"))
+                # Zenoh also takes a list per mode: {router: [...], peer: [...]}.
+                per_mode = found.values() if isinstance(found, dict) else [found]
+                endpoints = [endpoint for listed in per_mode for endpoint in listed]
+        return ", ".join(endpoints) or "no endpoint"
+
+
+def _zenoh_reason(exc: zenoh.ZError) -> str:
+    """Zenoh's error in one line, without its source location or the offending text (a
+    setting's value may be a password), a JSON5 position made readable."""
+    text = str(exc).split(" at /", 1)[0].replace("\\n", "\n")
+    located = re.search(
+        r'msg: "(.*?)", location: Some\(Location \{ line: (\d+), column: (\d+)', text, re.DOTALL
+    )
+    if located:
+        # A JSON5 syntax error draws the offending line; keep only its last line, "= why".
+        why = located[1].rsplit("= ", 1)[-1].strip()
+        return f"{why} (line {located[2]}, column {located[3]})"
+    drawn = re.match(r"\s*--> (\d+):(\d+)\n.*= ([^\n]+)", text, re.DOTALL)
+    if drawn:
+        return f"{drawn[3].strip()} (line {drawn[1]}, column {drawn[2]})"
+    quoted = re.fullmatch(r'Str\("(.*)"\)', text)
+    return quoted[1] if quoted else text.splitlines()[0]
 
 
 def robot_name(text: str) -> str:
@@ -79,19 +144,104 @@ def robot_name(text: str) -> str:
         raise argparse.ArgumentTypeError(str(exc)) from exc
 
 
-def add_bus_arguments(parser: argparse.ArgumentParser) -> None:
-    """The Zenoh flags every voicectl process shares."""
-    parser.add_argument(
+ZENOH_ENVIRONMENT = {
+    "mode": "ZENOH_MODE",
+    "connect": "ZENOH_CONNECT",
+    "listen": "ZENOH_LISTEN",
+    "config": "ZENOH_CONFIG",
+    "cfg": "ZENOH_CFG",
+}
+"""Environment variables that stand in for the flags (containers): endpoints separated
+by ',', settings by ';'. A flag on the command line wins over its variable."""
+
+
+def add_bus_arguments(parser: argparse.ArgumentParser, router: bool = False) -> None:
+    """The Zenoh flags every voicectl process shares, named as zenohd names them."""
+    group = parser.add_argument_group(
+        "Zenoh", "as zenohd's flags; each has an environment variable: ZENOH_MODE, ..."
+    )
+    if not router:
+        group.add_argument(
+            "--mode", choices=MODES, help="client (default), peer, or what --config says"
+        )
+    default_endpoint = "" if router else f"; default {DEFAULT_ROUTER}"
+    group.add_argument(
         "--connect",
         action="append",
         metavar="ENDPOINT",
-        help=f"Zenoh endpoint to connect to (repeatable; default {DEFAULT_ROUTER})",
+        help=f"endpoint to connect to (repeatable{default_endpoint})",
+    )
+    group.add_argument(
+        "--listen",
+        action="append",
+        metavar="ENDPOINT",
+        help=f"endpoint to listen on (repeatable{'; default ' + DEFAULT_ROUTER if router else ''})",
+    )
+    group.add_argument(
+        "--config",
+        type=Path,
+        metavar="FILE",
+        help="a Zenoh JSON5 configuration (TLS, credentials...); the other flags override it",
+    )
+    group.add_argument(
+        "--cfg",
+        action="append",
+        metavar="KEY:VALUE",
+        help="set one configuration key to a JSON5 value, last (repeatable), e.g. "
+        "transport/link/tx/lease:2000",
     )
     parser.add_argument("--debug", action="store_true", help="log at DEBUG level")
+    parser.set_defaults(bus_prog=parser.prog)
 
 
-def bus_options(args: argparse.Namespace, wait: bool = True) -> BusOptions:
-    return BusOptions(connect=args.connect or [DEFAULT_ROUTER], wait=wait)
+def bus_options(
+    args: argparse.Namespace,
+    wait: bool = True,
+    router: bool = False,
+    environ: Mapping[str, str] = os.environ,
+) -> BusOptions:
+    """The options the flags (or their environment variables) give; a mistake in them
+    ends the process now, in one line, rather than when the session opens."""
+
+    def given(name: str, separator: str) -> list[str]:
+        flag: list[str] | None = getattr(args, name, None)
+        if flag:
+            return flag
+        text = environ.get(ZENOH_ENVIRONMENT[name], "")
+        return [part.strip() for part in text.split(separator) if part.strip()]
+
+    config_file: Path | None = args.config or (
+        Path(environ["ZENOH_CONFIG"]) if environ.get("ZENOH_CONFIG") else None
+    )
+    mode: str | None = "router" if router else (args.mode or environ.get("ZENOH_MODE"))
+    connect, listen = given("connect", ","), given("listen", ",")
+    if config_file is None:
+        mode = mode or "client"
+        if router:
+            listen = listen or [DEFAULT_ROUTER]
+        elif not connect:
+            connect = [DEFAULT_ROUTER]
+    prog = getattr(args, "bus_prog", "voicectl")
+    if mode is not None and mode not in MODES:
+        _exit(prog, f"ZENOH_MODE {mode!r}: expected one of {', '.join(MODES)}")
+    options = BusOptions(
+        connect=connect,
+        listen=listen,
+        mode=mode,  # type: ignore[arg-type]  # checked just above
+        wait=wait,
+        config_file=config_file,
+        settings=tuple(given("cfg", ";")),
+    )
+    try:
+        options.zenoh_config()
+    except BusError as exc:
+        _exit(prog, str(exc))
+    return options
+
+
+def _exit(prog: str, message: str) -> None:
+    print(f"{prog}: {message}", file=sys.stderr)
+    raise SystemExit(2)
 
 
 def setup_logging(debug: bool) -> None:
@@ -105,9 +255,15 @@ def setup_logging(debug: bool) -> None:
 class Bus:
     """A Zenoh session whose callbacks land on one asyncio loop."""
 
-    def __init__(self, session: zenoh.Session, loop: asyncio.AbstractEventLoop) -> None:
+    def __init__(
+        self, session: zenoh.Session, loop: asyncio.AbstractEventLoop, secured: bool = False
+    ) -> None:
         self._session = session
         self._loop = loop
+        self._unanswered = "no service answered"
+        if secured:
+            # The router drops what its access control refuses without a word.
+            self._unanswered += " (none is up, or the router's access control refuses this user)"
         self._closers = contextlib.ExitStack()
         self._encoder = msgspec.json.Encoder()
         self._running: set[asyncio.Task[tuple[bytes, zenoh.Encoding] | None]] = set()
@@ -121,7 +277,7 @@ class Bus:
         """Open the session; raises BusError naming the endpoints when a command cannot
         reach the router, and SystemExit(0) on SIGINT/SIGTERM while a service waits."""
         session = _open_session(options)
-        bus = cls(session, loop)
+        bus = cls(session, loop, secured=options.config_file is not None)
         try:
             yield bus
         finally:
@@ -275,7 +431,7 @@ class Bus:
 
         def on_done() -> None:
             if not answered:  # one loop wake-up per request, not two
-                self._call_soon(settle, BusError(f"{key}: no service answered"))
+                self._call_soon(settle, BusError(f"{key}: {self._unanswered}"))
 
         qos: dict[str, Any] = {}
         if urgent:
@@ -507,17 +663,32 @@ def _open_session(options: BusOptions) -> zenoh.Session:
         previous = {sig: signal.signal(sig, stop) for sig in (signal.SIGINT, signal.SIGTERM)}
     try:
         opener.start()
+        started = time.monotonic()
+        warn_at = started + WAIT_WARNING
         while opener.is_alive():
             opener.join(0.1)
+            if opener.is_alive() and time.monotonic() >= warn_at:
+                warn_at += WAIT_WARNING
+                # A router that refuses us (TLS, credentials) looks exactly like one not up.
+                _LOGGER.warning(
+                    "still waiting for the router at %s after %.0f s: is it up, and do its "
+                    "TLS certificates and credentials match this process's --config?",
+                    options.where,
+                    time.monotonic() - started,
+                )
     finally:
         for sig, handler in previous.items():
             signal.signal(sig, handler)
     if failed:
-        where = ", ".join(options.connect)
+        if isinstance(failed[0], BusError):
+            raise failed[0]
         why = str(failed[0]).split(" at /", 1)[0]  # Zenoh appends its source file
         if not options.wait:
-            why = f"waited {CLIENT_TIMEOUT:g} s; is voicectl up or voicectl router running?"
-        raise BusError(f"cannot reach the router at {where} ({why})") from failed[0]
+            why = f"waited {CLIENT_TIMEOUT:g} s; is voicectl up or voicectl router running"
+            if options.config_file is not None:
+                why += ", and do its TLS certificates and credentials match --config"
+            why += "?"
+        raise BusError(f"cannot reach the router at {options.where} ({why})") from failed[0]
     return opened[0]
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import importlib
 import json
 import re
 import signal
@@ -15,6 +16,7 @@ import pytest
 
 from services.executor.builtin.pic import TakePhoto
 from services.executor.framework import load_bindings_file
+from shared.bus import bus_options
 from voicectl.cli import build_parser
 
 from .conftest import REPO, free_port, wait_until
@@ -154,3 +156,32 @@ def test_executors_doc_executors_file_binds_and_its_typo_fails_as_shown(tmp_path
     )
     assert done.returncode == 2
     assert done.stderr.strip().splitlines()[-1] == shown
+
+
+def test_deploy_doc_secured_bus_commands_run_as_written(tmp_path: Path) -> None:
+    """`voicectl bus-secrets` as documented (HOME moved to a temporary directory), and
+    every documented service line parses with the files it made."""
+    doc = DOCS / "deploy.md"
+    make = block_after(doc, "in a directory of your choice", "sh").strip()
+    env = {"HOME": str(tmp_path), "PATH": "/usr/bin:/bin", "PYTHONPATH": str(REPO)}
+    command = make.replace(".venv/bin/voicectl", f"{sys.executable} -m voicectl")
+    done = subprocess.run(
+        ["bash", "-c", command], capture_output=True, text=True, env=env, cwd=REPO, check=False
+    )
+    assert done.returncode == 0, done.stderr
+    secrets = tmp_path / ".local/share/voicectl/bus"
+    client = json.loads((secrets / "panel.json5").read_text())
+    assert client["connect"]["endpoints"] == ["tls/robot-host.local:7447"]
+    lines = block_after(doc, "every process starts with its own file", "sh").strip().splitlines()
+    assert lines[0] == "B=~/.local/share/voicectl/bus"
+    for line in lines[1:]:
+        words = line.replace("$B", str(secrets)).split()
+        assert words[0] == ".venv/bin/voicectl"
+        name, argv = words[1], words[2:]
+        if name == "say":
+            continue  # a command, not a service: its flags are the same bus flags
+        module = importlib.import_module(f"services.{name}.__main__")
+        args = module.parse_args(argv)
+        options = bus_options(args, router=name == "router", environ={})
+        assert options.config_file is not None
+        assert options.config_file.is_file()

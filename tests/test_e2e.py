@@ -175,7 +175,12 @@ def test_up_stops_every_child_on_sigint(stack: Stack) -> None:
     database = Path(stack.env["VOICECTL_DATA"]) / "supervisor.sqlite3"
     with sqlite3.connect(database) as db:
         status = dict(db.execute("SELECT id, status FROM orders").fetchall())
-    assert status == {running: "interrupted", queued: "cancelled"}
+    # On a loaded machine the first order can end (at 10x) before the signal lands: then
+    # the second is the one interrupted.
+    assert [status[running], status[queued]] in (
+        ["interrupted", "cancelled"],
+        ["succeeded", "interrupted"],
+    ), status
 
 
 def test_say_submits_only_what_was_wholly_understood(stack: Stack) -> None:

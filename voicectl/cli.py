@@ -11,8 +11,9 @@ from pathlib import Path
 
 import msgspec
 
+from services.converter.shipped import shipped_orders
 from services.stt.__main__ import add_engine_arguments, engine_options
-from services.web.__main__ import add_tls_arguments, tls_problem
+from services.web.tls import add_tls_arguments, tls_problem
 from shared.bus import (
     DEFAULT_ROUTER,
     Bus,
@@ -43,10 +44,12 @@ from shared.messages import (
     SupervisorReply,
 )
 
+from .health import add_health_arguments, check
 from .stack import Child, Panel, port_in_use, run_stack
 
 SERVICES = ("router", "converter", "stt", "supervisor", "executor", "sim", "web")
-REPO_ORDERS = Path(__file__).resolve().parents[1] / "orders"
+SHIPPED_ORDERS = shipped_orders()
+"""orders/ of the checkout, or the installed copy of its files."""
 _ENCODER = msgspec.json.Encoder()
 
 
@@ -71,7 +74,7 @@ def build_parser() -> argparse.ArgumentParser:
     up.add_argument(
         "--orders",
         type=Path,
-        default=REPO_ORDERS,
+        default=SHIPPED_ORDERS,
         help="orders file or directory (default: every shipped file in orders/)",
     )
     up.add_argument("--time-scale", type=float, default=1.0, help="simulator speed-up")
@@ -101,7 +104,7 @@ def build_parser() -> argparse.ArgumentParser:
     parse.add_argument(
         "--orders",
         type=Path,
-        default=REPO_ORDERS,
+        default=SHIPPED_ORDERS,
         help="orders file or directory (default: orders/)",
     )
     parse.add_argument(
@@ -118,7 +121,7 @@ def build_parser() -> argparse.ArgumentParser:
     transcribe.add_argument(
         "--orders",
         type=Path,
-        default=REPO_ORDERS,
+        default=SHIPPED_ORDERS,
         help="orders file or directory (default: orders/)",
     )
     add_engine_arguments(transcribe)
@@ -161,13 +164,55 @@ def build_parser() -> argparse.ArgumentParser:
     cert.add_argument("hosts", nargs="+", metavar="HOST", help="a name or an IP address")
     cert.add_argument("--out", type=Path, default=None, help="directory (default: data dir/tls)")
 
+    secrets = sub.add_parser(
+        "bus-secrets",
+        help="make a secured bus's CA, router certificate, passwords and per-service configs",
+    )
+    secrets.add_argument(
+        "directory", type=Path, nargs="?", default=None, help="default: data dir/bus"
+    )
+    secrets.add_argument(
+        "--host",
+        action="append",
+        default=[],
+        metavar="HOST",
+        help="a name or address clients use to reach the router (repeatable; the first is "
+        "the one their configs connect to; localhost and 127.0.0.1 are always included)",
+    )
+    secrets.add_argument("--port", type=int, default=7447, help="the router's TLS port")
+
     token = sub.add_parser("token", help="print the panel's API token (creating it if needed)")
     token.add_argument("--token-file", type=Path, default=None)
+
+    health = sub.add_parser(
+        "health",
+        help="exit 0 if a service is up, 1 if not, saying so in one line (healthchecks)",
+        description="Whether a service is up: its liveliness token is on the bus (the "
+        "router: a session to it opens; the panel: its health address answers). Exit "
+        "status 0 if it is, 1 if not.",
+    )
+    add_health_arguments(health)
     return parser
 
 
 def main(argv: list[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
+    try:
+        return _main(argv)
+    except ModuleNotFoundError as exc:
+        if (exc.name or "").partition(".")[0] in ("shared", "services", "voicectl"):
+            raise  # one of ours: a bug, not a missing package
+        # A robot installs only the core: the host's commands say what they lack.
+        command = argv[0] if argv else "voicectl"
+        print(
+            f"voicectl {command}: {exc}; this installation lacks the host's packages "
+            "(pip install 'voicectl[host]')",
+            file=sys.stderr,
+        )
+        return 2
+
+
+def _main(argv: list[str]) -> int:
     if argv and argv[0] in SERVICES:
         module = importlib.import_module(f"services.{argv[0]}.__main__")
         result: int = asyncio.run(module.main(argv[1:]))
@@ -206,10 +251,17 @@ def main(argv: list[str] | None = None) -> int:
             return 0
         case "cert":
             return _cert(args)
+        case "bus-secrets":
+            return _bus_secrets(args)
+        case "health":
+            return check(args)
     return 2
 
 
 def _up(args: argparse.Namespace) -> int:
+    # The host's packages, before any child starts: one line, not a traceback per child.
+    for needed in ("services.converter.service", "services.web.app"):
+        importlib.import_module(needed)
     busy = _busy_ports(args)
     if busy:
         print(f"voicectl up: {busy}", file=sys.stderr)
@@ -259,6 +311,22 @@ def _up(args: argparse.Namespace) -> int:
         BridgeKeys().simulator,
     ] + ([] if args.no_stt else [keys.alive("stt")])
     return run_stack(children, web, args.router, ready)
+
+
+def _bus_secrets(args: argparse.Namespace) -> int:
+    from .bus_secrets import SecretsExist, write_bus_secrets
+
+    directory = (args.directory or data_dir() / "bus").expanduser().resolve()
+    try:
+        written = write_bus_secrets(directory, args.host, args.port)
+    except SecretsExist as exc:
+        print(f"voicectl bus-secrets: {exc}", file=sys.stderr)
+        return 1
+    clients = [path.stem for path in written if path.suffix == ".json5" and path.stem != "router"]
+    print(f"bus secrets in {directory} (keys, passwords and client configs mode 0600)")
+    print(f"router: voicectl router --config {directory / 'router.json5'}")
+    print(f"clients: --config {directory}/<user>.json5 for {', '.join(clients)}")
+    return 0
 
 
 def _cert(args: argparse.Namespace) -> int:

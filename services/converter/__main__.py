@@ -12,10 +12,10 @@ from shared.bus import Bus, add_bus_arguments, bus_options, setup_logging, wait_
 from shared.errors import OrdersFileError
 
 from .service import POLL_SECONDS, ConverterService, errors_of, load
+from .shipped import shipped_orders
 from .watch import signature
 
 _LOGGER = logging.getLogger(__name__)
-DEFAULT_ORDERS = Path(__file__).resolve().parents[2] / "orders"
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -23,7 +23,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument(
         "--orders",
         type=Path,
-        default=DEFAULT_ORDERS,
+        default=shipped_orders(),
         help="orders YAML file or directory of them (default: every shipped file in orders/); "
         "edits apply while running",
     )

@@ -9,35 +9,31 @@ import sys
 
 import zenoh
 
-from shared.bus import DEFAULT_ROUTER, BusOptions, setup_logging, wait_for_stop
+from shared.bus import add_bus_arguments, bus_options, setup_logging, wait_for_stop
+from shared.errors import BusError
 
 _LOGGER = logging.getLogger(__name__)
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="voicectl router", description=__doc__)
-    parser.add_argument(
-        "--listen",
-        action="append",
-        metavar="ENDPOINT",
-        help=f"endpoint to listen on (repeatable; default {DEFAULT_ROUTER})",
-    )
-    parser.add_argument("--debug", action="store_true", help="log at DEBUG level")
+    add_bus_arguments(parser, router=True)
     return parser.parse_args(argv)
 
 
 async def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     setup_logging(args.debug)
-    listen: list[str] = args.listen or [DEFAULT_ROUTER]
-    options = BusOptions(mode="router", connect=[], listen=listen)
+    options = bus_options(args, router=True)
+    listen = ", ".join(options.listen) or f"the endpoints of {options.config_file}"
     try:
         session = zenoh.open(options.zenoh_config())
-    except zenoh.ZError as exc:
-        print(f"voicectl router: cannot listen on {', '.join(listen)}: {exc}", file=sys.stderr)
+    except (zenoh.ZError, BusError) as exc:
+        reason = str(exc).split(" at /", 1)[0]
+        print(f"voicectl router: cannot listen on {listen}: {reason}", file=sys.stderr)
         return 2
     try:
-        _LOGGER.info("router listening on %s", ", ".join(listen))
+        _LOGGER.info("router listening on %s", listen)
         await wait_for_stop()
     finally:
         session.close()

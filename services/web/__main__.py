@@ -17,6 +17,7 @@ from shared.config import default_token_file, load_or_create_token
 
 from .app import Access, create_app
 from .audio import MAX_MESSAGE
+from .tls import add_tls_arguments, tls_problem
 
 _LOGGER = logging.getLogger(__name__)
 
@@ -51,22 +52,6 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     )
     add_bus_arguments(parser)
     return parser.parse_args(argv)
-
-
-def add_tls_arguments(parser: argparse.ArgumentParser) -> None:
-    """HTTPS: browsers give pages a microphone only on https or on localhost."""
-    parser.add_argument("--certfile", type=Path, help="TLS certificate (PEM); see voicectl cert")
-    parser.add_argument("--keyfile", type=Path, help="its private key (PEM)")
-
-
-def tls_problem(args: argparse.Namespace) -> str:
-    """Why the TLS flags cannot be used, or ''."""
-    if (args.certfile is None) != (args.keyfile is None):
-        return "--certfile and --keyfile go together"
-    for path in (args.certfile, args.keyfile):
-        if path is not None and not path.is_file():
-            return f"{path}: no such file (voicectl cert HOST... writes a certificate and key)"
-    return ""
 
 
 async def main(argv: list[str] | None = None) -> int:

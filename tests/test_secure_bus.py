@@ -1,0 +1,184 @@
+"""The secured bus, with real sessions: `voicectl bus-secrets` makes a CA, the router's
+certificate, passwords and client configurations; the shipped router configuration
+(TLS, user/password, access control) runs the stack end to end, and refuses whoever has
+no credentials, the wrong certificate, or a role that does not allow what they try."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import stat
+from collections.abc import Awaitable, Callable
+from pathlib import Path
+
+import pytest
+
+from shared.bus import Bus, BusOptions, json_decoder
+from shared.errors import BusError
+from shared.keys import BridgeKeys, RobotKeys
+from shared.messages import Execute, ExecutorReply, GetRunning
+from shared.ros2 import Odometry, Ros2Codec
+from voicectl.bus_secrets import ROUTER_TEMPLATE, USERS, SecretsExist, write_bus_secrets
+
+from .conftest import Processes, async_wait_until, free_port, voicectl
+from .support import Client, client_wait_ready, order
+
+CODEC = Ros2Codec()
+
+
+class SecureSite:
+    """A secured router on a loopback TLS port, and the stack's services, each with its
+    own credentials."""
+
+    def __init__(self, processes: Processes, secrets: Path, port: int) -> None:
+        self.processes = processes
+        self.secrets = secrets
+        self.endpoint = f"tls/127.0.0.1:{port}"
+
+    def config(self, user: str) -> Path:
+        return self.secrets / f"{user}.json5"
+
+    def start(self, module: str, user: str, *args: str) -> None:
+        self.processes.start(module, "--config", str(self.config(user)), *args)
+
+    def options(self, config: Path) -> BusOptions:
+        return BusOptions(connect=[], mode=None, config_file=config, wait=False)
+
+    def run(self, user: str, body: Callable[[Bus], Awaitable[None]]) -> None:
+        async def main() -> None:
+            options = self.options(self.config(user))
+            with Bus.open(options, asyncio.get_running_loop()) as bus:
+                await body(bus)
+
+        asyncio.run(main())
+
+
+@pytest.fixture
+def site(processes: Processes, tmp_path: Path) -> SecureSite:
+    port = free_port()
+    secrets = tmp_path / "bus"
+    write_bus_secrets(secrets, ["127.0.0.1"], port)
+    site = SecureSite(processes, secrets, port)
+    processes.start(
+        "services.router", "--config", str(secrets / "router.json5"), "--listen", site.endpoint
+    )
+    return site
+
+
+def start_robot(site: SecureSite) -> None:
+    site.start("services.supervisor", "supervisor", "--robot", "r1")
+    site.start("services.sim", "robot")
+    site.start("services.executor", "executor", "--robot", "r1")
+
+
+def test_bus_secrets_are_private_and_never_overwritten(tmp_path: Path) -> None:
+    written = write_bus_secrets(tmp_path / "bus", ["robot.local", "192.168.1.20"])
+    names = {path.name for path in written}
+    assert names >= {"ca.pem", "router.pem", "router.key", "passwords", "router.json5"}
+    assert names >= {f"{user}.json5" for user in USERS}
+    public = {"ca.pem", "router.pem", "router.json5"}
+    for path in written:
+        mode = stat.S_IMODE(path.stat().st_mode)
+        assert mode == (0o644 if path.name in public else 0o600), path.name
+    client = json.loads((tmp_path / "bus" / "panel.json5").read_text())
+    assert client["connect"]["endpoints"] == ["tls/robot.local:7447"]
+    assert client["transport"]["auth"]["usrpwd"]["user"] == "panel"
+    # The router's configuration is the shipped one, paths aside.
+    router = (tmp_path / "bus" / "router.json5").read_text()
+    assert router == ROUTER_TEMPLATE.read_text().replace(
+        "/etc/voicectl/bus", str((tmp_path / "bus").resolve())
+    )
+    with pytest.raises(SecretsExist, match="already holds bus secrets"):
+        write_bus_secrets(tmp_path / "bus", ["robot.local"])
+
+
+def test_the_stack_runs_end_to_end_on_the_secured_bus(site: SecureSite) -> None:
+    site.start("services.converter", "converter")
+    start_robot(site)
+    operator = str(site.config("operator"))
+
+    async def body(bus: Bus) -> None:
+        client = Client(bus, "r1")
+        await client_wait_ready(client)
+        (product,) = await client.submit(order("mul", first=6, second=7))
+        assert (await client.finished(product)).message == "6 x 7 = 42"
+        said = await asyncio.to_thread(
+            voicectl, "say", "--robot", "r1", "--config", operator, "multiply composites"
+        )
+        assert said.returncode == 0, said.stderr
+        (composites,) = json.loads(said.stdout)["order_ids"]
+        assert (await client.finished(composites)).message == "10 x 20 = 200"
+
+    site.run("operator", body)
+
+
+def test_the_panel_cannot_drive_the_robot_or_reach_the_executor(site: SecureSite) -> None:
+    start_robot(site)
+
+    async def body(bus: Bus) -> None:
+        odometry: list[Odometry] = []
+        bus.subscribe(BridgeKeys().odom, CODEC.read_odometry, lambda _k, o: odometry.append(o))
+        client = Client(bus, "r1")
+        await client_wait_ready(client)  # asking the supervisor is allowed
+        for _ in range(20):
+            bus.publish_bytes(BridgeKeys().cmd_vel, CODEC.twist(0.5, 0.0), urgent=True)
+            await asyncio.sleep(0.05)
+        await async_wait_until(lambda: len(odometry) > 30, 10.0, "odometry")
+        assert all(o.linear_x == 0.0 for o in odometry)
+        keys = RobotKeys("r1")
+        decode = json_decoder(ExecutorReply)
+        execute = Execute(order_id="sneaky", order=order("mul", first=1, second=1))
+        for key, request in (
+            (keys.executor_execute, execute),
+            (keys.executor_control, GetRunning()),
+        ):
+            with pytest.raises(BusError) as refused:
+                await bus.request(key, request, decode, timeout=2.0)
+            assert str(refused.value) == (
+                f"{key}: no service answered (none is up, or the router's access control "
+                "refuses this user)"
+            )
+
+    site.run("panel", body)
+
+
+def without_credentials(config: Path, target: Path) -> Path:
+    client = json.loads(config.read_text())
+    del client["transport"]["auth"]
+    target.write_text(json.dumps(client))
+    return target
+
+
+def test_no_credentials_or_a_wrong_password_cannot_connect(
+    site: SecureSite, tmp_path: Path
+) -> None:
+    anonymous = without_credentials(site.config("panel"), tmp_path / "anonymous.json5")
+    wrong = json.loads(site.config("panel").read_text())
+    wrong["transport"]["auth"]["usrpwd"]["password"] = "guess"
+    guessing = tmp_path / "guessing.json5"
+    guessing.write_text(json.dumps(wrong))
+    for config in (anonymous, guessing):
+        refused = voicectl("state", "--robot", "r1", "--config", str(config), timeout=60)
+        assert refused.returncode == 3
+        assert refused.stderr.strip() == (
+            f"voicectl state: cannot reach the router at {site.endpoint} (waited 3 s; is "
+            "voicectl up or voicectl router running, and do its TLS certificates and "
+            "credentials match --config?)"
+        )
+    allowed = voicectl("state", "--robot", "r1", "--config", str(site.config("panel")))
+    assert allowed.returncode == 3  # connected; only no supervisor serves r1 here
+    assert "no service answered (none is up, or the router's access control" in allowed.stderr
+
+
+def test_a_certificate_from_another_authority_is_refused(site: SecureSite, tmp_path: Path) -> None:
+    other = tmp_path / "other"
+    write_bus_secrets(other, ["127.0.0.1"])
+    client = json.loads(site.config("panel").read_text())
+    client["transport"]["link"]["tls"]["root_ca_certificate"] = str(other / "ca.pem")
+    impostor = tmp_path / "impostor.json5"
+    impostor.write_text(json.dumps(client))
+    refused = voicectl("state", "--robot", "r1", "--config", str(impostor), timeout=60)
+    assert refused.returncode == 3
+    assert refused.stderr.startswith(f"voicectl state: cannot reach the router at {site.endpoint}")
+    plain = voicectl("state", "--robot", "r1", "--connect", site.endpoint.replace("tls/", "tcp/"))
+    assert plain.returncode == 3

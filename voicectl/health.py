@@ -1,0 +1,149 @@
+"""`voicectl health SERVICE`: whether one voicectl service is up, said in one line.
+
+Exit status 0 when it is and 1 when it is not, for container healthchecks (Docker
+reserves every other status) and scripts. A service is up when its liveliness token is
+on the bus (converter, stt, supervisor, executor, sim), the router when a session to it
+opens, and the panel when its health address answers. Needs only what a robot installs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import ssl
+import sys
+import urllib.error
+import urllib.parse
+import urllib.request
+
+import zenoh
+
+from shared.bus import Bus, add_bus_arguments, bus_options, robot_name
+from shared.errors import BusError
+from shared.keys import BridgeKeys, ConverterKeys, RobotKeys, check_ros_name
+
+SERVICES = ("router", "converter", "stt", "supervisor", "executor", "sim", "web")
+PER_ROBOT = ("stt", "supervisor", "executor")
+"""The services that serve one robot, whose token is under the robot's name."""
+DEFAULT_URL = "http://127.0.0.1:8000/api/health"
+UP, DOWN = 0, 1
+
+
+def _namespace(text: str) -> str:
+    try:
+        return check_ros_name(text, "ROS namespace")
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from exc
+
+
+def _web_url(text: str) -> str:
+    if urllib.parse.urlsplit(text).scheme not in ("http", "https"):
+        raise argparse.ArgumentTypeError(f"{text!r} is not an http:// or https:// address")
+    return text
+
+
+def add_health_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("service", choices=SERVICES, help="the service to check")
+    parser.add_argument(
+        "--robot",
+        type=robot_name,
+        default="robot",
+        help=f"the robot it serves ({', '.join(PER_ROBOT)}; default: robot)",
+    )
+    parser.add_argument(
+        "--namespace",
+        type=_namespace,
+        default="",
+        help="the ROS namespace the simulator plays (sim; default: none)",
+    )
+    parser.add_argument(
+        "--url",
+        type=_web_url,
+        default=DEFAULT_URL,
+        help=f"the panel's health address (web; default: {DEFAULT_URL})",
+    )
+    parser.add_argument(
+        "--timeout",
+        type=float,
+        default=2.0,
+        metavar="SECONDS",
+        help="how long the answer may take once the router is reached (default: 2)",
+    )
+    add_bus_arguments(parser)
+
+
+def token_key(service: str, robot: str, namespace: str = "") -> str | None:
+    """The liveliness token that says `service` is up; None for the router, which holds
+    none (reaching it is the check)."""
+    match service:
+        case "router" | "web":
+            return None
+        case "converter":
+            return ConverterKeys().alive
+        case "sim":
+            return BridgeKeys(namespace).simulator
+        case _:
+            return RobotKeys(robot).alive(service)
+
+
+def check(args: argparse.Namespace) -> int:
+    """Check the service the parsed `args` name; print one line; return the exit status."""
+    if args.service == "web":
+        up, said = _check_web(args.url, args.timeout)
+    else:
+        up, said = asyncio.run(_check_bus(args))
+    if up:
+        print(said)
+        return UP
+    print(f"voicectl health: {said}", file=sys.stderr)
+    return DOWN
+
+
+def _subject(args: argparse.Namespace) -> str:
+    if args.service in PER_ROBOT:
+        return f"{args.service} of robot {args.robot!r}"
+    if args.service == "sim" and args.namespace:
+        return f"sim in namespace {args.namespace!r}"
+    return str(args.service)
+
+
+async def _check_bus(args: argparse.Namespace) -> tuple[bool, str]:
+    options = bus_options(args, wait=False)
+    key = token_key(args.service, args.robot, args.namespace)
+    try:
+        with Bus.open(options, asyncio.get_running_loop()) as bus:
+            if key is None:
+                return True, f"router at {', '.join(options.connect) or 'its endpoints'} is up"
+            present = await asyncio.to_thread(_token_present, bus.session, key, args.timeout)
+    except BusError as exc:  # no router: nothing behind it can be up either
+        return False, f"{_subject(args)} is not reachable: {exc}"
+    if present:
+        return True, f"{_subject(args)} is up ({key})"
+    return False, f"{_subject(args)} is not up: no liveliness token on {key}"
+
+
+def _token_present(session: zenoh.Session, key: str, timeout: float) -> bool:
+    """Whether a liveliness token matches `key` (blocks up to `timeout` seconds: run it in
+    a thread). The router answers for every token it knows of."""
+    replies = session.liveliness().get(key, timeout=timeout)
+    return any(reply.ok is not None for reply in replies)
+
+
+def _check_web(url: str, timeout: float) -> tuple[bool, str]:
+    # The panel's certificate is its own self-signed one, made for its LAN names: asking
+    # it whether it is up on its own address needs no proof of who it is.
+    context = ssl.create_default_context()
+    context.check_hostname = False
+    context.verify_mode = ssl.CERT_NONE
+    try:
+        with urllib.request.urlopen(url, timeout=timeout, context=context) as response:
+            status = response.status
+    except urllib.error.HTTPError as exc:
+        status = exc.code
+        exc.close()
+    except (urllib.error.URLError, OSError) as exc:
+        reason = exc.reason if isinstance(exc, urllib.error.URLError) else exc
+        return False, f"panel at {url} is not up: {reason}"
+    if status != 200:
+        return False, f"panel at {url} is not up: HTTP {status}"
+    return True, f"panel at {url} is up"
