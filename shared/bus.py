@@ -39,9 +39,9 @@ Decode = Callable[[bytes], T]
 
 DEFAULT_ROUTER = "tcp/127.0.0.1:7447"
 CLIENT_TIMEOUT = 3.0
+"""Seconds a command (voicectl state, stop...) waits for the router before it gives up."""
 WAIT_WARNING = 10.0
 """Seconds between two warnings of a service still waiting for its router."""
-"""Seconds a command (voicectl state, stop...) waits for the router before it gives up."""
 JSON = zenoh.Encoding.APPLICATION_JSON
 CDR = zenoh.Encoding.APPLICATION_CDR
 

@@ -7,7 +7,11 @@ from __future__ import annotations
 
 import asyncio
 import json
+import shlex
 import stat
+import subprocess
+import sys
+import threading
 from collections.abc import Awaitable, Callable
 from pathlib import Path
 
@@ -20,7 +24,7 @@ from shared.messages import Execute, ExecutorReply, GetRunning
 from shared.ros2 import Odometry, Ros2Codec
 from voicectl.bus_secrets import ROUTER_TEMPLATE, USERS, SecretsExist, write_bus_secrets
 
-from .conftest import Processes, async_wait_until, free_port, voicectl
+from .conftest import REPO, Processes, async_wait_until, free_port, voicectl
 from .support import Client, client_wait_ready, order
 
 CODEC = Ros2Codec()
@@ -182,3 +186,50 @@ def test_a_certificate_from_another_authority_is_refused(site: SecureSite, tmp_p
     assert refused.stderr.startswith(f"voicectl state: cannot reach the router at {site.endpoint}")
     plain = voicectl("state", "--robot", "r1", "--connect", site.endpoint.replace("tls/", "tcp/"))
     assert plain.returncode == 3
+
+
+def test_the_documented_observer_watches_the_order_stream(site: SecureSite) -> None:
+    """docs/deploy.md's Zenoh CLI command, with the observer's credentials, sees what the
+    supervisor publishes (and the observer cannot publish itself)."""
+    doc = (REPO / "docs" / "deploy.md").read_text()
+    command = doc.split("To watch the order stream on a secured router", 1)[1]
+    command = command.split("```sh\n", 1)[1].split("\n```", 1)[0]
+    words = shlex.split(command.replace("~/.local/share/voicectl/bus", str(site.secrets)))
+    assert words[0] == ".venv/bin/zenoh"
+    words[0] = str(Path(sys.executable).with_name("zenoh"))
+    with subprocess.Popen(words, stdout=subprocess.PIPE, text=True) as watcher:
+        try:
+            lines: list[str] = []
+            reader = threading.Thread(target=lambda: lines.extend(watcher.stdout or []))
+            reader.start()
+
+            async def publish(bus: Bus) -> None:
+                async def seen() -> bool:
+                    bus.publish_bytes("voice/r1/supervisor/state", b'{"marker": 1}')
+                    await asyncio.sleep(0.2)
+                    return any('"marker"' in line for line in lines)
+
+                for _ in range(50):
+                    if await seen():
+                        return
+                raise AssertionError(f"the observer saw nothing: {lines}")
+
+            site.run("supervisor", publish)
+        finally:
+            watcher.terminate()
+            watcher.wait(timeout=10)
+            reader.join(timeout=10)
+
+    async def forge(bus: Bus) -> None:
+        received: list[bytes] = []
+        bus.subscribe("voice/r1/supervisor/state", bytes, lambda _k, raw: received.append(raw))
+        await asyncio.sleep(0.5)
+        observer = Bus.open(site.options(site.config("observer")), asyncio.get_running_loop())
+        with observer as sneaky:
+            for _ in range(5):
+                sneaky.publish_bytes("voice/r1/supervisor/state", b'{"forged": 1}')
+                await asyncio.sleep(0.1)
+        await asyncio.sleep(0.5)
+        assert received == []
+
+    site.run("panel", forge)

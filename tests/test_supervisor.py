@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 
+from services.executor.runner import SUPERVISOR_LOST
 from shared.bus import Bus, BusOptions
 from shared.errors import BusError
 from shared.keys import BridgeKeys
@@ -82,6 +83,7 @@ def site(router: str, processes: Processes, tmp_path: Path) -> Site:
 
 
 def test_sigkill_with_orders_in_flight_loses_nothing_and_resumes(site: Site) -> None:
+    site.processes.start("services.sim", "--connect", site.router)
     site.start_supervisor()
     site.start_executor()
 
@@ -91,25 +93,31 @@ def test_sigkill_with_orders_in_flight_loses_nothing_and_resumes(site: Site) -> 
         (done_before,) = await client.submit(order("mul", first=2, second=2))
         await client.finished(done_before)
         running, queued_1, queued_2 = await client.submit(
-            order("slow", seconds=2),
+            order("drive", distance=5.0),
             order("mul", first=3, second=3),
             order("mul", first=4, second=4),
         )
-        await client.wait_state(lambda s: s.current is not None, "the slow order to run")
+        await client.wait_state(
+            lambda s: s.current is not None and s.current.progress is not None,
+            "the drive to command the robot",
+        )
 
         site.kill_supervisor()
         site.start_supervisor()
         await client_wait_ready(client)
+        # The executor ended the drive when its supervisor went (no one could STOP it);
+        # the restarted supervisor records that outcome, fetched from the executor.
+        record = await client.finished(running)
+        assert (record.status, record.message) == (OrderStatus.CANCELLED, SUPERVISOR_LOST)
+        assert site.supervisor is not None
+        assert f"{running} ended while the supervisor was away" in site.processes.log(
+            site.supervisor
+        )
         state = await client.state()
-        assert state.current is not None
-        assert state.current.id == running
+        assert state.current is None
         assert [r.id for r in state.queue] == [queued_1, queued_2]
         assert state.paused  # nothing new starts after a restart unasked
 
-        # The executor was still running it: resumed, not interrupted; the queue waits
-        # until the user resumes it.
-        assert (await client.finished(running)).status == OrderStatus.SUCCEEDED
-        assert [r.id for r in (await client.state()).queue] == [queued_1, queued_2]
         assert isinstance(await client.ask(Resume()), Done)
         assert (await client.finished(queued_2)).message == "4 x 4 = 16"
         page = await client.history()

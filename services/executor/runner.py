@@ -1,11 +1,17 @@
-"""The executor on the bus: takes one order at a time, reports progress and results."""
+"""The executor on the bus: takes one order at a time, reports progress and results.
+
+The supervisor holds the operator's STOP. When its liveliness token goes (it died, or the
+link to it is down past the Zenoh lease), an order that commands the robot is cancelled
+and the robot halted; an order that has not commanded it (a wait, a photo) goes on, but
+may not command the robot until a supervisor is back.
+"""
 
 from __future__ import annotations
 
 import asyncio
 import collections
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Coroutine
 
 from shared.bus import Bus, Latest, json_decoder
 from shared.errors import OrderFailed
@@ -29,19 +35,60 @@ from shared.messages import (
     Progress,
     Rejected,
     Running,
+    TargetPose,
 )
+from shared.ros2 import Pose2D
 
 from .framework import Bindings, ExecutionContext, Executor, ParamsMismatch, order_params
 from .robot import OrderRobot, RobotLink
 
 _LOGGER = logging.getLogger(__name__)
 RECENT_RESULTS = 32
+SUPERVISOR_LOST = "supervisor lost: robot stopped (no one could STOP it)"
+"""How an order that commanded the robot ends when the supervisor goes."""
+UNSUPERVISED = "supervisor lost: the robot takes no command while no one could STOP it"
+"""Why an order may not command the robot while the supervisor is lost."""
+
+
+class _CommandedRobot(OrderRobot):
+    """An order's robot handle that notes whether the order has commanded the robot
+    (anything but reading it, or stopping it), and refuses commands while the supervisor
+    is lost: they raise OrderFailed and send nothing."""
+
+    def __init__(self, link: RobotLink, order_id: str, unsupervised: Callable[[], bool]) -> None:
+        super().__init__(link, order_id)
+        self._unsupervised = unsupervised
+        self.commanded = False
+
+    def _command(self) -> None:
+        if self._unsupervised():
+            raise OrderFailed(UNSUPERVISED)
+        self.commanded = True
+
+    def drive(self, linear_x: float, angular_z: float) -> None:
+        if linear_x != 0.0 or angular_z != 0.0:  # zero velocity is a stop, always allowed
+            self._command()
+        super().drive(linear_x, angular_z)
+
+    async def navigate(
+        self, target: TargetPose, on_feedback: Callable[[Pose2D, float], None]
+    ) -> None:
+        self._command()
+        await super().navigate(target, on_feedback)
+
+    def publish(self, key: str, payload: bytes) -> None:
+        self._command()  # any topic of the robot may move it
+        super().publish(key, payload)
+
+    async def request(self, key: str, payload: bytes, timeout: float) -> bytes:
+        self._command()
+        return await super().request(key, payload, timeout)
 
 
 class _Execution:
     """The order being executed, the task that runs it and its robot handle."""
 
-    def __init__(self, order_id: str, task: asyncio.Task[None], robot: OrderRobot) -> None:
+    def __init__(self, order_id: str, task: asyncio.Task[None], robot: _CommandedRobot) -> None:
         self.order_id = order_id
         self.task = task
         self.robot = robot
@@ -75,6 +122,11 @@ class ExecutorService:
         """Tasks of executors that ignored a cancel, with their order ids: while one runs,
         no other order starts, so that no two `execute` ever run at once."""
         self._info: Latest | None = None
+        self._supervisor_seen = False
+        self.supervisor_lost = False
+        """The supervisor was seen, and its token has gone since: no one could STOP."""
+        self._tasks: set[asyncio.Task[str | None]] = set()
+        """Halts in progress (the loop keeps only weak references to tasks)."""
 
     def start(self) -> None:
         self._robot.start()
@@ -85,6 +137,7 @@ class ExecutorService:
                 self._bus.announce(self._keys.label(label))
             except ValueError as exc:  # still served; only not announced
                 _LOGGER.warning("label not announced: %s", exc)
+        self._bus.watch(self._keys.alive("supervisor"), self._on_supervisor)
         self._withdraw = self._bus.announce(self._keys.alive("executor"))
         self._info = self._bus.latest(self._keys.executor_info)
         self.publish_info()
@@ -127,16 +180,7 @@ class ExecutorService:
                 await self._cancel(running, "cancelled")
                 return Done(detail=f"cancelled {order_id}")
             case Halt():
-                # Zero velocity first; then cancel the order's task before the robot's goals,
-                # so the order ends as cancelled, not as a navigation the robot dropped.
-                self._robot.stop_moving()
-                running = self._running
-                if running is not None:
-                    running.cancel_reason = "emergency stop"
-                    running.task.cancel()
-                problem = await self._robot.halt()
-                if running is not None:
-                    await self._cancel(running, "emergency stop")
+                problem = await self._halt("emergency stop")
                 if problem is not None:
                     return Failed(reason=f"robot did not confirm the stop: {problem}")
                 return Done(detail="halted")
@@ -148,6 +192,56 @@ class ExecutorService:
                 if finished is None:
                     return Failed(reason=f"no result for order '{order_id}' here")
                 return finished
+
+    def _halt(self, why: str) -> Coroutine[None, None, str | None]:
+        """Stop the robot and end the running order, if any, as cancelled for `why`. Zero
+        velocity and the order's cancellation happen now, before the loop lets the order
+        run again; the coroutine returned cancels the robot's goals, waits for the order to
+        end, and says what the robot did not confirm (None if it did)."""
+        self._robot.stop_moving()
+        running = self._running
+        if running is not None:
+            # Before the robot's goals, so that the order ends as cancelled, not as a
+            # navigation the robot dropped.
+            running.cancel_reason = why
+            running.task.cancel()
+        return self._end_halt(running, why)
+
+    async def _end_halt(self, running: _Execution | None, why: str) -> str | None:
+        problem = await self._robot.halt()
+        if running is not None:
+            await self._cancel(running, why)
+        return problem
+
+    def _on_supervisor(self, _key: str, alive: bool) -> None:
+        if alive:
+            if self.supervisor_lost:
+                _LOGGER.info("supervisor back: orders may command the robot again")
+            elif not self._supervisor_seen:
+                _LOGGER.info("supervisor online")
+            self._supervisor_seen, self.supervisor_lost = True, False
+            return
+        if not self._supervisor_seen or self.supervisor_lost:
+            return  # never there (an executor run alone), or already lost
+        self.supervisor_lost = True
+        running = self._running
+        if running is None:
+            _LOGGER.warning("supervisor lost; no order runs")
+        elif not running.robot.commanded:
+            _LOGGER.warning(
+                "supervisor lost; order %s goes on, but may not command the robot until a "
+                "supervisor is back",
+                running.order_id,
+            )
+        else:
+            _LOGGER.warning(
+                "supervisor lost while order %s commanded the robot: cancelling it, halting "
+                "the robot",
+                running.order_id,
+            )
+            task = asyncio.get_running_loop().create_task(self._halt(SUPERVISOR_LOST))
+            self._tasks.add(task)
+            task.add_done_callback(self._tasks.discard)
 
     async def shutdown(self) -> None:
         # Offline first, so the supervisor holds its queue instead of sending the next order.
@@ -180,13 +274,18 @@ class ExecutorService:
             params = order_params(executor, order)
         except ParamsMismatch as exc:
             return Rejected(order_id=order_id, reason=str(exc))
-        robot = OrderRobot(self._robot, order_id)
+        robot = _CommandedRobot(self._robot, order_id, lambda: self.supervisor_lost)
         task = asyncio.create_task(self._run(order_id, executor, order, robot, params))
         self._running = _Execution(order_id, task, robot)
         return Accepted(order_id=order_id)
 
     async def _run(
-        self, order_id: str, executor: Executor, order: Order, robot: OrderRobot, params: object
+        self,
+        order_id: str,
+        executor: Executor,
+        order: Order,
+        robot: _CommandedRobot,
+        params: object,
     ) -> None:
         def report(progress: Progress) -> None:
             if robot.revoked:  # an executor that outlived its order has nothing to say

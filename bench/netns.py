@@ -1,0 +1,407 @@
+"""Two hosts on one machine: a host and a robot in Linux network namespaces joined by a
+veth pair, a link that can be cut or made slow and lossy, and voicectl processes started
+on either side. Used by tests/test_cross_host.py and bench/cross_host.py; needs root.
+
+Each side reaches the other only across the veth (10.213.0.1/30 on the host, .2 on the
+robot: addresses that exist inside the two namespaces only). A process outside both, such
+as a test, joins a side's router through a Unix socket, as a process on that host would:
+a socket file belongs to no network namespace. The routers never connect to each other
+that way: a Zenoh router makes no connection to what it learns of by gossip (the cut link
+of tests/test_cross_host.py would not lose the executor if they did).
+
+The kernels here have no netem, so delay and loss are made by this module's own shaper:
+iptables hands every packet leaving a side through the veth to an NFQUEUE, and a small
+process (`python -m bench.netns shape`) gives each its verdict after the delay, or drops
+it with the loss probability: netem's `delay D loss L` on both ends of the link.
+
+    python -m bench.netns shape --queue N --delay-ms 100 --loss 5   (inside a namespace)
+    python -m bench.netns clean      (remove what runs of killed tests left behind)
+"""
+
+from __future__ import annotations
+
+import argparse
+import collections
+import contextlib
+import itertools
+import os
+import random
+import re
+import select
+import shutil
+import signal
+import socket
+import struct
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Literal
+
+REPO = Path(__file__).resolve().parents[1]
+HOST_ADDR = "10.213.0.1"
+ROBOT_ADDR = "10.213.0.2"
+PORT = 7447
+LEASE_MS = 2000
+"""Zenoh lease of every process: a link down longer than this loses the other side."""
+LEASE = ("--cfg", f"transport/link/tx/lease:{LEASE_MS}")
+
+Side = Literal["host", "robot"]
+SIDES: tuple[Side, ...] = ("host", "robot")
+_PREFIX = "vcx"
+_NAME = re.compile(rf"^{_PREFIX}(\d+)n\d+[hr]$")
+_COUNTER = itertools.count()
+
+
+def unavailable() -> str | None:
+    """Why two hosts cannot be made here, or None when they can."""
+    if os.geteuid() != 0:
+        return "network namespaces need root"
+    if shutil.which("ip") is None:
+        return "iproute2's `ip` is not installed"
+    try:
+        subprocess.run(["ip", "netns", "list"], check=True, capture_output=True, timeout=10)
+    except (OSError, subprocess.SubprocessError) as exc:
+        return f"`ip netns` does not work here: {exc}"
+    return None
+
+
+def impairment_unavailable() -> str | None:
+    """Why the link cannot be made slow and lossy here, or None when it can."""
+    if shutil.which("iptables") is None:
+        return "iptables is not installed (Debian package iptables)"
+    return None
+
+
+def _run(*command: str) -> None:
+    done = subprocess.run(command, capture_output=True, text=True, timeout=30, check=False)
+    if done.returncode != 0:
+        raise RuntimeError(f"{' '.join(command)}: {done.stderr.strip() or done.returncode}")
+
+
+def clean_stale() -> list[str]:
+    """Delete the namespaces (and socket directories) of runs whose process is gone (a
+    killed test); the names of the namespaces deleted. Those of live runs are left alone."""
+    listed = subprocess.run(
+        ["ip", "netns", "list"], capture_output=True, text=True, timeout=10, check=False
+    ).stdout
+    deleted = []
+    for line in listed.splitlines():
+        name = line.split(" ", 1)[0]
+        match = _NAME.match(name)
+        if match and not Path(f"/proc/{match[1]}").exists():
+            subprocess.run(["ip", "netns", "del", name], capture_output=True, timeout=10)
+            deleted.append(name)
+    for directory in Path(tempfile.gettempdir()).glob(f"{_PREFIX}*-*"):
+        match = _NAME.match(directory.name.split("-", 1)[0] + "h")
+        if match and not Path(f"/proc/{match[1]}").exists():
+            shutil.rmtree(directory, ignore_errors=True)
+    return deleted
+
+
+class TwoHosts:
+    """A host and a robot joined by one veth pair; every process started here is stopped,
+    and both namespaces deleted, by `close()`, whatever happened before."""
+
+    def __init__(self, logs: Path) -> None:
+        self.logs = logs
+        logs.mkdir(parents=True, exist_ok=True)
+        tag = f"{_PREFIX}{os.getpid()}n{next(_COUNTER)}"
+        self.namespaces: dict[Side, str] = {"host": f"{tag}h", "robot": f"{tag}r"}
+        """Namespace names, the same as the names of their ends of the veth."""
+        # Unix socket paths must stay under 108 bytes: a directory of its own in /tmp.
+        self._sockets = Path(tempfile.mkdtemp(prefix=f"{tag}-"))
+        self.started: list[tuple[str, subprocess.Popen[bytes], Path]] = []
+        self._shapers: list[subprocess.Popen[bytes]] = []
+        self._pdeathsig = (
+            # Children die with this process even when it is SIGKILLed (a timed-out test).
+            ["setpriv", "--pdeathsig", "KILL"] if shutil.which("setpriv") else []
+        )
+        clean_stale()
+        try:
+            self._create()
+        except BaseException:
+            self.close()
+            raise
+
+    def _create(self) -> None:
+        host, robot = self.namespaces["host"], self.namespaces["robot"]
+        _run("ip", "netns", "add", host)
+        _run("ip", "netns", "add", robot)
+        _run("ip", "link", "add", host, "type", "veth", "peer", "name", robot)
+        for side, address in zip(SIDES, (HOST_ADDR, ROBOT_ADDR), strict=True):
+            name = self.namespaces[side]
+            _run("ip", "link", "set", name, "netns", name)
+            _run("ip", "-n", name, "addr", "add", f"{address}/30", "dev", name)
+            _run("ip", "-n", name, "link", "set", name, "up")
+            _run("ip", "-n", name, "link", "set", "lo", "up")
+
+    # --- endpoints ------------------------------------------------------------------------
+
+    @property
+    def host_router(self) -> str:
+        """Where the robot's router reaches the host's, across the link."""
+        return f"tcp/{HOST_ADDR}:{PORT}"
+
+    @staticmethod
+    def local_router() -> str:
+        """Where a process reaches its own side's router."""
+        return f"tcp/127.0.0.1:{PORT}"
+
+    def socket(self, side: Side) -> str:
+        """A side's router for a process outside both namespaces (a test)."""
+        return f"unixsock-stream/{self._sockets / side}.sock"
+
+    # --- processes ------------------------------------------------------------------------
+
+    def start(self, side: Side, module: str, *args: str, name: str) -> subprocess.Popen[bytes]:
+        """`python -m module args` inside `side`'s namespace; its output goes to a log."""
+        log = self.logs / f"{name}.log"
+        env = {**os.environ, "PYTHONUNBUFFERED": "1", "VOICECTL_DATA": str(self.logs / "data")}
+        command = ["ip", "netns", "exec", self.namespaces[side], *self._pdeathsig]
+        with log.open("wb") as out:
+            # `ip netns exec` and setpriv exec the next program: the child is Python itself.
+            process = subprocess.Popen(
+                [*command, sys.executable, "-m", module, *args],
+                stdout=out,
+                stderr=subprocess.STDOUT,
+                cwd=REPO,
+                env=env,
+                start_new_session=True,
+            )
+        self.started.append((name, process, log))
+        return process
+
+    def start_router(self, side: Side) -> subprocess.Popen[bytes]:
+        """`voicectl router` on `side`, listening on its loopback, its Unix socket and (the
+        host) its link address; the robot's connects to the host's across the link."""
+        listen = [self.local_router(), self.socket(side)]
+        if side == "host":
+            listen.append(self.host_router)
+        args = [arg for endpoint in listen for arg in ("--listen", endpoint)]
+        if side == "robot":
+            args += ["--connect", self.host_router]
+        return self.start(side, "services.router", *args, *LEASE, name=f"{side}-router")
+
+    def log(self, name: str) -> str:
+        return (self.logs / f"{name}.log").read_text(errors="replace")
+
+    def dump(self) -> str:
+        return "\n".join(
+            f"----- {name} -----\n{log.read_text(errors='replace')[-4000:]}"
+            for name, _, log in self.started
+        )
+
+    @staticmethod
+    def kill(process: subprocess.Popen[bytes]) -> None:
+        process.send_signal(signal.SIGKILL)
+        process.wait()
+
+    @staticmethod
+    def stop(process: subprocess.Popen[bytes], timeout: float = 10.0) -> int:
+        """SIGTERM, wait, and SIGKILL its whole session if it does not stop."""
+        if process.poll() is None:
+            process.send_signal(signal.SIGTERM)
+            try:
+                process.wait(timeout=timeout)
+            except subprocess.TimeoutExpired:
+                with contextlib.suppress(ProcessLookupError):
+                    os.killpg(process.pid, signal.SIGKILL)
+                process.wait()
+        return process.returncode
+
+    # --- the link ---------------------------------------------------------------------------
+
+    @contextlib.contextmanager
+    def link_down(self) -> Iterator[None]:
+        """The veth down for the time of the block (both directions: its peer loses carrier)."""
+        host = self.namespaces["host"]
+        _run("ip", "-n", host, "link", "set", host, "down")
+        try:
+            yield
+        finally:
+            _run("ip", "-n", host, "link", "set", host, "up")
+
+    @contextlib.contextmanager
+    def impaired(self, delay_ms: float, loss_percent: float) -> Iterator[None]:
+        """Every packet crossing the link, either way, is delayed by `delay_ms` and lost
+        with `loss_percent` % probability, for the time of the block."""
+        rules = []
+        try:
+            for queue, side in enumerate(SIDES, start=1):
+                name = self.namespaces[side]
+                shaper = self.start(
+                    side,
+                    "bench.netns",
+                    *("shape", "--queue", str(queue), "--delay-ms", str(delay_ms)),
+                    *("--loss", str(loss_percent)),
+                    name=f"shaper-{name}",
+                )
+                self._shapers.append(shaper)
+                self._wait_ready(shaper, f"shaper-{name}")
+                rule = ["-o", name, "-j", "NFQUEUE", "--queue-num", str(queue)]
+                _run("ip", "netns", "exec", name, "iptables", "-A", "OUTPUT", *rule)
+                rules.append((name, rule))
+            yield
+        finally:
+            for name, rule in rules:
+                _run("ip", "netns", "exec", name, "iptables", "-D", "OUTPUT", *rule)
+            while self._shapers:  # each lets its held packets go before it exits
+                self.stop(self._shapers.pop())
+
+    def _wait_ready(self, process: subprocess.Popen[bytes], name: str) -> None:
+        deadline = time.monotonic() + 30.0
+        while "ready" not in self.log(name):
+            if process.poll() is not None or time.monotonic() > deadline:
+                raise RuntimeError(f"{name} did not start:\n{self.log(name)}")
+            time.sleep(0.05)
+
+    # --- teardown -----------------------------------------------------------------------------
+
+    def stop_all(self) -> list[str]:
+        """Stop every process, newest first; name those that did not exit 0 on SIGTERM."""
+        unclean = []
+        for name, process, _ in reversed(self.started):
+            was_running = process.poll() is None
+            code = self.stop(process)
+            if was_running and code != 0:
+                unclean.append(f"{name} exited {code}")
+        return unclean
+
+    def close(self) -> list[str]:
+        """Stop everything and delete both namespaces (with the veth); what did not stop
+        cleanly."""
+        try:
+            unclean = self.stop_all()
+        finally:
+            for name in self.namespaces.values():
+                subprocess.run(["ip", "netns", "del", name], capture_output=True, timeout=30)
+            shutil.rmtree(self._sockets, ignore_errors=True)
+        return unclean
+
+    def __enter__(self) -> TwoHosts:
+        return self
+
+    def __exit__(self, *_: object) -> None:
+        self.close()
+
+
+# --- the shaper: netem's delay and loss in user space, through NFQUEUE ---------------------
+
+_NETLINK_NETFILTER = 12
+_SOL_NETLINK, _NETLINK_NO_ENOBUFS = 270, 5
+_QUEUE = 3 << 8  # NFNL_SUBSYS_QUEUE
+_PACKET, _VERDICT, _CONFIG = _QUEUE | 0, _QUEUE | 1, _QUEUE | 2
+_REQUEST, _ACK = 1, 4
+_ERROR = 2  # NLMSG_ERROR
+_CFG_CMD, _CFG_PARAMS, _CFG_QUEUE_MAXLEN = 1, 2, 3
+_CMD_BIND = 1
+_COPY_META = 1
+_PACKET_HDR, _VERDICT_HDR = 1, 2
+_DROP, _ACCEPT = 0, 1
+
+
+def _attribute(kind: int, payload: bytes) -> bytes:
+    raw = struct.pack("=HH", 4 + len(payload), kind) + payload
+    return raw + b"\0" * (-len(raw) % 4)
+
+
+def _message(kind: int, queue: int, attributes: bytes, flags: int = _REQUEST) -> bytes:
+    body = struct.pack("=BB", socket.AF_UNSPEC, 0) + struct.pack("!H", queue) + attributes
+    return struct.pack("=IHHII", 16 + len(body), kind, flags, 0, 0) + body
+
+
+def _packet_ids(data: bytes) -> Iterator[int]:
+    """The ids of the packets in one netlink read; raises on an error message."""
+    offset = 0
+    while offset + 16 <= len(data):
+        length, kind = struct.unpack_from("=IH", data, offset)
+        if kind == _ERROR:
+            (error,) = struct.unpack_from("=i", data, offset + 16)
+            if error:
+                raise OSError(-error, f"nfqueue: {os.strerror(-error)}")
+        elif kind == _PACKET:
+            position, end = offset + 20, offset + length
+            while position + 4 <= end:
+                size, attribute = struct.unpack_from("=HH", data, position)
+                if attribute & 0x7FFF == _PACKET_HDR:
+                    yield struct.unpack_from("!I", data, position + 4)[0]
+                position += max(4, (size + 3) & ~3)
+        offset += max(16, (length + 3) & ~3)
+
+
+def shape(queue: int, delay: float, loss: float) -> None:
+    """Hold each packet of NFQUEUE `queue` for `delay` seconds, dropping a `loss` fraction,
+    until SIGTERM; then let every held packet go."""
+    stopping = False
+
+    def stop(_signum: int, _frame: object) -> None:
+        nonlocal stopping
+        stopping = True
+
+    signal.signal(signal.SIGTERM, stop)
+    signal.signal(signal.SIGINT, stop)
+    with socket.socket(socket.AF_NETLINK, socket.SOCK_RAW, _NETLINK_NETFILTER) as sock:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 22)
+        sock.setsockopt(_SOL_NETLINK, _NETLINK_NO_ENOBUFS, 1)
+        sock.bind((0, 0))
+        for attribute in (
+            _attribute(_CFG_CMD, struct.pack("!BBH", _CMD_BIND, 0, 0)),
+            _attribute(_CFG_PARAMS, struct.pack("!IB", 0, _COPY_META)),
+            _attribute(_CFG_QUEUE_MAXLEN, struct.pack("!I", 20_000)),
+        ):
+            sock.send(_message(_CONFIG, queue, attribute, _REQUEST | _ACK))
+            list(_packet_ids(sock.recv(4096)))  # the acknowledgement, or an error raised
+        print(f"ready: queue {queue}, delay {delay * 1000:g} ms, loss {loss:.1%}", flush=True)
+
+        def verdict(packet_id: int, what: int) -> None:
+            sock.send(
+                _message(
+                    _VERDICT, queue, _attribute(_VERDICT_HDR, struct.pack("!II", what, packet_id))
+                )
+            )
+
+        held: collections.deque[tuple[float, int]] = collections.deque()
+        seen = dropped = 0
+        while not stopping:
+            wait = max(0.0, held[0][0] - time.monotonic()) if held else 0.2
+            try:
+                readable, _, _ = select.select([sock], [], [], wait)
+            except InterruptedError:
+                continue
+            if readable:
+                for packet_id in _packet_ids(sock.recv(1 << 20)):
+                    seen += 1
+                    if random.random() < loss:
+                        dropped += 1
+                        verdict(packet_id, _DROP)
+                    else:
+                        held.append((time.monotonic() + delay, packet_id))
+            now = time.monotonic()
+            while held and held[0][0] <= now:
+                verdict(held.popleft()[1], _ACCEPT)
+        for _, packet_id in held:
+            verdict(packet_id, _ACCEPT)
+        print(f"stopped: {seen} packets, {dropped} dropped", flush=True)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m bench.netns", description=__doc__)
+    commands = parser.add_subparsers(dest="command", required=True)
+    shaper = commands.add_parser("shape", help="delay and drop the packets of one NFQUEUE")
+    shaper.add_argument("--queue", type=int, required=True)
+    shaper.add_argument("--delay-ms", type=float, default=100.0)
+    shaper.add_argument("--loss", type=float, default=5.0, metavar="PERCENT")
+    commands.add_parser("clean", help="delete namespaces left by killed runs")
+    args = parser.parse_args(argv)
+    if args.command == "shape":
+        shape(args.queue, args.delay_ms / 1000, args.loss / 100)
+    else:
+        print("\n".join(clean_stale()) or "nothing to clean")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,198 @@
+"""The executor when its supervisor goes (the operator's STOP with it), with real processes
+on loopback and the simulator: an order that moves the robot is cancelled and the robot
+stopped; an order that does not command the robot goes on; nothing commands the robot
+until a supervisor is back."""
+
+from __future__ import annotations
+
+import asyncio
+import signal
+import subprocess
+from collections.abc import Awaitable, Callable
+from pathlib import Path
+
+import pytest
+
+from services.executor.runner import SUPERVISOR_LOST, UNSUPERVISED
+from shared.bus import Bus, BusOptions
+from shared.keys import BridgeKeys, RobotKeys
+from shared.messages import Done, Order, OrderStatus, Resume, TargetPose
+from shared.ros2 import Odometry, Pose2D, Ros2Codec
+
+from .conftest import Processes, async_wait_until
+from .support import Client, ExecutorHarness, client_wait_ready, order, run_harness, start_robot
+
+WAIT = 30.0
+STOP_BOUND = 2.0
+"""Seconds from SIGKILL to zero velocity on odometry: on loopback the supervisor's token
+goes within milliseconds and the simulator reports at 20 Hz, so this is generous."""
+FAR = Order(
+    order="goal",
+    label="mbgoal",
+    description="reach far",
+    target_pose=TargetPose(frame="map", x=8.0, y=0.0),
+)
+DRIVE_FAR = order("drive", distance=8.0)
+
+
+class Robot:
+    """The simulator, a supervisor and an executor for robot r1; the robot's odometry
+    with the loop time each message arrived."""
+
+    def __init__(self, router: str, processes: Processes, db: Path) -> None:
+        self.router = router
+        self.processes = processes
+        self.db = db
+        processes.start("services.sim", "--connect", router)
+        self.supervisor = self.start_supervisor()
+        self.executor = processes.start(
+            "services.executor",
+            *("--connect", router, "--robot", "r1"),
+            *("--executor", "tests.executors_for_tests:Slow=slow"),
+        )
+        self.odometry: list[tuple[float, Odometry]] = []
+
+    def start_supervisor(self) -> subprocess.Popen[bytes]:
+        self.supervisor = self.processes.start(
+            "services.supervisor", "--connect", self.router, "--robot", "r1", "--db", str(self.db)
+        )
+        return self.supervisor
+
+    def kill_supervisor(self) -> None:
+        self.supervisor.send_signal(signal.SIGKILL)
+        self.supervisor.wait()
+
+    def executor_log(self) -> str:
+        return self.processes.log(self.executor)
+
+    def run(self, body: Callable[[Client], Awaitable[None]]) -> None:
+        async def main() -> None:
+            loop = asyncio.get_running_loop()
+            with Bus.open(BusOptions(connect=[self.router]), loop) as bus:
+                bus.subscribe(
+                    BridgeKeys().odom,
+                    Ros2Codec().read_odometry,
+                    lambda _key, odom: self.odometry.append((loop.time(), odom)),
+                )
+                await async_wait_until(lambda: self.odometry, WAIT, "odometry from the sim")
+                client = Client(bus, "r1")
+                await client_wait_ready(client)
+                await body(client)
+
+        asyncio.run(main())
+
+    async def driving(self) -> None:
+        await async_wait_until(
+            lambda: self.odometry[-1][1].linear_x > 0.2, WAIT, "the robot to drive"
+        )
+
+    async def standing(self, since: float) -> tuple[float, Pose2D]:
+        """Wait for zero velocity reported after loop time `since`: how long it took, and
+        the pose there."""
+
+        def first_still() -> tuple[float, Odometry] | None:
+            return next(
+                (
+                    (at, odom)
+                    for at, odom in self.odometry
+                    if at > since and odom.linear_x == 0.0 and odom.angular_z == 0.0
+                ),
+                None,
+            )
+
+        await async_wait_until(first_still, WAIT, "the robot to stand still")
+        found = first_still()
+        assert found is not None
+        return found[0] - since, found[1].pose
+
+
+@pytest.fixture
+def robot(router: str, processes: Processes, tmp_path: Path) -> Robot:
+    return Robot(router, processes, tmp_path / "supervisor.sqlite3")
+
+
+@pytest.mark.parametrize("moving", [DRIVE_FAR, FAR], ids=["drive", "mbgoal"])
+def test_a_lost_supervisor_stops_the_moving_robot(robot: Robot, moving: Order) -> None:
+    async def body(client: Client) -> None:
+        running, sibling = await client.submit(moving, order("mul", first=2, second=3))
+        (later,) = await client.submit(order("mul", first=4, second=5))
+        await robot.driving()
+        lost = asyncio.get_running_loop().time()
+        robot.kill_supervisor()  # and the operator's STOP with it
+        took, stood = await robot.standing(lost)
+        print(f"supervisor SIGKILLed to zero velocity on odom ({moving.label}): {took:.3f} s")
+        assert took < STOP_BOUND
+        assert stood.x < 7.0  # far from where it was going
+        await asyncio.sleep(1.0)  # a window to watch it stand
+        assert abs(robot.odometry[-1][1].pose.x - stood.x) < 0.01, "it moved again"
+
+        robot.start_supervisor()
+        await client_wait_ready(client)
+        record = await client.finished(running)
+        assert (record.status, record.message) == (OrderStatus.CANCELLED, SUPERVISOR_LOST)
+        state = await client.state()
+        assert [r.id for r in state.queue] == [sibling, later]  # kept, waiting for resume
+        assert state.paused
+        assert isinstance(await client.ask(Resume()), Done)
+        assert (await client.finished(later)).message == "4 x 5 = 20"
+        assert [r.id for r in (await client.history()).records] == [later, sibling, running]
+        assert robot.executor_log().count("supervisor lost while order") == 1
+
+    robot.run(body)
+
+
+def test_an_order_that_does_not_command_the_robot_goes_on(robot: Robot) -> None:
+    async def body(client: Client) -> None:
+        running, after = await client.submit(
+            order("slow", seconds=3), order("mul", first=3, second=3)
+        )
+        await client.wait_state(
+            lambda s: s.current is not None and s.current.progress is not None,
+            "the slow order to run on the executor",
+        )
+        robot.kill_supervisor()
+        await async_wait_until(
+            lambda: f"order {running} goes on" in robot.executor_log(),
+            WAIT,
+            "the executor to see its supervisor go",
+        )
+        robot.start_supervisor()
+        await client_wait_ready(client)
+        record = await client.finished(running)
+        assert (record.status, record.message) == (OrderStatus.SUCCEEDED, "slept")
+        assert [r.id for r in (await client.state()).queue] == [after]
+
+    robot.run(body)
+
+
+def test_no_order_commands_the_robot_until_a_supervisor_is_back(
+    router: str, processes: Processes, tmp_path: Path
+) -> None:
+    """The test holds the supervisor's token, and sends orders as no supervisor would
+    while it is gone."""
+    start_robot(processes, router, tmp_path / "photos")
+    executor = processes.started[-1][1]
+
+    def logged(text: str) -> Callable[[], bool]:
+        return lambda: text in processes.log(executor)
+
+    async def body(harness: ExecutorHarness) -> None:
+        supervisor = RobotKeys("r1").alive("supervisor")
+        withdraw = harness.bus.announce(supervisor)
+        await async_wait_until(logged("supervisor online"), WAIT, "the supervisor to be seen")
+        withdraw()
+        await async_wait_until(logged("supervisor lost; no order runs"), WAIT, "the loss")
+
+        sent = asyncio.get_running_loop().time()
+        refused = await harness.finished(await harness.execute(order("drive", distance=1.0)))
+        assert (refused.status, refused.message) == (OrderStatus.FAILED, UNSUPERVISED)
+        assert all(odom.linear_x == 0.0 for odom in harness.since(sent))
+        photo = await harness.finished(await harness.execute(order("pic")))
+        assert photo.status == OrderStatus.SUCCEEDED  # reading the robot is not commanding it
+
+        harness.bus.announce(supervisor)
+        await async_wait_until(logged("supervisor back"), WAIT, "the supervisor to be back")
+        driven = await harness.finished(await harness.execute(order("drive", distance=0.3)))
+        assert (driven.status, driven.message) == (OrderStatus.SUCCEEDED, "drove 0.3 m")
+
+    run_harness(router, body)
