@@ -16,8 +16,8 @@ from pathlib import Path
 import pytest
 from PIL import Image as PilImage
 
-from shared.bus import json_decoder
-from shared.keys import BridgeKeys
+from shared.bus import Bus, BusOptions, json_decoder
+from shared.keys import BridgeKeys, RobotKeys
 from shared.messages import (
     CancelOrder,
     Done,
@@ -28,10 +28,12 @@ from shared.messages import (
     OrderStatus,
     TargetPose,
 )
+from shared.ros2 import Ros2Codec
 
 from .conftest import Processes, async_wait_until, voicectl
 from .support import ExecutorHarness, run_harness, start_robot
 
+CODEC = Ros2Codec()
 Start = Callable[..., None]
 """start(sim_args, executor_args): the simulator and an executor for robot 'r1'."""
 
@@ -280,3 +282,29 @@ def test_a_namespace_ros_would_refuse_is_refused_with_what_is_allowed() -> None:
         "argument --namespace: ROS namespace 'bot-1': 'bot-1' is not a ROS 2 name; use letters, "
         "digits and single '_', not starting with a digit ('-' and '.' are not allowed)"
     ) in refused.stderr
+
+
+def test_the_stop_at_start_up_is_in_the_type_the_robot_takes(
+    router: str, processes: Processes, tmp_path: Path
+) -> None:
+    """A starting executor stops whatever moves the robot; on a TwistStamped robot that
+    stop must be a TwistStamped, so it waits for the bridge to say so first."""
+    processes.start("services.sim", "--connect", router, *NAMES, "--cmd-vel-type", "stamped")
+
+    async def main() -> None:
+        with Bus.open(BusOptions(connect=[router]), asyncio.get_running_loop()) as bus:
+            sent: list[bytes] = []
+            bus.subscribe(REMAPPED.cmd_vel, bytes, lambda _key, raw: sent.append(raw))
+            await asyncio.sleep(0.5)  # the subscription reaches the router
+            processes.start("services.executor", "--connect", router, "--robot", "r1", *NAMES)
+            online = RobotKeys("r1").alive("executor")
+
+            def executor_online() -> bool:
+                replies = bus.session.liveliness().get(online, timeout=1)
+                return any(reply.ok is not None for reply in replies)
+
+            await async_wait_until(executor_online, 30.0, "the executor to come online")
+            assert len(sent) >= 3, "no stop at start-up"
+            assert all(CODEC.read_twist_stamped(raw) == (0.0, 0.0) for raw in sent)
+
+    asyncio.run(main())

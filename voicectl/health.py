@@ -113,7 +113,7 @@ async def _check_bus(args: argparse.Namespace) -> tuple[bool, str]:
     try:
         with Bus.open(options, asyncio.get_running_loop()) as bus:
             if key is None:
-                return True, f"router at {', '.join(options.connect) or 'its endpoints'} is up"
+                return True, f"router at {options.where} is up"
             present = await asyncio.to_thread(_token_present, bus.session, key, args.timeout)
     except BusError as exc:  # no router: nothing behind it can be up either
         return False, f"{_subject(args)} is not reachable: {exc}"

@@ -10,6 +10,7 @@ executor that outlives its order can never move the robot again.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import logging
 import time
 from collections.abc import Callable
@@ -95,6 +96,7 @@ class RobotLink:
         """Whether the robot's NavigateToPose server has shown itself (token or reply)."""
         self.bridge_cmd_vel: CmdVelType | None = None
         """What the bridge says the robot's cmd_vel subscribers take."""
+        self._cmd_vel_learnt = asyncio.Event()
         self.bridge_camera: CameraType | None = None
         self._warned_cmd_vel = False
 
@@ -118,6 +120,14 @@ class RobotLink:
             return self.bridge_camera
         compressed = self.keys.camera_name.endswith("/compressed")
         return CameraType.COMPRESSED if compressed else CameraType.RAW
+
+    async def cmd_vel_type_known(self, timeout: float) -> bool:
+        """Wait, at most `timeout` seconds, until the type cmd_vel takes is configured or
+        announced by the bridge: a stop in the wrong type is one the robot cannot read."""
+        if self.options.cmd_vel_type is None:
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self._cmd_vel_learnt.wait(), timeout)
+        return self.options.cmd_vel_type is not None or self.bridge_cmd_vel is not None
 
     def start(self) -> None:
         codec = self.codec
@@ -154,6 +164,7 @@ class RobotLink:
                 ros_type,
                 configured,
             )
+        self._cmd_vel_learnt.set()
         if found is not self.bridge_cmd_vel:
             self.bridge_cmd_vel = found
             _LOGGER.info("'%s' takes %s (from the bridge)", self.keys.cmd_vel, ros_type)

@@ -44,6 +44,8 @@ from .robot import OrderRobot, RobotLink
 
 _LOGGER = logging.getLogger(__name__)
 RECENT_RESULTS = 32
+CMD_VEL_TYPE_WAIT = 2.0
+"""Seconds the start-up stop waits for the bridge to say what cmd_vel takes."""
 SUPERVISOR_LOST = "supervisor lost: robot stopped (no one could STOP it)"
 """How an order that commanded the robot ends when the supervisor goes."""
 UNSUPERVISED = "supervisor lost: the robot takes no command while no one could STOP it"
@@ -138,7 +140,6 @@ class ExecutorService:
             except ValueError as exc:  # still served; only not announced
                 _LOGGER.warning("label not announced: %s", exc)
         self._bus.watch(self._keys.alive("supervisor"), self._on_supervisor)
-        self._withdraw = self._bus.announce(self._keys.alive("executor"))
         self._info = self._bus.latest(self._keys.executor_info)
         self.publish_info()
 
@@ -158,12 +159,21 @@ class ExecutorService:
 
     async def end_stray_motion(self) -> None:
         """At start nothing of this executor runs: whatever moves the robot (a goal an
-        earlier executor left, a last velocity command) is stray, and is stopped."""
+        earlier executor left, a last velocity command) is stray, and is stopped. Only
+        then does the executor say it is online, so that no order's goal meets this
+        halt's cancel."""
+        if not await self._robot.cmd_vel_type_known(CMD_VEL_TYPE_WAIT):
+            _LOGGER.warning(
+                "after %g s the bridge has still not said what '%s' takes; stopping with Twist",
+                CMD_VEL_TYPE_WAIT,
+                self._robot.keys.cmd_vel,
+            )
         problem = await self._robot.halt()
         if problem is None:
             _LOGGER.info("robot halted at start: zero velocity, every navigation goal cancelled")
         else:
             _LOGGER.warning("robot halted at start: zero velocity sent, but %s", problem)
+        self._withdraw = self._bus.announce(self._keys.alive("executor"))
 
     async def handle(self, request: ExecutorRequest) -> Message:
         match request:
