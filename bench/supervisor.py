@@ -28,6 +28,7 @@ from shared.errors import BusError  # noqa: E402
 from shared.keys import RobotKeys  # noqa: E402
 from shared.messages import (  # noqa: E402
     Accepted,
+    ControlRequest,
     Done,
     Execute,
     ExecutorRequest,
@@ -98,8 +99,8 @@ class FakeExecutor:
         self.arrived = asyncio.Event()
 
     def start(self) -> None:
-        self.bus.serve(self.keys.executor_execute, json_decoder(ExecutorRequest), self.handle)
-        self.bus.serve(self.keys.executor_control, json_decoder(ExecutorRequest), self.handle)
+        self.bus.serve(self.keys.executor_execute, json_decoder(Execute), self.handle)
+        self.bus.serve(self.keys.executor_control, json_decoder(ControlRequest), self.handle)
         self.bus.announce(self.keys.alive("executor"))
 
     async def handle(self, request: ExecutorRequest) -> Message:

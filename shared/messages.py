@@ -427,7 +427,10 @@ class GetResult(Message):
     order_id: str
 
 
-ExecutorRequest = Execute | CancelOrder | Halt | GetRunning | GetResult
+ControlRequest = CancelOrder | Halt | GetRunning | GetResult
+"""What the executor's control key takes; its execute key takes `Execute` alone, so a
+message sent to the wrong key is a decode error, not a surprise."""
+ExecutorRequest = Execute | ControlRequest
 
 
 class Accepted(Message):
@@ -452,8 +455,13 @@ class OrderProgress(Message):
 class OrderFinished(Message):
     order_id: str
     status: OrderStatus
-    """succeeded, failed or cancelled."""
+    """An end: succeeded, failed, cancelled, rejected or interrupted, never queued or
+    running (a message saying otherwise does not decode)."""
     message: str = ""
+
+    def __post_init__(self) -> None:
+        if self.status in (OrderStatus.QUEUED, OrderStatus.RUNNING):
+            raise ValueError(f"an order does not finish as {self.status}")
 
 
 ExecutorEvent = OrderProgress | OrderFinished

@@ -394,14 +394,14 @@ class Ros2Codec:
         return self._encode(msg, "tf2_msgs/msg/TFMessage")
 
     def read_transform(self, raw: bytes) -> list[tuple[str, str, Pose2D]]:
-        """(parent, child, planar pose) of each transform in a TFMessage."""
+        """(parent, child, planar pose) of each transform in a TFMessage. Only the tests
+        read TF today; the reader lives beside its writer so that the simulator's bytes are
+        checked by the codec that makes them, and fuzzed with every other reader."""
         msg = self._decode(raw, "tf2_msgs/msg/TFMessage")
         found = []
         for stamped in msg.transforms:
-            q = stamped.transform.rotation
-            yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
             v = stamped.transform.translation
-            pose = Pose2D(x=float(v.x), y=float(v.y), yaw=yaw)
+            pose = Pose2D(x=float(v.x), y=float(v.y), yaw=_yaw(stamped.transform.rotation))
             found.append((str(stamped.header.frame_id), str(stamped.child_frame_id), pose))
         return found
 
@@ -551,6 +551,7 @@ class Ros2Codec:
         return self._encode(msg, "action_msgs/msg/GoalStatusArray")
 
     def read_goal_status_array(self, raw: bytes) -> list[tuple[bytes, GoalStatus]]:
+        """Read only by the tests, for the reason `read_transform` gives."""
         msg = self._decode(raw, "action_msgs/msg/GoalStatusArray")
         return [
             (_goal_id(entry.goal_info.goal_id), _enum(GoalStatus, entry.status, "goal status"))
@@ -704,10 +705,13 @@ def _goal_id(uuid_msg: Any) -> bytes:
     return bytes(uuid_msg.uuid)
 
 
+def _yaw(q: Any) -> float:
+    """The rotation about z of a quaternion (roll and pitch are zero on the ground)."""
+    return math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+
+
 def _pose2d(pose: Any) -> Pose2D:
-    q = pose.orientation
-    yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
-    return Pose2D(x=float(pose.position.x), y=float(pose.position.y), yaw=yaw)
+    return Pose2D(x=float(pose.position.x), y=float(pose.position.y), yaw=_yaw(pose.orientation))
 
 
 def _enum(kind: type[_E], value: int, what: str) -> _E:

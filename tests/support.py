@@ -6,9 +6,10 @@ import asyncio
 import uuid
 from collections.abc import Callable, Coroutine
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 from shared.bus import Bus, BusOptions, json_decoder
+from shared.client import VoicectlClient
 from shared.errors import BusError
 from shared.keys import BridgeKeys, RobotKeys
 from shared.messages import (
@@ -35,24 +36,52 @@ from shared.ros2 import Odometry, Ros2Codec
 
 from .conftest import Processes, async_wait_until
 
+T = TypeVar("T")
+
+
+def on_bus(where: str | BusOptions, body: Callable[[Bus], Coroutine[Any, Any, T]]) -> T:
+    """Run `body` with a bus joined to `where` (a router's endpoint, or options), in an
+    event loop of its own; the bus is closed whatever happens. The tests' one entry
+    from synchronous test functions to the bus."""
+
+    async def main() -> T:
+        options = BusOptions(connect=[where]) if isinstance(where, str) else where
+        with Bus.open(options, asyncio.get_running_loop()) as bus:
+            return await body(bus)
+
+    return asyncio.run(main())
+
+
+async def until_heard(bus: Bus, key: str, timeout: float = 10.0) -> None:
+    """Wait until a subscriber on `key` in another session has reached the router, seen
+    from `bus`: a publisher declared here matches it then. Instead of sleeping and hoping."""
+    publisher = bus.session.declare_publisher(key)
+    try:
+        await async_wait_until(
+            # The stubs say bool; zenoh 1.10 returns a MatchingStatus with `matching`.
+            lambda: getattr(publisher.matching_status, "matching", False),
+            timeout,
+            f"a subscriber on {key} to reach the router",
+        )
+    finally:
+        publisher.undeclare()
+
 
 def order(label: str, **params: Any) -> Order:
     return Order(order=label, label=label, description=f"do {label}", params=params)
 
 
 class Client:
-    """The test's side of the supervisor protocol."""
+    """The test's side of the supervisor protocol: voicectl's own client, plus waits."""
 
     def __init__(self, bus: Bus, robot: str) -> None:
         self.bus = bus
         self.keys = RobotKeys(robot)
-        self._decode = json_decoder(SupervisorReply)
+        self._client = VoicectlClient(bus)
 
     async def ask(self, request: Message) -> SupervisorReply:
-        reply: SupervisorReply = await self.bus.request(
-            self.keys.supervisor, request, self._decode, timeout=10.0
-        )
-        return reply
+        """The supervisor's reply as it is, a refusal (`Failed`) too."""
+        return await self._client.request(self.keys.robot, request)
 
     async def ask_submit(self, *orders: Order) -> SupervisorReply:
         """Submit and return whatever the supervisor answers (a refusal too)."""
@@ -194,13 +223,12 @@ def run_harness(
     """Run `body` with a harness on a bus connected to `router`, once the executor and
     the robot are up."""
 
-    async def main() -> None:
-        with Bus.open(BusOptions(connect=[router]), asyncio.get_running_loop()) as bus:
-            harness = ExecutorHarness(bus, bridge=bridge)
-            await harness.ready()
-            await body(harness)
+    async def main(bus: Bus) -> None:
+        harness = ExecutorHarness(bus, bridge=bridge)
+        await harness.ready()
+        await body(harness)
 
-    asyncio.run(main())
+    on_bus(router, main)
 
 
 def start_robot(

@@ -3,17 +3,30 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import logging
 
+import msgspec
 import pytest
 import zenoh
 
 from shared.bus import Bus, BusOptions, json_decoder
 from shared.errors import BusError
-from shared.messages import Done, Failed, GetState, Message, SupervisorRequest, Transcript
+from shared.messages import (
+    Done,
+    ExecutorEvent,
+    Failed,
+    GetState,
+    Message,
+    OrderFinished,
+    OrderStatus,
+    SupervisorRequest,
+    Transcript,
+)
 
 from .conftest import async_wait_until
+from .support import until_heard
 
 
 def options(router: str) -> BusOptions:
@@ -32,7 +45,7 @@ def test_publish_subscribe_decodes_and_drops_junk(
                 json_decoder(Transcript),
                 lambda key, msg: received.append((key, msg)),
             )
-            await asyncio.sleep(0.3)  # subscription propagation through the router
+            await until_heard(pub, "voice/r1/stt/transcript")
             pub.session.put("voice/r1/stt/transcript", b"\xff not json")
             pub.session.put("voice/r1/stt/transcript", b'{"type": "transcript"}')
             pub.publish("voice/r1/stt/transcript", Transcript(text="turn left"))
@@ -52,8 +65,7 @@ def test_json_on_the_wire_is_readable_by_any_tool(router: str) -> None:
         loop = asyncio.get_running_loop()
         got: list[zenoh.Sample] = []
         with Bus.open(options(router), loop) as bus:
-            subscriber = bus.session.declare_subscriber("voice/**", got.append)
-            await asyncio.sleep(0.3)
+            subscriber = bus.session.declare_subscriber("voice/**", got.append)  # same session
             bus.publish("voice/r1/stt/transcript", Transcript(text="hi"))
             await async_wait_until(lambda: got, 5.0, "the raw sample")
             subscriber.undeclare()
@@ -78,10 +90,16 @@ def test_request_reply_and_errors(router: str) -> None:
                         raise RuntimeError("boom")
 
             server.serve("voice/r1/supervisor/request", json_decoder(SupervisorRequest), handle)
-            await asyncio.sleep(0.3)
             decode = json_decoder(Done | Failed)
-            reply = await client.request("voice/r1/supervisor/request", GetState(), decode)
-            assert reply == Done(detail="state")
+            replies: list[Done | Failed] = []
+            for _ in range(100):  # until the queryable has reached the router
+                with contextlib.suppress(BusError):
+                    replies.append(
+                        await client.request("voice/r1/supervisor/request", GetState(), decode)
+                    )
+                    break
+                await asyncio.sleep(0.05)
+            assert replies == [Done(detail="state")]
             raw = await client.request_bytes("voice/r1/supervisor/request", b"junk", 5.0)
             assert b"undecodable request" in raw
             failed = await client.request(
@@ -109,3 +127,13 @@ def test_liveliness_tokens_come_and_go(router: str) -> None:
         return seen
 
     assert asyncio.run(scenario()) == [True, False]
+
+
+def test_an_order_cannot_finish_as_queued_or_running() -> None:
+    decode = json_decoder(ExecutorEvent)
+    finished = decode(b'{"type": "orderfinished", "order_id": "a", "status": "failed"}')
+    assert finished == OrderFinished(order_id="a", status=OrderStatus.FAILED)
+    for status in ("queued", "running"):
+        raw = f'{{"type": "orderfinished", "order_id": "a", "status": "{status}"}}'.encode()
+        with pytest.raises(msgspec.ValidationError, match=f"an order does not finish as {status}"):
+            decode(raw)

@@ -13,10 +13,12 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
+import zenoh
 
 from services.executor.builtin.pic import TakePhoto
 from services.executor.framework import load_bindings_file
-from shared.bus import bus_options
+from shared.keys import ConverterKeys, RobotKeys
+from shared.process import bus_options
 from voicectl.cli import build_parser
 
 from .conftest import REPO, free_port, wait_until
@@ -185,3 +187,37 @@ def test_deploy_doc_secured_bus_commands_run_as_written(tmp_path: Path) -> None:
         options = bus_options(args, router=name == "router", environ={})
         assert options.config_file is not None
         assert options.config_file.is_file()
+
+
+def documented_keys() -> list[tuple[str, str]]:
+    """Every `voice/...` key the README and the docs name, with where."""
+    found = []
+    for doc in [REPO / "README.md", *sorted(DOCS.glob("*.md"))]:
+        for key in re.findall(r"`(voice/[^`\s]*)`", doc.read_text()):
+            found.append((doc.name, key))
+    return found
+
+
+def voicectl_keys() -> list[str]:
+    """Every key expression shared/keys.py builds, for any robot, session or label."""
+    robot, converter = RobotKeys.any_robot(), ConverterKeys()
+    keys = [robot.stt_audio_any, robot.label("x").replace("/x", "/*"), robot.alive("*")]
+    for keyset in (robot, converter):
+        for name in dir(type(keyset)):
+            if isinstance(getattr(type(keyset), name), property):
+                value = getattr(keyset, name)
+                if isinstance(value, str) and value.startswith("voice/"):
+                    keys.append(value)
+    return keys
+
+
+def test_every_key_the_docs_name_is_one_voicectl_uses() -> None:
+    known = [zenoh.KeyExpr(key) for key in voicectl_keys()]
+    documented = documented_keys()
+    assert len(documented) >= 8
+    for doc, key in documented:
+        expression = re.sub(r"<[a-z]+>", "*", key).replace("...", "**").rstrip("/") + "/**"
+        expression = expression.replace("/**/**", "/**")
+        assert any(zenoh.KeyExpr(expression).intersects(k) for k in known), (
+            f"{doc} names {key}, which no key in shared/keys.py matches"
+        )

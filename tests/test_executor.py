@@ -10,10 +10,14 @@ from pathlib import Path
 import pytest
 from PIL import Image as PilImage
 
+from shared.bus import json_decoder
 from shared.keys import BridgeKeys
 from shared.messages import (
     CancelOrder,
     Done,
+    Execute,
+    ExecutorReply,
+    Failed,
     Halt,
     Order,
     OrderProgress,
@@ -24,7 +28,7 @@ from shared.messages import (
 from shared.ros2 import Ros2Codec, RosDistro
 
 from .conftest import Processes, async_wait_until
-from .support import ExecutorHarness, run_harness, start_robot
+from .support import ExecutorHarness, order, run_harness, start_robot
 
 
 @pytest.fixture
@@ -33,10 +37,6 @@ def robot(router: str, processes: Processes, tmp_path: Path) -> tuple[str, Path]
     executor_args = ("--cancel-deadline", "0.5", "--executor", "tests.executors_for_tests:Runaway")
     start_robot(processes, router, photos, executor_args=executor_args)
     return router, photos
-
-
-def order(label: str, **params: float) -> Order:
-    return Order(order=label, label=label, description=f"{label} test", params=params)
 
 
 def test_drive_and_rotate_close_the_loop_on_odometry(robot: tuple[str, Path]) -> None:
@@ -177,7 +177,7 @@ def test_wait_pauses_for_the_spoken_seconds(robot: tuple[str, Path]) -> None:
         _, bad = await harness.offer(order("wait", seconds=-1))
         assert bad == Rejected(
             order_id=bad.order_id if isinstance(bad, Rejected) else "",
-            reason="'wait test' (wait): parameter 'seconds': Expected `float` >= 0.0",
+            reason="'do wait' (wait): parameter 'seconds': Expected `float` >= 0.0",
         )
 
     run_harness(robot[0], body)
@@ -210,5 +210,21 @@ def test_an_executor_that_outlives_its_order_cannot_move_the_robot(
             f"the executor of order '{order_id}' ignored its cancel and still runs; "
             "no new order until it ends (restarting the executor ends it)"
         )
+
+    run_harness(robot[0], body)
+
+
+def test_each_executor_key_takes_only_its_own_requests(robot: tuple[str, Path]) -> None:
+    async def body(harness: ExecutorHarness) -> None:
+        decode = json_decoder(ExecutorReply)
+        keys = harness.keys
+        wrong_key = await harness.bus.request(keys.executor_execute, Halt(), decode)
+        assert isinstance(wrong_key, Failed)
+        assert wrong_key.reason.startswith("undecodable request")
+        execute = Execute(order_id="x", order=order("mul", first=1, second=2))
+        wrong_key = await harness.bus.request(keys.executor_control, execute, decode)
+        assert isinstance(wrong_key, Failed)
+        assert wrong_key.reason.startswith("undecodable request")
+        assert pytest.approx(0.0) == harness.pose().linear_x  # and nothing moved
 
     run_harness(robot[0], body)

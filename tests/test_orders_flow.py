@@ -12,7 +12,7 @@ from typing import Any
 
 import pytest
 
-from shared.bus import Bus, BusOptions
+from shared.bus import Bus
 from shared.messages import (
     Cancel,
     Done,
@@ -22,7 +22,7 @@ from shared.messages import (
 )
 
 from .conftest import Processes
-from .support import Client, client_wait_ready, order
+from .support import Client, client_wait_ready, on_bus, order
 
 USER_EXECUTORS = [
     "--executor",
@@ -80,14 +80,12 @@ def robot(router: str, processes: Processes, tmp_path: Path) -> Robot:
 
 
 def scenario(robot: Robot, body: Callable[[Client], Coroutine[Any, Any, None]]) -> None:
-    async def run() -> None:
-        options = BusOptions(connect=[robot.router])
-        with Bus.open(options, asyncio.get_running_loop()) as bus:
-            client = Client(bus, robot.name)
-            await client_wait_ready(client)
-            await body(client)
+    async def run(bus: Bus) -> None:
+        client = Client(bus, robot.name)
+        await client_wait_ready(client)
+        await body(client)
 
-    asyncio.run(run())
+    on_bus(robot.router, run)
 
 
 def test_results_of_builtin_and_user_executors(robot: Robot) -> None:

@@ -31,7 +31,7 @@ from shared.messages import (
 from shared.ros2 import Ros2Codec
 
 from .conftest import Processes, async_wait_until, voicectl
-from .support import ExecutorHarness, run_harness, start_robot
+from .support import ExecutorHarness, order, run_harness, start_robot, until_heard
 
 CODEC = Ros2Codec()
 Start = Callable[..., None]
@@ -75,10 +75,6 @@ def goal(frame: str, x: float) -> Order:
     )
 
 
-def task(label: str, **params: float) -> Order:
-    return Order(order=label, label=label, description=f"{label} test", params=params)
-
-
 async def executor_info(harness: ExecutorHarness, matches: Callable[[ExecutorInfo], bool]) -> None:
     seen: list[ExecutorInfo] = []
     harness.bus.subscribe(
@@ -107,12 +103,12 @@ def test_a_remapped_robot_with_stamped_cmd_vel_and_a_compressed_camera(
         # robot would not move.
         await executor_info(harness, lambda info: info.cmd_vel_type == "stamped")
         begin = harness.pose().pose
-        result = await harness.finished(await harness.execute(task("drive", distance=0.5)))
+        result = await harness.finished(await harness.execute(order("drive", distance=0.5)))
         assert (result.status, result.message) == (OrderStatus.SUCCEEDED, "drove 0.5 m")
         moved = harness.pose().pose
         assert math.hypot(moved.x - begin.x, moved.y - begin.y) == pytest.approx(0.5, abs=0.05)
 
-        result = await harness.finished(await harness.execute(task("pic", wait=0)))
+        result = await harness.finished(await harness.execute(order("pic", wait=0)))
         assert result.status == OrderStatus.SUCCEEDED, result.message
         (photo,) = (tmp_path / "photos").glob("*")
         assert photo.suffix == ".jpg"  # the robot's JPEG, saved as it came
@@ -138,7 +134,7 @@ def test_the_camera_is_subscribed_only_while_a_photo_is_taken(router: str, start
         try:
             await asyncio.sleep(1.0)  # time for a subscriber, were there one, to be seen
             assert not subscribed()
-            order_id = await harness.execute(task("pic", wait=3))
+            order_id = await harness.execute(order("pic", wait=3))
             await async_wait_until(subscribed, 10.0, "the executor to subscribe to the camera")
             result = await harness.finished(order_id)
             assert result.status == OrderStatus.SUCCEEDED, result.message
@@ -295,7 +291,8 @@ def test_the_stop_at_start_up_is_in_the_type_the_robot_takes(
         with Bus.open(BusOptions(connect=[router]), asyncio.get_running_loop()) as bus:
             sent: list[bytes] = []
             bus.subscribe(REMAPPED.cmd_vel, bytes, lambda _key, raw: sent.append(raw))
-            await asyncio.sleep(0.5)  # the subscription reaches the router
+            with Bus.open(BusOptions(connect=[router]), asyncio.get_running_loop()) as probe:
+                await until_heard(probe, REMAPPED.cmd_vel)
             processes.start("services.executor", "--connect", router, "--robot", "r1", *NAMES)
             online = RobotKeys("r1").alive("executor")
 

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from shared.bus import Bus, BusOptions, json_decoder
+from shared.bus import Bus, json_decoder
 from shared.keys import BridgeKeys, RobotKeys
 from shared.messages import (
     Done,
@@ -31,7 +31,7 @@ from shared.messages import (
 from shared.ros2 import Odometry, Pose2D, Ros2Codec, RosDistro, new_goal_id
 
 from .conftest import Processes, async_wait_until
-from .support import Client, client_wait_ready, order
+from .support import Client, client_wait_ready, on_bus, order
 
 WAIT = 30.0
 CODEC = Ros2Codec(RosDistro.JAZZY)
@@ -87,18 +87,17 @@ class Robot:
         process.wait()
 
     def run(self, body: Callable[[Bus, Client], Awaitable[None]]) -> None:
-        async def main() -> None:
+        async def main(bus: Bus) -> None:
             loop = asyncio.get_running_loop()
-            with Bus.open(BusOptions(connect=[self.router]), loop) as bus:
-                bus.subscribe(
-                    self.bridge.odom,
-                    CODEC.read_odometry,
-                    lambda _key, odom: self.odometry.append((loop.time(), odom)),
-                )
-                await async_wait_until(lambda: self.odometry, WAIT, "odometry from the sim")
-                await body(bus, Client(bus, "r1"))
+            bus.subscribe(
+                self.bridge.odom,
+                CODEC.read_odometry,
+                lambda _key, odom: self.odometry.append((loop.time(), odom)),
+            )
+            await async_wait_until(lambda: self.odometry, WAIT, "odometry from the sim")
+            await body(bus, Client(bus, "r1"))
 
-        asyncio.run(main())
+        on_bus(self.router, main)
 
     async def driving(self) -> None:
         await async_wait_until(

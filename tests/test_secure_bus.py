@@ -12,8 +12,9 @@ import stat
 import subprocess
 import sys
 import threading
-from collections.abc import Awaitable, Callable
+from collections.abc import Callable, Coroutine
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -25,7 +26,7 @@ from shared.ros2 import Odometry, Ros2Codec
 from voicectl.bus_secrets import ROUTER_TEMPLATE, USERS, SecretsExist, write_bus_secrets
 
 from .conftest import REPO, Processes, async_wait_until, free_port, voicectl
-from .support import Client, client_wait_ready, order
+from .support import Client, client_wait_ready, on_bus, order
 
 CODEC = Ros2Codec()
 
@@ -48,13 +49,8 @@ class SecureSite:
     def options(self, config: Path) -> BusOptions:
         return BusOptions(connect=[], mode=None, config_file=config, wait=False)
 
-    def run(self, user: str, body: Callable[[Bus], Awaitable[None]]) -> None:
-        async def main() -> None:
-            options = self.options(self.config(user))
-            with Bus.open(options, asyncio.get_running_loop()) as bus:
-                await body(bus)
-
-        asyncio.run(main())
+    def run(self, user: str, body: Callable[[Bus], Coroutine[Any, Any, None]]) -> None:
+        on_bus(self.options(self.config(user)), body)
 
 
 @pytest.fixture

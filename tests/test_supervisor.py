@@ -7,13 +7,14 @@ import asyncio
 import signal
 import sqlite3
 import subprocess
-from collections.abc import Awaitable, Callable
+from collections.abc import Callable, Coroutine
 from pathlib import Path
+from typing import Any
 
 import pytest
 
 from services.executor.runner import SUPERVISOR_LOST
-from shared.bus import Bus, BusOptions
+from shared.bus import Bus
 from shared.errors import BusError
 from shared.keys import BridgeKeys
 from shared.messages import (
@@ -33,7 +34,7 @@ from shared.messages import (
 from shared.ros2 import Odometry, Ros2Codec, RosDistro
 
 from .conftest import Processes, async_wait_until
-from .support import Client, client_wait_ready, order
+from .support import Client, client_wait_ready, on_bus, order
 
 EXECUTORS = ["--executor", "tests.executors_for_tests:Slow=slow"]
 
@@ -69,12 +70,8 @@ class Site:
         self.executors[robot].send_signal(signal.SIGKILL)
         self.executors[robot].wait()
 
-    def run(self, body: Callable[[Bus], Awaitable[None]]) -> None:
-        async def main() -> None:
-            with Bus.open(BusOptions(connect=[self.router]), asyncio.get_running_loop()) as bus:
-                await body(bus)
-
-        asyncio.run(main())
+    def run(self, body: Callable[[Bus], Coroutine[Any, Any, None]]) -> None:
+        on_bus(self.router, body)
 
 
 @pytest.fixture

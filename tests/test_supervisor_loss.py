@@ -14,13 +14,21 @@ from pathlib import Path
 import pytest
 
 from services.executor.runner import SUPERVISOR_LOST, UNSUPERVISED
-from shared.bus import Bus, BusOptions
+from shared.bus import Bus
 from shared.keys import BridgeKeys, RobotKeys
 from shared.messages import Done, Order, OrderStatus, Resume, TargetPose
 from shared.ros2 import Odometry, Pose2D, Ros2Codec
 
 from .conftest import Processes, async_wait_until
-from .support import Client, ExecutorHarness, client_wait_ready, order, run_harness, start_robot
+from .support import (
+    Client,
+    ExecutorHarness,
+    client_wait_ready,
+    on_bus,
+    order,
+    run_harness,
+    start_robot,
+)
 
 WAIT = 30.0
 STOP_BOUND = 2.0
@@ -66,20 +74,19 @@ class Robot:
         return self.processes.log(self.executor)
 
     def run(self, body: Callable[[Client], Awaitable[None]]) -> None:
-        async def main() -> None:
+        async def main(bus: Bus) -> None:
             loop = asyncio.get_running_loop()
-            with Bus.open(BusOptions(connect=[self.router]), loop) as bus:
-                bus.subscribe(
-                    BridgeKeys().odom,
-                    Ros2Codec().read_odometry,
-                    lambda _key, odom: self.odometry.append((loop.time(), odom)),
-                )
-                await async_wait_until(lambda: self.odometry, WAIT, "odometry from the sim")
-                client = Client(bus, "r1")
-                await client_wait_ready(client)
-                await body(client)
+            bus.subscribe(
+                BridgeKeys().odom,
+                Ros2Codec().read_odometry,
+                lambda _key, odom: self.odometry.append((loop.time(), odom)),
+            )
+            await async_wait_until(lambda: self.odometry, WAIT, "odometry from the sim")
+            client = Client(bus, "r1")
+            await client_wait_ready(client)
+            await body(client)
 
-        asyncio.run(main())
+        on_bus(self.router, main)
 
     async def driving(self) -> None:
         await async_wait_until(

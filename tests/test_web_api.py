@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import json
 import threading
-import time
 from collections.abc import Iterator
 
 import msgspec
@@ -20,6 +19,7 @@ from shared.keys import RobotKeys
 from shared.messages import AudioChunk, AudioMessage, AudioStart, AudioStop
 
 from .conftest import Processes, wait_until
+from .support import on_bus, until_heard
 
 TOKEN = "test-token-0123456789"
 AUTH = {"Authorization": f"Bearer {TOKEN}"}
@@ -43,6 +43,8 @@ class AudioListener:
             RobotKeys(robot).stt_audio_any, self._on_sample
         )
         self._lock = threading.Lock()
+        # Listening once the router knows it: the socket waits for a listener, not this test.
+        on_bus(router, lambda bus: until_heard(bus, RobotKeys(robot).stt_audio("probe")))
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
         with self._lock:
@@ -191,7 +193,6 @@ def test_the_audio_socket_says_when_no_recogniser_listens(client: TestClient) ->
 def test_audio_frames_become_one_session_on_the_bus(client: TestClient, router: str) -> None:
     listener = AudioListener(router)
     try:
-        time.sleep(0.5)  # our subscriber reaches the router; the socket waits for it anyway
         frames = [bytes([n]) * 640 for n in range(3)]
         with client.websocket_connect(
             "/api/audio", headers={"origin": "http://testserver"}
@@ -227,7 +228,6 @@ def test_bad_audio_ends_the_session_with_a_reason(
 ) -> None:
     listener = AudioListener(router)
     try:
-        time.sleep(0.5)
         with client.websocket_connect("/api/audio") as socket:
             socket.send_text(json.dumps({"token": TOKEN, "robot": "robot"}))
             assert socket.receive_json()["type"] == "session"

@@ -14,7 +14,8 @@ from pathlib import Path
 
 import pytest
 
-from shared.bus import DEFAULT_ROUTER, BusOptions, add_bus_arguments, bus_options
+from shared.bus import DEFAULT_ROUTER, BusOptions
+from shared.process import add_bus_arguments, bus_options
 
 from .conftest import REPO
 

@@ -28,6 +28,8 @@ from cryptography.hazmat.primitives import hashes, serialization
 from cryptography.hazmat.primitives.asymmetric import ec
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
+from shared.errors import VoicectlError
+
 ROUTER_TEMPLATE = Path(__file__).with_name("secure-router.json5")
 CONTAINER_DIR = "/etc/voicectl/bus"
 """Where the template expects DIR: the path the containers mount it at."""
@@ -39,7 +41,7 @@ VALID_DAYS = 3650
 PORT = 7447
 
 
-class SecretsExist(FileExistsError):
+class SecretsExist(VoicectlError, FileExistsError):
     """DIR already holds a deployment's secrets: writing new ones would lock its services out."""
 
 

@@ -6,7 +6,6 @@ import argparse
 import asyncio
 import importlib
 import sys
-import uuid
 from pathlib import Path
 
 import msgspec
@@ -14,14 +13,8 @@ import msgspec
 from services.converter.shipped import shipped_orders
 from services.stt.__main__ import add_engine_arguments, engine_options
 from services.web.tls import add_tls_arguments, tls_problem
-from shared.bus import (
-    DEFAULT_ROUTER,
-    Bus,
-    add_bus_arguments,
-    bus_options,
-    json_decoder,
-    robot_name,
-)
+from shared.bus import DEFAULT_ROUTER, Bus
+from shared.client import Refused, VoicectlClient
 from shared.config import data_dir, default_token_file, load_or_create_token
 from shared.errors import BusError, OrdersFileError
 from shared.keys import BridgeKeys, ConverterKeys, RobotKeys
@@ -29,20 +22,15 @@ from shared.messages import (
     Cancel,
     CancelAll,
     EmergencyStop,
-    Failed,
     GetHistory,
     GetState,
     Message,
-    ParseReply,
-    ParseRequest,
     Release,
     Reorder,
     Resume,
     StateReply,
-    Submit,
-    Submitted,
-    SupervisorReply,
 )
+from shared.process import add_bus_arguments, bus_options, robot_name
 
 from .health import add_health_arguments, check
 from .stack import Child, Panel, port_in_use, run_stack
@@ -395,39 +383,17 @@ def _transcribe(args: argparse.Namespace) -> int:
 
 
 async def _say(args: argparse.Namespace) -> int:
-    keys = RobotKeys(args.robot)
-    order_ids: list[str] = []
     try:
         with Bus.open(bus_options(args, wait=False), asyncio.get_running_loop()) as bus:
-            parsed = await bus.request(
-                ConverterKeys().parse,
-                ParseRequest(text=args.text),
-                json_decoder(ParseReply | Failed),
-                timeout=5.0,
-            )
-            if isinstance(parsed, Failed):
-                print(f"voicectl say: converter: {parsed.reason}", file=sys.stderr)
-                return 1
-            result = parsed.result
-            sending = result.orders if args.partial or not result.errors else []
-            if sending:
-                reply = await bus.request(
-                    keys.supervisor,
-                    Submit(request_id=uuid.uuid4().hex, orders=sending, transcript=args.text),
-                    json_decoder(SupervisorReply),
-                    timeout=5.0,
-                )
-                if isinstance(reply, Failed):
-                    print(f"voicectl say: supervisor: {reply.reason}", file=sys.stderr)
-                    return 1
-                if not isinstance(reply, Submitted):
-                    print(f"voicectl say: supervisor answered {reply!r}", file=sys.stderr)
-                    return 1
-                order_ids = reply.order_ids
+            said = await VoicectlClient(bus).say(args.robot, args.text, partial=args.partial)
+    except Refused as exc:
+        print(f"voicectl say: {exc}", file=sys.stderr)
+        return 1
     except BusError as exc:  # no router, or no converter or supervisor answering
         print(f"voicectl say: {exc}", file=sys.stderr)
         return 3
-    _print_json({"orders": result.orders, "errors": result.errors, "order_ids": order_ids})
+    result = said.result
+    _print_json({"orders": result.orders, "errors": result.errors, "order_ids": said.order_ids})
     for error in result.errors:
         print(f"voicectl say: {error.text!r}: {error.reason}", file=sys.stderr)
     if result.errors and not args.partial:
@@ -440,23 +406,16 @@ async def _say(args: argparse.Namespace) -> int:
 
 async def _ask_supervisor(args: argparse.Namespace, request: Message) -> int:
     """Send one request to the robot's supervisor and print the answer as JSON."""
-    keys = RobotKeys(args.robot)
     try:
         with Bus.open(bus_options(args, wait=False), asyncio.get_running_loop()) as bus:
-            reply = await bus.request(
-                keys.supervisor,
-                request,
-                json_decoder(SupervisorReply),
-                timeout=10.0,
-                urgent=isinstance(request, EmergencyStop),
-            )
+            reply = await VoicectlClient(bus).ask(args.robot, request)
+    except Refused as exc:
+        print(f"voicectl {args.command}: {exc.reason}", file=sys.stderr)
+        return 1
     except BusError as exc:  # no router, or no supervisor answering
         print(f"voicectl {args.command}: {exc}", file=sys.stderr)
         return 3
     match reply:
-        case Failed(reason=reason):
-            print(f"voicectl {args.command}: {reason}", file=sys.stderr)
-            return 1
         case StateReply(state=state):
             _print_json(state)
         case _:

@@ -18,9 +18,10 @@ import urllib.request
 
 import zenoh
 
-from shared.bus import Bus, add_bus_arguments, bus_options, robot_name
+from shared.bus import Bus
 from shared.errors import BusError
 from shared.keys import BridgeKeys, ConverterKeys, RobotKeys, check_ros_name
+from shared.process import add_bus_arguments, bus_options, robot_name
 
 SERVICES = ("router", "converter", "stt", "supervisor", "executor", "sim", "web")
 PER_ROBOT = ("stt", "supervisor", "executor")

@@ -8,8 +8,9 @@ import logging
 import sys
 from pathlib import Path
 
-from shared.bus import Bus, add_bus_arguments, bus_options, setup_logging, wait_for_stop
+from shared.bus import Bus
 from shared.errors import OrdersFileError
+from shared.process import add_bus_arguments, bus_options, setup_logging, wait_for_stop
 
 from .service import POLL_SECONDS, ConverterService, errors_of, load
 from .shipped import shipped_orders

@@ -74,6 +74,13 @@ class OrdersInvalid(OrdersFileError):
         return tuple(f"{message}{_at(line)}" for message, line in self.problems)
 
 
+def orders_files(path: Path) -> list[Path]:
+    """The files an orders path stands for: itself, or the *.yaml/*.yml in a directory."""
+    if path.is_dir():
+        return sorted([*path.glob("*.yaml"), *path.glob("*.yml")])
+    return [path]
+
+
 @dataclass(frozen=True)
 class CaseSpec:
     """One variant of an order ('left' of 'rotation') and what it changes."""
@@ -220,7 +227,7 @@ class OrderSet:
     def load(path: Path) -> OrderSet:
         """Load one YAML file, or every ``*.yaml``/``*.yml`` in a directory."""
         if path.is_dir():
-            files = sorted([*path.glob("*.yaml"), *path.glob("*.yml")])
+            files = orders_files(path)
             if not files:
                 raise OrdersFileError(f"{path}: no *.yaml orders files in this directory")
             sets: list[OrderSet] = []

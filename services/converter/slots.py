@@ -24,6 +24,7 @@ from typing import Any
 
 from text_to_num import alpha2digit  # type: ignore[import-untyped]
 
+from shared.errors import VoicectlError
 from shared.messages import ParamValue
 
 MAX_GRID = 1000
@@ -154,7 +155,7 @@ def format_value(value: float) -> str:
     return f"{value:g}"
 
 
-class SlotValueError(ValueError):
+class SlotValueError(VoicectlError, ValueError):
     """A spoken value that does not fit its slot; the text says what is allowed."""
 
 

@@ -9,15 +9,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from .orders import orders_files
+
 Signature = tuple[tuple[str, int, int, int], ...]
 """Each orders file with its modification time (ns), size and inode."""
-
-
-def orders_files(path: Path) -> list[Path]:
-    """The files an orders path stands for: itself, or the *.yaml/*.yml in a directory."""
-    if path.is_dir():
-        return sorted([*path.glob("*.yaml"), *path.glob("*.yml")])
-    return [path]
 
 
 def signature(path: Path) -> Signature:

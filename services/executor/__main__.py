@@ -9,9 +9,10 @@ import os
 import sys
 from pathlib import Path
 
-from shared.bus import Bus, add_bus_arguments, bus_options, robot_name, setup_logging, wait_for_stop
+from shared.bus import Bus
 from shared.config import data_dir
 from shared.keys import RobotKeys
+from shared.process import add_bus_arguments, bus_options, robot_name, setup_logging, wait_for_stop
 from shared.robot_options import add_robot_arguments, robot_options
 
 from .builtin import builtin_executors

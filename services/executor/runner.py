@@ -19,6 +19,7 @@ from shared.keys import RobotKeys
 from shared.messages import (
     Accepted,
     CancelOrder,
+    ControlRequest,
     Done,
     Execute,
     ExecutorInfo,
@@ -132,8 +133,8 @@ class ExecutorService:
 
     def start(self) -> None:
         self._robot.start()
-        self._bus.serve(self._keys.executor_execute, json_decoder(ExecutorRequest), self.handle)
-        self._bus.serve(self._keys.executor_control, json_decoder(ExecutorRequest), self.handle)
+        self._bus.serve(self._keys.executor_execute, json_decoder(Execute), self.handle)
+        self._bus.serve(self._keys.executor_control, json_decoder(ControlRequest), self.handle)
         for label in self._bindings.labels:
             try:
                 self._bus.announce(self._keys.label(label))
@@ -300,9 +301,9 @@ class ExecutorService:
         def report(progress: Progress) -> None:
             if robot.revoked:  # an executor that outlived its order has nothing to say
                 return
-            self._bus.publish(
-                self._keys.executor_events, OrderProgress(order_id=order_id, progress=progress)
-            )
+            progressed = OrderProgress(order_id=order_id, progress=progress)
+            # The next report replaces this one: under congestion it is dropped, not waited for.
+            self._bus.publish(self._keys.executor_events, progressed, superseded=True)
 
         ctx = ExecutionContext(order_id, robot, report, params)
         _LOGGER.info("executing %s: %s (%s)", order_id, order.description, order.label)

@@ -9,8 +9,8 @@ import sys
 
 import zenoh
 
-from shared.bus import add_bus_arguments, bus_options, setup_logging, wait_for_stop
 from shared.errors import BusError
+from shared.process import add_bus_arguments, bus_options, setup_logging, wait_for_stop
 
 _LOGGER = logging.getLogger(__name__)
 

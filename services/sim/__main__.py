@@ -8,7 +8,8 @@ import contextlib
 import logging
 import sys
 
-from shared.bus import Bus, add_bus_arguments, bus_options, setup_logging, wait_for_stop
+from shared.bus import Bus
+from shared.process import add_bus_arguments, bus_options, setup_logging, wait_for_stop
 from shared.robot_options import add_robot_arguments, robot_options
 from shared.ros2 import CameraType, CmdVelType, Ros2Codec, RosDistro
 

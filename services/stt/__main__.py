@@ -8,7 +8,8 @@ import logging
 import sys
 from pathlib import Path
 
-from shared.bus import Bus, add_bus_arguments, bus_options, robot_name, setup_logging, wait_for_stop
+from shared.bus import Bus
+from shared.process import add_bus_arguments, bus_options, robot_name, setup_logging, wait_for_stop
 
 from .engine import ENGINES, EngineError, EngineOptions, load_engine
 from .service import Limits, SttService

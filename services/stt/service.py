@@ -20,6 +20,7 @@ from dataclasses import dataclass
 from types import TracebackType
 
 from shared.bus import Bus, Latest, json_decoder
+from shared.client import Refused, VoicectlClient
 from shared.errors import BusError
 from shared.keys import ConverterKeys, RobotKeys, last_chunk
 from shared.messages import (
@@ -27,10 +28,7 @@ from shared.messages import (
     AudioMessage,
     AudioStart,
     AudioStop,
-    Failed,
     Grammar,
-    ParseReply,
-    ParseRequest,
     PartialTranscript,
     SttStatus,
     Transcript,
@@ -195,7 +193,7 @@ class SttService:
         self._compiling: asyncio.Task[None] | None = None
         self._status: Latest | None = None
         self._unpronounceable: list[str] = []
-        self._parse_decode = json_decoder(ParseReply | Failed)
+        self._client = VoicectlClient(bus)
 
     def __enter__(self) -> SttService:
         self._status = self.bus.latest(self._keys.stt_status)
@@ -367,15 +365,12 @@ class SttService:
         """Why `text` does not make whole orders, or '' when it does (or when the
         converter cannot tell now: it parses the transcript again anyway)."""
         try:
-            reply = await self.bus.request(
-                self._converter.parse, ParseRequest(text=text), self._parse_decode
-            )
+            result = await self._client.parse(text)
+        except Refused:
+            return ""
         except BusError as exc:
             _LOGGER.warning("could not check %s with the converter: %s", excerpt(text), exc)
             return ""
-        if isinstance(reply, Failed):
-            return ""
-        result = reply.result
         if result.errors:
             return f"not a command: {result.errors[0].reason}"
         if not result.orders:

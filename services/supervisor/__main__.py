@@ -10,8 +10,9 @@ import sqlite3
 import sys
 from pathlib import Path
 
-from shared.bus import Bus, add_bus_arguments, bus_options, robot_name, setup_logging, wait_for_stop
+from shared.bus import Bus
 from shared.config import data_dir
+from shared.process import add_bus_arguments, bus_options, robot_name, setup_logging, wait_for_stop
 
 from .service import SupervisorService
 from .store import Durability, OrderStore, StoreInUse

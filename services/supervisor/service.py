@@ -291,10 +291,7 @@ class RobotSupervisor:
                 if self._queue.progress(order_id, progress):
                     self._publish_soon()
             case OrderFinished(order_id=order_id, status=status, message=message):
-                if status in (OrderStatus.QUEUED, OrderStatus.RUNNING):
-                    _LOGGER.warning("%s: ignored result %s for %s", self.robot, status, order_id)
-                    return
-                self._finish(order_id, status, message)
+                self._finish(order_id, status, message)  # a final status: the type says so
 
     def on_executor(self, alive: bool) -> None:
         _LOGGER.info("%s: executor %s", self.robot, "online" if alive else "lost")
@@ -381,7 +378,11 @@ class RobotSupervisor:
     def _publish(self) -> None:
         self._publish_handle = None
         self._last_publish = asyncio.get_running_loop().time()
-        self._bus.publish(self._keys.state, StateUpdate(state=self._queue.snapshot()))
+        # Each snapshot is whole and replaces the last: dropped under congestion, never
+        # waited for on the loop. Clients that must know ask (GetState).
+        self._bus.publish(
+            self._keys.state, StateUpdate(state=self._queue.snapshot()), superseded=True
+        )
 
 
 class SupervisorService:

@@ -24,6 +24,7 @@ from typing import IO, Any, TypeVar
 
 import msgspec
 
+from shared.errors import VoicectlError
 from shared.messages import OrderRecord
 
 _LOGGER = logging.getLogger(__name__)
@@ -291,7 +292,7 @@ class OrderStore:
                 loop.call_soon_threadsafe(_settle, future, ok, value)
 
 
-class StoreInUse(OSError):
+class StoreInUse(VoicectlError, OSError):
     """Another supervisor holds the database: two would hand the same orders out twice."""
 
 

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import uvicorn
 
-from shared.bus import add_bus_arguments, bus_options, robot_name, setup_logging, wait_for_stop
 from shared.config import default_token_file, load_or_create_token
+from shared.process import add_bus_arguments, bus_options, robot_name, setup_logging, wait_for_stop
 
 from .app import Access, create_app
 from .audio import MAX_MESSAGE

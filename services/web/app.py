@@ -27,21 +27,20 @@ from starlette.responses import FileResponse, JSONResponse, Response, StreamingR
 from starlette.routing import Route, WebSocketRoute
 from starlette.websockets import WebSocket
 
-from shared.bus import Bus, BusOptions, json_decoder
-from shared.errors import BusError, VoicectlError
-from shared.keys import ConverterKeys, RobotKeys, check_chunk
+from shared.bus import Bus, BusOptions
+from shared.client import Refused, Unreachable, VoicectlClient
+from shared.errors import VoicectlError
+from shared.keys import RobotKeys, check_chunk
 from shared.messages import (
     Cancel,
     CancelAll,
     Done,
     EmergencyStop,
-    Failed,
     GetHistory,
     GetState,
     Message,
     Order,
-    ParseReply,
-    ParseRequest,
+    ParseResult,
     Release,
     Reorder,
     Resume,
@@ -126,13 +125,13 @@ class Panel:
         self.default_robot = robot
         self.access = access
         self._bus: Bus | None = None
+        self._client: VoicectlClient | None = None
         self.hub: Hub | None = None
-        self._parse_decode = json_decoder(ParseReply | Failed)
-        self._supervisor_decode = json_decoder(SupervisorReply)
         self._encoder = msgspec.json.Encoder()
 
     def attach(self, bus: Bus) -> None:
         self._bus = bus
+        self._client = VoicectlClient(bus, BUS_TIMEOUT)
         self.hub = Hub(bus, self.default_robot)
         self.hub.start()
 
@@ -222,31 +221,26 @@ class Panel:
         except (msgspec.DecodeError, msgspec.ValidationError) as exc:
             raise ApiError(400, f"bad request body: {exc}") from exc
 
-    async def _ask_converter(self, text: str) -> ParseReply:
+    @property
+    def client(self) -> VoicectlClient:
+        assert self._client is not None, "the app has not started"
+        return self._client
+
+    async def _ask_converter(self, text: str) -> ParseResult:
         try:
-            reply: ParseReply | Failed = await self.bus.request(
-                ConverterKeys().parse, ParseRequest(text=text), self._parse_decode, BUS_TIMEOUT
-            )
-        except BusError as exc:
+            return await self.client.parse(text)
+        except Refused as exc:
+            raise ApiError(400, exc.reason) from exc
+        except Unreachable as exc:
             raise ApiError(503, f"converter unavailable: {exc}") from exc
-        if isinstance(reply, Failed):
-            raise ApiError(400, reply.reason)
-        return reply
 
     async def _ask_supervisor(self, keys: RobotKeys, request: Message) -> SupervisorReply:
         try:
-            reply: SupervisorReply = await self.bus.request(
-                keys.supervisor,
-                request,
-                self._supervisor_decode,
-                BUS_TIMEOUT,
-                urgent=isinstance(request, EmergencyStop),
-            )
-        except BusError as exc:
+            return await self.client.ask(keys.robot, request)
+        except Refused as exc:
+            raise ApiError(409, exc.reason) from exc
+        except Unreachable as exc:
             raise ApiError(503, f"supervisor unavailable: {exc}") from exc
-        if isinstance(reply, Failed):
-            raise ApiError(409, reply.reason)
-        return reply
 
     async def _robots(self, _request: Request) -> object:
         assert self.hub is not None
@@ -254,7 +248,7 @@ class Panel:
 
     async def _parse(self, request: Request) -> object:
         body = await self._body(request, TextBody)
-        return (await self._ask_converter(body.text)).result
+        return await self._ask_converter(body.text)
 
     async def _submit(self, request: Request) -> object:
         keys = self._robot(request)
@@ -271,16 +265,14 @@ class Panel:
         """Parse and submit in one go, only when the whole text made orders."""
         keys = self._robot(request)
         body = await self._body(request, TextBody)
-        result = (await self._ask_converter(body.text)).result
-        order_ids: list[str] = []
-        if result.orders and not result.errors:
-            reply = await self._ask_supervisor(
-                keys,
-                Submit(request_id=uuid.uuid4().hex, orders=result.orders, transcript=body.text),
-            )
-            assert isinstance(reply, Submitted)
-            order_ids = reply.order_ids
-        return {"orders": result.orders, "errors": result.errors, "order_ids": order_ids}
+        try:
+            said = await self.client.say(keys.robot, body.text)
+        except Refused as exc:
+            raise ApiError(400 if exc.service == "converter" else 409, exc.reason) from exc
+        except Unreachable as exc:
+            raise ApiError(503, f"{exc.service} unavailable: {exc}") from exc
+        result = said.result
+        return {"orders": result.orders, "errors": result.errors, "order_ids": said.order_ids}
 
     async def _cancel(self, request: Request) -> object:
         keys = self._robot(request)

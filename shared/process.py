@@ -1,0 +1,163 @@
+"""A voicectl process's command line, logging and stop signals: the flags every service
+shares (the Zenoh ones named as zenohd names them, with their environment variables),
+one logging setup, and waiting for SIGINT or SIGTERM."""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import logging
+import os
+import signal
+import sys
+from collections.abc import Awaitable, Mapping
+from pathlib import Path
+
+import zenoh
+
+from .bus import DEFAULT_ROUTER, MODES, BusOptions
+from .errors import BusError
+from .keys import check_chunk
+
+
+def robot_name(text: str) -> str:
+    """argparse type for a robot name: a clear message instead of 'invalid value'."""
+    try:
+        return check_chunk(text, "robot name")
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from exc
+
+
+ZENOH_ENVIRONMENT = {
+    "mode": "ZENOH_MODE",
+    "connect": "ZENOH_CONNECT",
+    "listen": "ZENOH_LISTEN",
+    "config": "ZENOH_CONFIG",
+    "cfg": "ZENOH_CFG",
+}
+"""Environment variables that stand in for the flags (containers): endpoints separated
+by ',', settings by ';'. A flag on the command line wins over its variable."""
+
+
+def add_bus_arguments(parser: argparse.ArgumentParser, router: bool = False) -> None:
+    """The Zenoh flags every voicectl process shares, named as zenohd names them."""
+    group = parser.add_argument_group(
+        "Zenoh", "as zenohd's flags; each has an environment variable: ZENOH_MODE, ..."
+    )
+    if not router:
+        group.add_argument(
+            "--mode", choices=MODES, help="client (default), peer, or what --config says"
+        )
+    default_endpoint = "" if router else f"; default {DEFAULT_ROUTER}"
+    group.add_argument(
+        "--connect",
+        action="append",
+        metavar="ENDPOINT",
+        help=f"endpoint to connect to (repeatable{default_endpoint})",
+    )
+    group.add_argument(
+        "--listen",
+        action="append",
+        metavar="ENDPOINT",
+        help=f"endpoint to listen on (repeatable{'; default ' + DEFAULT_ROUTER if router else ''})",
+    )
+    group.add_argument(
+        "--config",
+        type=Path,
+        metavar="FILE",
+        help="a Zenoh JSON5 configuration (TLS, credentials...); the other flags override it",
+    )
+    group.add_argument(
+        "--cfg",
+        action="append",
+        metavar="KEY:VALUE",
+        help="set one configuration key to a JSON5 value, last (repeatable), e.g. "
+        "transport/link/tx/lease:2000",
+    )
+    parser.add_argument("--debug", action="store_true", help="log at DEBUG level")
+    parser.set_defaults(bus_prog=parser.prog)
+
+
+def bus_options(
+    args: argparse.Namespace,
+    wait: bool = True,
+    router: bool = False,
+    environ: Mapping[str, str] = os.environ,
+) -> BusOptions:
+    """The options the flags (or their environment variables) give; a mistake in them
+    ends the process now, in one line, rather than when the session opens."""
+
+    def given(name: str, separator: str) -> list[str]:
+        flag: list[str] | None = getattr(args, name, None)
+        if flag:
+            return flag
+        text = environ.get(ZENOH_ENVIRONMENT[name], "")
+        return [part.strip() for part in text.split(separator) if part.strip()]
+
+    config_file: Path | None = args.config or (
+        Path(environ["ZENOH_CONFIG"]) if environ.get("ZENOH_CONFIG") else None
+    )
+    mode: str | None = "router" if router else (args.mode or environ.get("ZENOH_MODE"))
+    connect, listen = given("connect", ","), given("listen", ",")
+    if config_file is None:
+        mode = mode or "client"
+        if router:
+            listen = listen or [DEFAULT_ROUTER]
+        elif not connect:
+            connect = [DEFAULT_ROUTER]
+    prog = getattr(args, "bus_prog", "voicectl")
+    if mode is not None and mode not in MODES:
+        _exit(prog, f"ZENOH_MODE {mode!r}: expected one of {', '.join(MODES)}")
+    options = BusOptions(
+        connect=connect,
+        listen=listen,
+        mode=mode,  # type: ignore[arg-type]  # checked just above
+        wait=wait,
+        config_file=config_file,
+        settings=tuple(given("cfg", ";")),
+    )
+    try:
+        options.zenoh_config()
+    except BusError as exc:
+        _exit(prog, str(exc))
+    return options
+
+
+def _exit(prog: str, message: str) -> None:
+    print(f"{prog}: {message}", file=sys.stderr)
+    raise SystemExit(2)
+
+
+def setup_logging(debug: bool) -> None:
+    logging.basicConfig(
+        level=logging.DEBUG if debug else logging.INFO,
+        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+    )
+    zenoh.init_log_from_env_or("error")
+
+
+async def wait_for_stop(*tasks: Awaitable[object], keep_running: bool = False) -> None:
+    """Return on SIGINT or SIGTERM; with `tasks`, also when one of them ends (re-raising
+    its error), cancelling the others; with `keep_running`, tasks that end well do not
+    end the wait (work done once at start)."""
+    loop = asyncio.get_running_loop()
+    stop = asyncio.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stop.set)
+    running = [asyncio.ensure_future(t) for t in tasks]
+    stopper = asyncio.ensure_future(stop.wait())
+    try:
+        pending = {stopper, *running}
+        while stopper in pending:
+            done, pending = await asyncio.wait(pending, return_when=asyncio.FIRST_COMPLETED)
+            for task in done:
+                if task is not stopper:
+                    task.result()
+            if not keep_running:
+                break
+    finally:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.remove_signal_handler(sig)
+        for task in [stopper, *running]:
+            task.cancel()
+        await asyncio.gather(stopper, *running, return_exceptions=True)
