@@ -4,6 +4,7 @@ always stopped, and a Bus on the test's own event loop."""
 from __future__ import annotations
 
 import asyncio
+import inspect
 import os
 import signal
 import socket
@@ -159,9 +160,14 @@ def wait_until(condition: Callable[[], object], timeout: float, what: str) -> No
 
 
 async def async_wait_until(condition: Callable[[], object], timeout: float, what: str) -> None:
+    """Poll `condition` (a function, or a coroutine function, whose result is truthy once
+    it holds) until it holds; AssertionError naming `what` after `timeout` seconds."""
     deadline = time.monotonic() + timeout
     while time.monotonic() < deadline:
-        if condition():
+        held = condition()
+        if inspect.isawaitable(held):
+            held = await held
+        if held:
             return
         await asyncio.sleep(0.02)
     raise AssertionError(f"timed out after {timeout:g} s waiting for {what}")

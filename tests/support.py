@@ -111,40 +111,30 @@ class Client:
             found[:] = [r for r in (await self.history()).records if r.id == order_id]
             return bool(found)
 
-        deadline = asyncio.get_running_loop().time() + timeout
-        while not await check():
-            assert asyncio.get_running_loop().time() < deadline, f"{order_id} never finished"
-            await asyncio.sleep(0.05)
+        await async_wait_until(check, timeout, f"order {order_id} to finish")
         return found[0]
 
     async def wait_state(self, predicate: Callable[[State], bool], what: str) -> State:
         states: list[State] = []
 
-        async def poll() -> None:
-            while True:
-                state = await self.state()
-                if predicate(state):
-                    states.append(state)
-                    return
-                await asyncio.sleep(0.05)
+        async def check() -> bool:
+            states[:] = [state] if predicate(state := await self.state()) else []
+            return bool(states)
 
-        try:
-            await asyncio.wait_for(poll(), 20.0)
-        except TimeoutError:
-            raise AssertionError(f"timed out waiting for {what}") from None
+        await async_wait_until(check, 20.0, what)
         return states[0]
 
 
 async def client_wait_ready(client: Client, executor: bool = True) -> None:
     """Wait for the supervisor to answer, and (by default) to see its executor."""
-    for _ in range(400):
+
+    async def ready() -> bool:
         try:
-            if (await client.state()).executor_online or not executor:
-                return
+            return (await client.state()).executor_online or not executor
         except BusError:
-            pass  # supervisor not up yet
-        await asyncio.sleep(0.05)
-    raise AssertionError("supervisor never saw the executor")
+            return False  # supervisor not up yet
+
+    await async_wait_until(ready, 20.0, "the supervisor (and its executor)")
 
 
 class ExecutorHarness:
@@ -170,15 +160,13 @@ class ExecutorHarness:
         self.events.setdefault(event.order_id, []).append(event)
 
     async def ready(self) -> None:
-        async def answered() -> bool:
+        def up() -> bool:
+            if not self.odometry:
+                return False
             replies = self.bus.session.liveliness().get(self.keys.alive("executor"), timeout=1)
             return any(r.ok is not None for r in replies)
 
-        for _ in range(200):
-            if await answered() and self.odometry:
-                return
-            await asyncio.sleep(0.05)
-        raise AssertionError("executor or sim never came up")
+        await async_wait_until(up, 20.0, "the executor and the simulator")
 
     async def offer(self, order: Order) -> tuple[str, ExecutorReply]:
         """Send `order` for execution: its id and the executor's answer."""

@@ -3,18 +3,17 @@ refuse a bad configuration in one line, junk on the bus answered and survived.""
 
 from __future__ import annotations
 
-import asyncio
 import json
 import subprocess
 import sys
 from pathlib import Path
 
-from shared.bus import Bus, BusOptions, json_decoder
-from shared.errors import BusError
+from shared.bus import Bus, json_decoder
 from shared.keys import RobotKeys
 from shared.messages import Failed, GetState, StateReply, SupervisorReply
 
 from .conftest import REPO, Processes, voicectl, wait_until
+from .support import Client, client_wait_ready, on_bus
 
 
 def test_parse_prints_one_json_object() -> None:
@@ -85,24 +84,18 @@ def test_supervisor_answers_junk_and_keeps_serving(router: str, processes: Proce
     supervisor = processes.start("services.supervisor", "--connect", router, "--robot", "r1")
     key = RobotKeys("r1").supervisor
 
-    async def scenario() -> None:
-        with Bus.open(BusOptions(connect=[router]), asyncio.get_running_loop()) as bus:
-            decode = json_decoder(SupervisorReply)
-            for _ in range(200):  # until the supervisor is up
-                try:
-                    await bus.request(key, GetState(), decode, timeout=2.0)
-                    break
-                except BusError:
-                    await asyncio.sleep(0.05)
-            for junk in (b"", b"\x00\xff", b'{"type": "submit"}', b'{"type": "launch"}'):
-                reply = decode(await bus.request_bytes(key, junk, 5.0))
-                assert isinstance(reply, Failed)
-                assert reply.reason.startswith("undecodable request")
-            bus.session.put(RobotKeys("r1").executor_events, b"garbage")
-            state = await bus.request(key, GetState(), decode, timeout=5.0)
-            assert isinstance(state, StateReply)
+    async def scenario(bus: Bus) -> None:
+        decode = json_decoder(SupervisorReply)
+        await client_wait_ready(Client(bus, "r1"), executor=False)
+        for junk in (b"", b"\x00\xff", b'{"type": "submit"}', b'{"type": "launch"}'):
+            reply = decode(await bus.request_bytes(key, junk, 5.0))
+            assert isinstance(reply, Failed)
+            assert reply.reason.startswith("undecodable request")
+        bus.session.put(RobotKeys("r1").executor_events, b"garbage")
+        state = await bus.request(key, GetState(), decode, timeout=5.0)
+        assert isinstance(state, StateReply)
 
-    asyncio.run(scenario())
+    on_bus(router, scenario)
     assert supervisor.poll() is None
     wait_until(
         lambda: (

@@ -31,6 +31,7 @@ from shared.messages import (
 )
 
 from .conftest import Processes, async_wait_until, wait_until
+from .support import on_bus
 
 ORDERS = Path(__file__).resolve().parents[1] / "orders"
 KEYS = ConverterKeys()
@@ -114,14 +115,12 @@ def scenario(
     orders: Path,
     body: Callable[[Converter], Coroutine[Any, Any, None]],
 ) -> None:
-    async def run() -> None:
-        loop = asyncio.get_running_loop()
-        with Bus.open(BusOptions(connect=[router]), loop) as bus:
-            converter = Converter(bus, processes, router, orders)
-            await converter.started()
-            await body(converter)
+    async def run(bus: Bus) -> None:
+        converter = Converter(bus, processes, router, orders)
+        await converter.started()
+        await body(converter)
 
-    asyncio.run(run())
+    on_bus(router, run)
 
 
 def write(path: Path, text: str) -> None:
@@ -310,9 +309,8 @@ def test_a_bad_file_at_start_is_fatal_in_one_line(
 
 
 def test_no_converter_means_no_answer(router: str) -> None:
-    async def run() -> None:
-        loop = asyncio.get_running_loop()
-        with Bus.open(BusOptions(connect=[router]), loop) as bus, pytest.raises(BusError):
+    async def run(bus: Bus) -> None:
+        with pytest.raises(BusError):
             await bus.request(KEYS.parse, GetGrammar(), json_decoder(ConverterReply), 1.0)
 
-    asyncio.run(run())
+    on_bus(router, run)

@@ -31,7 +31,7 @@ from shared.messages import (
 from shared.ros2 import Ros2Codec
 
 from .conftest import Processes, async_wait_until, voicectl
-from .support import ExecutorHarness, order, run_harness, start_robot, until_heard
+from .support import ExecutorHarness, on_bus, order, run_harness, start_robot, until_heard
 
 CODEC = Ros2Codec()
 Start = Callable[..., None]
@@ -287,21 +287,20 @@ def test_the_stop_at_start_up_is_in_the_type_the_robot_takes(
     stop must be a TwistStamped, so it waits for the bridge to say so first."""
     processes.start("services.sim", "--connect", router, *NAMES, "--cmd-vel-type", "stamped")
 
-    async def main() -> None:
-        with Bus.open(BusOptions(connect=[router]), asyncio.get_running_loop()) as bus:
-            sent: list[bytes] = []
-            bus.subscribe(REMAPPED.cmd_vel, bytes, lambda _key, raw: sent.append(raw))
-            with Bus.open(BusOptions(connect=[router]), asyncio.get_running_loop()) as probe:
-                await until_heard(probe, REMAPPED.cmd_vel)
-            processes.start("services.executor", "--connect", router, "--robot", "r1", *NAMES)
-            online = RobotKeys("r1").alive("executor")
+    async def main(bus: Bus) -> None:
+        sent: list[bytes] = []
+        bus.subscribe(REMAPPED.cmd_vel, bytes, lambda _key, raw: sent.append(raw))
+        with Bus.open(BusOptions(connect=[router]), asyncio.get_running_loop()) as probe:
+            await until_heard(probe, REMAPPED.cmd_vel)
+        processes.start("services.executor", "--connect", router, "--robot", "r1", *NAMES)
+        online = RobotKeys("r1").alive("executor")
 
-            def executor_online() -> bool:
-                replies = bus.session.liveliness().get(online, timeout=1)
-                return any(reply.ok is not None for reply in replies)
+        def executor_online() -> bool:
+            replies = bus.session.liveliness().get(online, timeout=1)
+            return any(reply.ok is not None for reply in replies)
 
-            await async_wait_until(executor_online, 30.0, "the executor to come online")
-            assert len(sent) >= 3, "no stop at start-up"
-            assert all(CODEC.read_twist_stamped(raw) == (0.0, 0.0) for raw in sent)
+        await async_wait_until(executor_online, 30.0, "the executor to come online")
+        assert len(sent) >= 3, "no stop at start-up"
+        assert all(CODEC.read_twist_stamped(raw) == (0.0, 0.0) for raw in sent)
 
-    asyncio.run(main())
+    on_bus(router, main)

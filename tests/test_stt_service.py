@@ -33,7 +33,7 @@ from shared.messages import (
 from shared.ros2 import Pose2D, Ros2Codec, RosDistro
 
 from .conftest import REPO, Processes, Speak, Stack, async_wait_until, wait_until
-from .support import Client
+from .support import Client, on_bus
 
 ORDERS = REPO / "orders"
 KEYS = RobotKeys("robot")
@@ -121,15 +121,14 @@ def scenario(
     orders: Path = ORDERS,
     stt_args: tuple[str, ...] = (),
 ) -> None:
-    async def run() -> None:
-        with Bus.open(BusOptions(connect=[router]), asyncio.get_running_loop()) as bus:
-            listener = Listener(bus)
-            processes.start("services.converter", "--connect", router, "--orders", str(orders))
-            processes.start("services.stt", "--connect", router, "--debug", *stt_args)
-            await listener.ready()
-            await body(listener)
+    async def run(bus: Bus) -> None:
+        listener = Listener(bus)
+        processes.start("services.converter", "--connect", router, "--orders", str(orders))
+        processes.start("services.stt", "--connect", router, "--debug", *stt_args)
+        await listener.ready()
+        await body(listener)
 
-    asyncio.run(run())
+    on_bus(router, run)
 
 
 def test_speech_becomes_a_proposal_while_partials_grow(
@@ -293,21 +292,20 @@ def test_speech_streamed_to_voicectl_up_moves_the_simulated_robot(
     the stack's recogniser, becomes orders that the simulated robot carries out."""
     wav = speech("please turn left then go to the kitchen", "en-gb", 160)
 
-    async def run() -> list[str]:
-        with Bus.open(BusOptions(connect=[stack.router]), asyncio.get_running_loop()) as bus:
-            listener = Listener(bus)
-            await listener.ready()
-            await stream(bus, "mic", wav)
-            proposal = await listener.proposal("mic")
-            assert not proposal.rejected
-            assert [o.description for o in proposal.orders] == ["turn left", "reach kitchen"]
-            client = Client(bus, "robot")
-            ids = await client.submit(*proposal.orders)
-            finished = [await client.finished(i, timeout=WAIT) for i in ids]
-            assert [r.status for r in finished] == [OrderStatus.SUCCEEDED] * 2
-            return ids
+    async def run(bus: Bus) -> list[str]:
+        listener = Listener(bus)
+        await listener.ready()
+        await stream(bus, "mic", wav)
+        proposal = await listener.proposal("mic")
+        assert not proposal.rejected
+        assert [o.description for o in proposal.orders] == ["turn left", "reach kitchen"]
+        client = Client(bus, "robot")
+        ids = await client.submit(*proposal.orders)
+        finished = [await client.finished(i, timeout=WAIT) for i in ids]
+        assert [r.status for r in finished] == [OrderStatus.SUCCEEDED] * 2
+        return ids
 
-    asyncio.run(run())
+    on_bus(stack.router, run)
     pose: list[Pose2D] = []
     codec = Ros2Codec(RosDistro.JAZZY)
     with zenoh.open(BusOptions(connect=[stack.router]).zenoh_config()) as session:
