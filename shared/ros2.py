@@ -17,7 +17,7 @@ import math
 import uuid
 from dataclasses import dataclass
 from enum import IntEnum, StrEnum
-from typing import Any, NamedTuple, TypeVar
+from typing import Any, NamedTuple, Self, TypeVar
 
 import numpy as np
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
@@ -71,44 +71,40 @@ class CancelCode(IntEnum):
     GOAL_TERMINATED = 3
 
 
-class CmdVelType(StrEnum):
+class _TopicType(StrEnum):
+    """A choice between message types for one topic, each with its ROS type name."""
+
+    @property
+    def ros_type(self) -> str:
+        return _ROS_TYPES[self]
+
+    @classmethod
+    def of(cls, ros_type: str) -> Self | None:
+        """The choice a bridge token's type names, if it is one of these."""
+        return next((kind for kind in cls if kind.ros_type == ros_type), None)
+
+
+class CmdVelType(_TopicType):
     """What a robot's velocity topic takes: Humble's and most drivers' Twist, or the
     TwistStamped of Jazzy's ros2_control diff drive controller and Kilted's Nav2."""
 
     TWIST = "twist"
     STAMPED = "stamped"
 
-    @property
-    def ros_type(self) -> str:
-        return (
-            "geometry_msgs/msg/TwistStamped"
-            if self is CmdVelType.STAMPED
-            else ("geometry_msgs/msg/Twist")
-        )
 
-    @staticmethod
-    def of(ros_type: str) -> CmdVelType | None:
-        """The type a bridge token names, if it is one of these."""
-        return next((kind for kind in CmdVelType if kind.ros_type == ros_type), None)
-
-
-class CameraType(StrEnum):
+class CameraType(_TopicType):
     """A camera topic's message: raw sensor_msgs/Image or a CompressedImage (JPEG, PNG)."""
 
     RAW = "raw"
     COMPRESSED = "compressed"
 
-    @property
-    def ros_type(self) -> str:
-        return (
-            "sensor_msgs/msg/CompressedImage"
-            if self is CameraType.COMPRESSED
-            else ("sensor_msgs/msg/Image")
-        )
 
-    @staticmethod
-    def of(ros_type: str) -> CameraType | None:
-        return next((kind for kind in CameraType if kind.ros_type == ros_type), None)
+_ROS_TYPES: dict[_TopicType, str] = {
+    CmdVelType.TWIST: "geometry_msgs/msg/Twist",
+    CmdVelType.STAMPED: "geometry_msgs/msg/TwistStamped",
+    CameraType.RAW: "sensor_msgs/msg/Image",
+    CameraType.COMPRESSED: "sensor_msgs/msg/CompressedImage",
+}
 
 
 NAVIGATION_ERRORS = {

@@ -55,16 +55,11 @@ def on_bus(where: str | BusOptions, body: Callable[[Bus], Coroutine[Any, Any, T]
 async def until_heard(bus: Bus, key: str, timeout: float = 10.0) -> None:
     """Wait until a subscriber on `key` in another session has reached the router, seen
     from `bus`: a publisher declared here matches it then. Instead of sleeping and hoping."""
-    publisher = bus.session.declare_publisher(key)
+    stream = bus.stream(key)
     try:
-        await async_wait_until(
-            # The stubs say bool; zenoh 1.10 returns a MatchingStatus with `matching`.
-            lambda: getattr(publisher.matching_status, "matching", False),
-            timeout,
-            f"a subscriber on {key} to reach the router",
-        )
+        assert await stream.matched(timeout), f"no subscriber on {key} reached the router"
     finally:
-        publisher.undeclare()
+        stream.close()
 
 
 def order(label: str, **params: Any) -> Order:

@@ -13,7 +13,8 @@ from pathlib import Path
 
 import pytest
 
-from services.executor.runner import SUPERVISOR_LOST, UNSUPERVISED
+from services.executor.robot import UNSUPERVISED
+from services.executor.runner import SUPERVISOR_LOST
 from shared.bus import Bus
 from shared.keys import BridgeKeys, RobotKeys
 from shared.messages import Done, Order, OrderStatus, Resume, TargetPose

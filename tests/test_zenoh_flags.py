@@ -17,7 +17,7 @@ import pytest
 from shared.bus import DEFAULT_ROUTER, BusOptions
 from shared.process import add_bus_arguments, bus_options
 
-from .conftest import REPO
+from .conftest import REPO, voicectl
 
 SERVICES = ("converter", "stt", "supervisor", "executor", "sim", "web")
 
@@ -160,14 +160,7 @@ def test_mistakes_end_the_process_in_one_line_that_keeps_values_secret(
 def test_a_broken_config_file_is_named_with_its_line(tmp_path: Path) -> None:
     broken = tmp_path / "broken.json5"
     broken.write_text('{\n  mode: "client",\n  connect: { endpoints: [tcp/x] },\n}\n')
-    done = subprocess.run(
-        [sys.executable, "-m", "services.executor", "--config", str(broken)],
-        capture_output=True,
-        text=True,
-        cwd=REPO,
-        timeout=60,
-        check=False,
-    )
+    done = voicectl("executor", "--config", str(broken), timeout=60)
     assert done.returncode == 2
     assert done.stderr == (
         f"voicectl executor: --config {broken}: expected array, boolean, null, number, "

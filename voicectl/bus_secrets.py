@@ -19,7 +19,6 @@ from __future__ import annotations
 import datetime
 import ipaddress
 import json
-import os
 import secrets
 from pathlib import Path
 
@@ -29,6 +28,8 @@ from cryptography.hazmat.primitives.asymmetric import ec
 from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
 from shared.errors import VoicectlError
+
+from .cert import alt_names, key_pem, write_file
 
 ROUTER_TEMPLATE = Path(__file__).with_name("secure-router.json5")
 CONTAINER_DIR = "/etc/voicectl/bus"
@@ -60,16 +61,16 @@ def write_bus_secrets(directory: Path, hosts: list[str], port: int = PORT) -> li
     router_certificate = _signed(router_key, names, ca_key, ca_certificate)
     passwords = {user: secrets.token_urlsafe(24) for user in USERS}
     written = [
-        _write(directory / "ca.pem", _pem(ca_certificate)),
-        _write(directory / "ca.key", _key_pem(ca_key), private=True),
-        _write(directory / "router.pem", _pem(router_certificate) + _pem(ca_certificate)),
-        _write(directory / "router.key", _key_pem(router_key), private=True),
-        _write(
+        write_file(directory / "ca.pem", _pem(ca_certificate)),
+        write_file(directory / "ca.key", key_pem(ca_key), private=True),
+        write_file(directory / "router.pem", _pem(router_certificate) + _pem(ca_certificate)),
+        write_file(directory / "router.key", key_pem(router_key), private=True),
+        write_file(
             directory / "passwords",
             "".join(f"{user}:{password}\n" for user, password in passwords.items()).encode(),
             private=True,
         ),
-        _write(
+        write_file(
             directory / "router.json5",
             ROUTER_TEMPLATE.read_text().replace(CONTAINER_DIR, str(directory)).encode(),
         ),
@@ -85,7 +86,7 @@ def write_bus_secrets(directory: Path, hosts: list[str], port: int = PORT) -> li
             },
         }
         text = json.dumps(client, indent=2) + "\n"
-        written.append(_write(directory / f"{user}.json5", text.encode(), private=True))
+        written.append(write_file(directory / f"{user}.json5", text.encode(), private=True))
     return written
 
 
@@ -128,12 +129,6 @@ def _signed(
     ca_key: ec.EllipticCurvePrivateKey,
     ca_certificate: x509.Certificate,
 ) -> x509.Certificate:
-    names: list[x509.GeneralName] = []
-    for host in hosts:
-        try:
-            names.append(x509.IPAddress(ipaddress.ip_address(host)))
-        except ValueError:
-            names.append(x509.DNSName(host))
     now = datetime.datetime.now(datetime.UTC)
     return (
         x509.CertificateBuilder()
@@ -143,7 +138,7 @@ def _signed(
         .serial_number(x509.random_serial_number())
         .not_valid_before(now - datetime.timedelta(minutes=5))
         .not_valid_after(now + datetime.timedelta(days=VALID_DAYS))
-        .add_extension(x509.SubjectAlternativeName(names), critical=False)
+        .add_extension(x509.SubjectAlternativeName(alt_names(hosts)), critical=False)
         .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
         .add_extension(x509.ExtendedKeyUsage([ExtendedKeyUsageOID.SERVER_AUTH]), critical=False)
         .add_extension(
@@ -164,19 +159,3 @@ def _endpoint_host(host: str) -> str:
 
 def _pem(certificate: x509.Certificate) -> bytes:
     return certificate.public_bytes(serialization.Encoding.PEM)
-
-
-def _key_pem(key: ec.EllipticCurvePrivateKey) -> bytes:
-    return key.private_bytes(
-        serialization.Encoding.PEM,
-        serialization.PrivateFormat.PKCS8,
-        serialization.NoEncryption(),
-    )
-
-
-def _write(path: Path, content: bytes, private: bool = False) -> Path:
-    """Write `content`; a private file is created 0600 before a byte is in it."""
-    descriptor = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600 if private else 0o644)
-    with os.fdopen(descriptor, "wb") as out:
-        out.write(content)
-    return path

@@ -22,6 +22,7 @@ from shared.keys import BRIDGE_TOKENS, BridgeKeys, BridgeKind, BridgeToken
 from shared.messages import RobotPose, TargetPose
 from shared.robot_options import RobotOptions
 from shared.ros2 import (
+    CANCEL_ALL,
     NAVIGATION_ERRORS,
     CameraType,
     CancelCode,
@@ -312,7 +313,7 @@ class RobotLink:
         codec = self.codec
         key = self.keys.navigate("cancel_goal")
         what = f"goal {goal_id.hex()[:8]}" if goal_id is not None else "every goal"
-        request = codec.cancel_goal_request(goal_id) if goal_id else codec.cancel_goal_request()
+        request = codec.cancel_goal_request(goal_id or CANCEL_ALL)
         problem = None
         try:
             reply = codec.read_cancel_goal_response(
@@ -424,15 +425,28 @@ def _raise_unless_succeeded(result: NavigateResult, distro: RosDistro) -> None:
     raise OrderFailed(f"navigation ended {status.name}{detail}")
 
 
+UNSUPERVISED = "supervisor lost: the robot takes no command while no one could STOP it"
+"""Why an order may not command the robot while the supervisor is lost."""
+
+
 class OrderRobot:
     """The robot as one order sees it. Calls go to the process's `RobotLink` until the
     order ends or is abandoned; then the handle is revoked, and every call raises
-    `RobotRevoked` and sends nothing."""
+    `RobotRevoked` and sends nothing.
 
-    def __init__(self, link: RobotLink, order_id: str) -> None:
+    The handle also notes whether the order has commanded the robot (anything but
+    reading it or stopping it), and refuses commands while `unsupervised()` says no one
+    could STOP the robot: they raise OrderFailed and send nothing."""
+
+    def __init__(
+        self, link: RobotLink, order_id: str, unsupervised: Callable[[], bool] = lambda: False
+    ) -> None:
         self._link = link
         self._order_id = order_id
         self._revoked = False
+        self._unsupervised = unsupervised
+        self.commanded = False
+        """Whether the order has moved the robot, navigated, or sent it anything else."""
         self.problems: list[str] = []
         """What the robot did not confirm while this order ran (a refused cancel)."""
 
@@ -448,6 +462,14 @@ class OrderRobot:
             raise RobotRevoked(f"order '{self._order_id}' has ended: its robot handle is revoked")
         return self._link
 
+    def _command(self) -> RobotLink:
+        """The link, for a call that may move the robot."""
+        link = self._live()
+        if self._unsupervised():
+            raise OrderFailed(UNSUPERVISED)
+        self.commanded = True
+        return link
+
     @property
     def pose(self) -> Pose2D | None:
         """The latest odometry pose, None until the first."""
@@ -462,8 +484,10 @@ class OrderRobot:
         return self._link.codec
 
     def drive(self, linear_x: float, angular_z: float) -> None:
-        """Publish one velocity command on the robot's cmd_vel."""
-        self._live().drive(linear_x, angular_z)
+        """Publish one velocity command on the robot's cmd_vel (a zero one is a stop,
+        always allowed)."""
+        stop = linear_x == 0.0 and angular_z == 0.0
+        (self._live() if stop else self._command()).drive(linear_x, angular_z)
 
     async def next_pose(self, timeout: float = 5.0) -> Pose2D:
         return await self._live().next_pose(timeout)
@@ -474,12 +498,13 @@ class OrderRobot:
     async def navigate(
         self, target: TargetPose, on_feedback: Callable[[Pose2D, float], None]
     ) -> None:
-        await self._live().navigate(target, on_feedback, self.problems.append)
+        await self._command().navigate(target, on_feedback, self.problems.append)
 
     def publish(self, key: str, payload: bytes) -> None:
-        """Publish CDR bytes on any other key of the robot (`keys.topic(name)`)."""
-        self._live().bus.publish_bytes(key, payload)
+        """Publish CDR bytes on any other key of the robot (`keys.topic(name)`): any
+        topic may move it."""
+        self._command().bus.publish_bytes(key, payload)
 
     async def request(self, key: str, payload: bytes, timeout: float) -> bytes:
         """Call any other service of the robot with CDR bytes; its reply's bytes."""
-        return await self._live().bus.request_bytes(key, payload, timeout)
+        return await self._command().bus.request_bytes(key, payload, timeout)

@@ -36,9 +36,7 @@ from shared.messages import (
     Progress,
     Rejected,
     Running,
-    TargetPose,
 )
-from shared.ros2 import Pose2D
 
 from .framework import Bindings, ExecutionContext, Executor, ParamsMismatch, order_params
 from .robot import OrderRobot, RobotLink
@@ -49,49 +47,12 @@ CMD_VEL_TYPE_WAIT = 2.0
 """Seconds the start-up stop waits for the bridge to say what cmd_vel takes."""
 SUPERVISOR_LOST = "supervisor lost: robot stopped (no one could STOP it)"
 """How an order that commanded the robot ends when the supervisor goes."""
-UNSUPERVISED = "supervisor lost: the robot takes no command while no one could STOP it"
-"""Why an order may not command the robot while the supervisor is lost."""
-
-
-class _CommandedRobot(OrderRobot):
-    """An order's robot handle that notes whether the order has commanded the robot
-    (anything but reading it, or stopping it), and refuses commands while the supervisor
-    is lost: they raise OrderFailed and send nothing."""
-
-    def __init__(self, link: RobotLink, order_id: str, unsupervised: Callable[[], bool]) -> None:
-        super().__init__(link, order_id)
-        self._unsupervised = unsupervised
-        self.commanded = False
-
-    def _command(self) -> None:
-        if self._unsupervised():
-            raise OrderFailed(UNSUPERVISED)
-        self.commanded = True
-
-    def drive(self, linear_x: float, angular_z: float) -> None:
-        if linear_x != 0.0 or angular_z != 0.0:  # zero velocity is a stop, always allowed
-            self._command()
-        super().drive(linear_x, angular_z)
-
-    async def navigate(
-        self, target: TargetPose, on_feedback: Callable[[Pose2D, float], None]
-    ) -> None:
-        self._command()
-        await super().navigate(target, on_feedback)
-
-    def publish(self, key: str, payload: bytes) -> None:
-        self._command()  # any topic of the robot may move it
-        super().publish(key, payload)
-
-    async def request(self, key: str, payload: bytes, timeout: float) -> bytes:
-        self._command()
-        return await super().request(key, payload, timeout)
 
 
 class _Execution:
     """The order being executed, the task that runs it and its robot handle."""
 
-    def __init__(self, order_id: str, task: asyncio.Task[None], robot: _CommandedRobot) -> None:
+    def __init__(self, order_id: str, task: asyncio.Task[None], robot: OrderRobot) -> None:
         self.order_id = order_id
         self.task = task
         self.robot = robot
@@ -285,7 +246,7 @@ class ExecutorService:
             params = order_params(executor, order)
         except ParamsMismatch as exc:
             return Rejected(order_id=order_id, reason=str(exc))
-        robot = _CommandedRobot(self._robot, order_id, lambda: self.supervisor_lost)
+        robot = OrderRobot(self._robot, order_id, lambda: self.supervisor_lost)
         task = asyncio.create_task(self._run(order_id, executor, order, robot, params))
         self._running = _Execution(order_id, task, robot)
         return Accepted(order_id=order_id)
@@ -295,7 +256,7 @@ class ExecutorService:
         order_id: str,
         executor: Executor,
         order: Order,
-        robot: _CommandedRobot,
+        robot: OrderRobot,
         params: object,
     ) -> None:
         def report(progress: Progress) -> None:

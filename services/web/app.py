@@ -15,7 +15,7 @@ import contextlib
 import hmac
 import logging
 import uuid
-from collections.abc import AsyncIterator, Awaitable, Callable
+from collections.abc import AsyncIterator, Awaitable, Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Annotated, TypeVar
@@ -116,6 +116,18 @@ class Access:
         scheme = "https" if websocket.url.scheme == "wss" else "http"
         own = f"{scheme}://{websocket.headers.get('host', '')}"
         return origin == own or origin in self.origins
+
+
+@contextlib.contextmanager
+def _as_api_errors() -> Iterator[None]:
+    """A service's refusal or absence as the API's answer: the converter refuses a text
+    (400), the supervisor a request (409); one that does not answer is unavailable (503)."""
+    try:
+        yield
+    except Refused as exc:
+        raise ApiError(400 if exc.service == "converter" else 409, exc.reason) from exc
+    except Unreachable as exc:
+        raise ApiError(503, f"{exc.service} unavailable: {exc}") from exc
 
 
 class Panel:
@@ -227,20 +239,12 @@ class Panel:
         return self._client
 
     async def _ask_converter(self, text: str) -> ParseResult:
-        try:
+        with _as_api_errors():
             return await self.client.parse(text)
-        except Refused as exc:
-            raise ApiError(400, exc.reason) from exc
-        except Unreachable as exc:
-            raise ApiError(503, f"converter unavailable: {exc}") from exc
 
     async def _ask_supervisor(self, keys: RobotKeys, request: Message) -> SupervisorReply:
-        try:
+        with _as_api_errors():
             return await self.client.ask(keys.robot, request)
-        except Refused as exc:
-            raise ApiError(409, exc.reason) from exc
-        except Unreachable as exc:
-            raise ApiError(503, f"supervisor unavailable: {exc}") from exc
 
     async def _robots(self, _request: Request) -> object:
         assert self.hub is not None
@@ -265,12 +269,8 @@ class Panel:
         """Parse and submit in one go, only when the whole text made orders."""
         keys = self._robot(request)
         body = await self._body(request, TextBody)
-        try:
+        with _as_api_errors():
             said = await self.client.say(keys.robot, body.text)
-        except Refused as exc:
-            raise ApiError(400 if exc.service == "converter" else 409, exc.reason) from exc
-        except Unreachable as exc:
-            raise ApiError(503, f"{exc.service} unavailable: {exc}") from exc
         result = said.result
         return {"orders": result.orders, "errors": result.errors, "order_ids": said.order_ids}
 
