@@ -1,14 +1,24 @@
-"""Generated speech for the recogniser's tests and benchmark: commands and non-commands.
+"""Speech for the recogniser's benchmark: commands and non-commands from several sources.
 
-Every command sentence comes from the shipped orders (``orders/``) with the orders it must
-become, written by hand as ``order/case`` names; every non-command must become no order.
-Each sentence is spoken by espeak-ng in several voices (American and British English, male
-and female variants) and speeds, resampled by sox to 16 kHz mono with silence before and
-after, as a microphone would deliver it.
+Sources, none of which the recogniser was built on:
 
-    python bench/speech_set.py DIR      # writes DIR/*.wav and DIR/index.json
+- ``real``: people. The recordings pocketsphinx's source distribution carries for its own
+  tests (a man saying "go forward ten meters", read literature from LibriVox, card names,
+  digits), fetched with pip at bench time. Test split only: there are too few to spare.
+- ``espeak``: espeak-ng, a formant synthesizer, American and British voices.
+- ``festival``: Festival's diphone voices (kal, ked) and its HTS voice (slt, a woman).
+- ``flite``: CMU Flite's voices (awb, a Scottish man; rms; slt; kal16).
 
-Files are cached: a second run with the same set writes nothing.
+Each is heard clean and in three conditions: stationary (pink) noise and babble (other
+voices of the same split mixed together) at 10 to 15 dB SNR, and a reverberant room.
+
+Two splits. **dev** is where thresholds and weights are tuned; **test** is where they are
+reported. They share no voice and no sentence: test has other phrasings, other numbers,
+other chatter, and every real recording.
+
+    python bench/speech_set.py DIR      # writes DIR/<split>/*.wav and DIR/index.json
+
+Files are cached: a second run writes nothing.
 """
 
 from __future__ import annotations
@@ -16,55 +26,99 @@ from __future__ import annotations
 import argparse
 import hashlib
 import json
+import random
 import shutil
 import subprocess
 import sys
 import tempfile
+from collections.abc import Iterable
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-VOICES = [
-    ("en-us", 160),
-    ("en-gb+f3", 150),
-    ("en-gb-x-rp", 175),
-    ("en-us+f2", 140),
-    ("en-gb", 185),
-    ("en-us+m3", 170),
-]
-"""(espeak-ng voice, words per minute); '+f3' is a female variant, '+m3' a male one."""
-
 LEAD_SILENCE = 0.5
 TAIL_SILENCE = 0.6
+POCKETSPHINX_SDIST = "pocketsphinx==5.1.1"
 
-# The sentences below are this project's own; each command lists the orders it must make.
-COMMANDS: list[tuple[str, list[str]]] = [
+
+@dataclass(frozen=True)
+class Voice:
+    """One synthesizer voice: `source` names the family, `name` the voice inside it."""
+
+    source: str
+    name: str
+    speed: int = 0
+    """espeak-ng's words per minute; 0 for the others."""
+
+
+DEV_VOICES = [
+    Voice("espeak", "en-us", 160),
+    Voice("espeak", "en-gb+f3", 150),
+    Voice("festival", "kal_diphone"),
+    Voice("flite", "awb"),
+    Voice("flite", "rms"),
+]
+TEST_VOICES = [
+    Voice("espeak", "en-gb-x-rp", 175),
+    Voice("espeak", "en-us+m3", 140),
+    Voice("festival", "ked_diphone"),
+    Voice("festival", "cmu_us_slt_arctic_hts"),
+    Voice("flite", "slt"),
+    Voice("flite", "kal16"),
+]
+
+# The sentences are this project's own. Each command lists the orders it must become
+# ('order/case'), and the numbers they carry in the spoken unit where there are any.
+DEV_COMMANDS: list[tuple[str, list[str]]] = [
     ("turn left", ["rotation/left"]),
     ("turn right", ["rotation/right"]),
-    ("turn to the left", ["rotation/left"]),
     ("turn back", ["rotation/back"]),
     ("reach the kitchen", ["goal/kitchen"]),
     ("reach the bathroom", ["goal/bathroom"]),
     ("reach base", ["goal/base"]),
-    ("reach the dumpster", ["goal/dumpster"]),
-    ("go to the kitchen", ["goal/kitchen"]),
+    ("go to the dumpster", ["goal/dumpster"]),
     ("move forward", ["local_goal/forward"]),
     ("move back", ["local_goal/back"]),
-    ("move forward two meters", ["drive/forward"]),
-    ("go forward two point five meters", ["drive/forward"]),
-    ("drive back one meter", ["drive/back"]),
-    ("turn left forty five degrees", ["turn_by/left"]),
-    ("rotate right ninety degrees", ["turn_by/right"]),
-    ("wait three seconds", ["wait"]),
-    ("wait ten seconds", ["wait"]),
+    ("move forward two meters", ["drive/forward 2"]),
+    ("go forward three point five meters", ["drive/forward 3.5"]),
+    ("drive back one meter", ["drive/back 1"]),
+    ("go forward eight meters", ["drive/forward 8"]),
+    ("turn left forty five degrees", ["turn_by/left 45"]),
+    ("rotate right ninety degrees", ["turn_by/right 90"]),
+    ("turn right thirty degrees", ["turn_by/right 30"]),
+    ("wait three seconds", ["wait 3"]),
+    ("wait twenty seconds", ["wait 20"]),
     ("take a picture", ["take_photo"]),
-    ("take a photo", ["take_photo"]),
     ("turn left then reach the kitchen", ["rotation/left", "goal/kitchen"]),
     ("please turn right then move forward", ["rotation/right", "local_goal/forward"]),
-    ("please turn left then go to the kitchen now", ["rotation/left", "goal/kitchen"]),
     ("reach the bathroom then take a picture", ["goal/bathroom", "take_photo"]),
     ("multiply primes", ["multiply/primes"]),
 ]
-NON_COMMANDS = [
+TEST_COMMANDS: list[tuple[str, list[str]]] = [
+    ("turn to the left", ["rotation/left"]),
+    ("please turn right", ["rotation/right"]),
+    ("turn backward", ["rotation/back"]),
+    ("go to the kitchen", ["goal/kitchen"]),
+    ("go to the bathroom please", ["goal/bathroom"]),
+    ("reach the dumpster", ["goal/dumpster"]),
+    ("go to base", ["goal/base"]),
+    ("move straight", ["local_goal/forward"]),
+    ("move backward", ["local_goal/back"]),
+    ("go forward ten meters", ["drive/forward 10"]),
+    ("move forward four point five meters", ["drive/forward 4.5"]),
+    ("drive back two meters", ["drive/back 2"]),
+    ("move ahead six meters", ["drive/forward 6"]),
+    ("rotate left ninety degrees", ["turn_by/left 90"]),
+    ("turn right sixty degrees", ["turn_by/right 60"]),
+    ("turn left fifteen degrees", ["turn_by/left 15"]),
+    ("wait ten seconds", ["wait 10"]),
+    ("wait five seconds", ["wait 5"]),
+    ("take a photo", ["take_photo"]),
+    ("turn right then go to the bathroom", ["rotation/right", "goal/bathroom"]),
+    ("please turn left then go to the kitchen now", ["rotation/left", "goal/kitchen"]),
+    ("move back then turn left", ["local_goal/back", "rotation/left"]),
+    ("reach the kitchen then take a photo", ["goal/kitchen", "take_photo"]),
+]
+DEV_CHATTER = [
     "what is the weather like",
     "hello robot how are you",
     "tell me a joke",
@@ -87,100 +141,393 @@ NON_COMMANDS = [
     "thank you very much",
     "set an alarm for seven",
     "turn on the lights",
+    "we should paint the fence blue",
+    "my brother lives in the city",
+    "the meeting starts at ten",
+]
+TEST_CHATTER = [
+    "could you please pass me the salt",
+    "hello there how are you doing",
+    "the kitchen needs cleaning tonight",
+    "I think we are out of milk",
+    "did you see the game last night",
+    "my phone is almost out of battery",
+    "she went back to the office",
+    "there are two cats in the garden",
+    "please remind me to buy bread",
+    "what are we having for dinner",
+    "the train leaves in ten minutes",
+    "I left my jacket in the car",
+    "turn the music down a little",
+    "the children are playing outside",
+    "we need more paper for the printer",
+    "he walked forward without looking",
+    "it was a long and quiet afternoon",
+    "that picture on the wall is crooked",
+    "nobody answered the door",
+    "let me know when you are ready",
+    "the store closes at nine",
+    "four people came to the party",
 ]
 VOICES_PER_COMMAND = 3
-VOICES_PER_NON_COMMAND = 2
+VOICES_PER_CHATTER = 2
+
+# The real recordings and what they say (transcripts from the same distribution).
+REAL: list[tuple[str, str, list[str]]] = [
+    ("test/data/goforward.raw", "go forward ten meters", ["drive/forward 10"]),
+    ("test/data/something.raw", "go somewhere and do something", []),
+    ("test/data/numbers.raw", "thirty three four or six ninety two", []),
+    ("test/data/tidigits/dhd.2934z.raw", "two nine three four zero", []),
+    *(
+        (f"test/data/librivox/sense_and_sensibility_01_austen_64kb-{n}.wav", text, [])
+        for n, text in [
+            (
+                "0870",
+                "and mister john dashwood had then leisure to consider how much there "
+                "might be prudently in his power to do for them",
+            ),
+            ("0880", "he was not an ill disposed young man"),
+            ("0890", "unless to be rather cold hearted and rather selfish is to be ill disposed"),
+            (
+                "0920",
+                "had he married a more amiable woman he might have been made still more "
+                "respectable than he was",
+            ),
+            ("0930", "he might even have been made amiable himself"),
+        ]
+    ),
+    ("test/data/cards/001.wav", "ten of clubs", []),
+    ("test/data/cards/002.wav", "four queen of clubs", []),
+    ("test/data/cards/003.wav", "seven of clubs", []),
+    ("test/data/cards/004.wav", "five five", []),
+    ("test/data/cards/005.wav", "eight of spades four of clubs seven of hearts", []),
+]
+
+CONDITIONS = ("clean", "noise", "babble", "reverb")
+NOISE_EVERY = 2
+"""Noisy conditions are made of every second clean synthesized file (all real ones)."""
 
 
 @dataclass(frozen=True)
 class Utterance:
-    """One generated recording and what it must become."""
+    """One recording and what it must become."""
 
     file: str
-    """File name inside the set's directory."""
+    """Path inside the set's directory."""
     text: str
     orders: list[str]
-    """Expected 'order/case' names in spoken order; empty for a non-command."""
+    """Expected 'order/case value...' in spoken order; empty for a non-command."""
+    source: str
     voice: str
-    speed: int
+    split: str
+    condition: str
     speech_end: float
     """Seconds from the start of the file to the end of the speech (before the tail)."""
+    snr: float = 0.0
+    """Signal to noise ratio in dB, for the noisy conditions."""
 
     @property
     def command(self) -> bool:
         return bool(self.orders)
 
 
-def plan() -> list[tuple[str, list[str], str, int]]:
-    """Every (text, orders, voice, speed) of the set, voices rotating through `VOICES`."""
-    planned = []
-    turn = 0
-    for texts, per in (
-        (COMMANDS, VOICES_PER_COMMAND),
-        ([(text, []) for text in NON_COMMANDS], VOICES_PER_NON_COMMAND),
-    ):
-        for text, orders in texts:
-            for _ in range(per):
-                voice, speed = VOICES[turn % len(VOICES)]
-                turn += 1
-                planned.append((text, orders, voice, speed))
-    return planned
-
-
-def generate(directory: Path) -> list[Utterance]:
-    """Write the whole set into `directory` (cached) and its index.json."""
-    utterances = [
-        speak(text, voice, speed, directory, orders) for text, orders, voice, speed in plan()
-    ]
+def generate(directory: Path, splits: Iterable[str] = ("dev", "test")) -> list[Utterance]:
+    """Write the set into `directory` (cached) and its index.json; returns its utterances."""
+    for tool in ("espeak-ng", "sox", "text2wave", "flite"):
+        if shutil.which(tool) is None:
+            package = {"text2wave": "festival"}.get(tool, tool)
+            raise RuntimeError(f"{tool} is not installed (Debian package {package})")
+    utterances: list[Utterance] = []
+    for split in splits:
+        clean = _clean_split(directory, split)
+        utterances += clean
+        utterances += _noisy(directory, split, clean)
     (directory / "index.json").write_text(json.dumps([asdict(u) for u in utterances], indent=1))
     return utterances
 
 
+def _clean_split(directory: Path, split: str) -> list[Utterance]:
+    voices = DEV_VOICES if split == "dev" else TEST_VOICES
+    commands = DEV_COMMANDS if split == "dev" else TEST_COMMANDS
+    chatter = DEV_CHATTER if split == "dev" else TEST_CHATTER
+    made: list[Utterance] = []
+    turn = 0
+    for texts, per in (
+        (commands, VOICES_PER_COMMAND),
+        ([(text, []) for text in chatter], VOICES_PER_CHATTER),
+    ):
+        for text, orders in texts:
+            for _ in range(per):
+                voice = voices[turn % len(voices)]
+                turn += 1
+                made.append(speak(text, voice, directory / split, orders, split))
+    if split == "test":
+        made += real_recordings(directory / split)
+    return made
+
+
 def speak(
-    text: str, voice: str, speed: int, directory: Path, orders: list[str] | None = None
+    text: str,
+    voice: Voice,
+    directory: Path,
+    orders: list[str] | None = None,
+    split: str = "",
 ) -> Utterance:
     """One recording of `text` in `directory`, made unless it is there already."""
-    for tool in ("espeak-ng", "sox"):
-        if shutil.which(tool) is None:
-            raise RuntimeError(f"{tool} is not installed (Debian package {tool})")
     directory.mkdir(parents=True, exist_ok=True)
-    digest = hashlib.sha1(f"{text}|{voice}|{speed}|{LEAD_SILENCE}|{TAIL_SILENCE}".encode())
-    name = f"{'_'.join(text.lower().split())[:40]}-{voice}-{speed}-{digest.hexdigest()[:6]}"
+    key = f"{text}|{voice}|{LEAD_SILENCE}|{TAIL_SILENCE}"
+    digest = hashlib.sha1(key.encode()).hexdigest()[:6]
+    name = f"{'_'.join(text.lower().split())[:40]}-{voice.source}-{voice.name}-{digest}"
     wav = directory / f"{name}.wav"
     meta = directory / f"{name}.json"
     if not (wav.exists() and meta.exists()):
-        speech = _speak(text, voice, speed, wav)
+        with tempfile.TemporaryDirectory() as tmp:
+            raw = Path(tmp) / "raw.wav"
+            _synthesize(text, voice, raw)
+            speech = _pad(raw, wav)
         meta.write_text(json.dumps({"speech": speech}))
     speech = json.loads(meta.read_text())["speech"]
-    return Utterance(wav.name, text, orders or [], voice, speed, round(LEAD_SILENCE + speech, 3))
+    return Utterance(
+        str(wav.relative_to(directory.parent)) if split else wav.name,
+        text,
+        orders or [],
+        voice.source,
+        voice.name if not voice.speed else f"{voice.name}@{voice.speed}",
+        split,
+        "clean",
+        round(LEAD_SILENCE + speech, 3),
+    )
 
 
-def _speak(text: str, voice: str, speed: int, out: Path) -> float:
-    """Write `text` spoken by espeak-ng to `out`; return the speech's duration in seconds."""
-    with tempfile.TemporaryDirectory() as tmp:
-        raw = Path(tmp) / "raw.wav"
-        trimmed = Path(tmp) / "trimmed.wav"
-        subprocess.run(
-            ["espeak-ng", "-v", voice, "-s", str(speed), "-w", str(raw), text], check=True
-        )
-        # espeak ends with some silence of its own: cut it so that the speech's end is known.
-        subprocess.run(
-            [
-                *("sox", "-D", str(raw), "-r", "16000", "-c", "1", "-b", "16", str(trimmed)),
-                *("reverse", "silence", "1", "0.02", "0.1%", "reverse"),
-            ],
-            check=True,
-        )
-        duration = float(
+def _synthesize(text: str, voice: Voice, out: Path) -> None:
+    match voice.source:
+        case "espeak":
+            command = ["espeak-ng", "-v", voice.name, "-s", str(voice.speed), "-w", str(out), text]
+            subprocess.run(command, check=True)
+        case "festival":
             subprocess.run(
-                ["soxi", "-D", str(trimmed)], check=True, capture_output=True, text=True
-            ).stdout
-        )
+                ["text2wave", "-eval", f"(voice_{voice.name})", "-o", str(out)],
+                input=text.encode(),
+                check=True,
+                capture_output=True,
+            )
+        case "flite":
+            subprocess.run(["flite", "-voice", voice.name, "-t", text, "-o", str(out)], check=True)
+        case _:
+            raise ValueError(f"unknown source {voice.source!r}")
+
+
+def _pad(raw: Path, out: Path) -> float:
+    """16 kHz mono 16-bit, own silence trimmed, then padded; returns the speech's seconds."""
+    trimmed = raw.with_name("trimmed.wav")
+    subprocess.run(
+        [
+            *("sox", "-D", str(raw), "-r", "16000", "-c", "1", "-b", "16", str(trimmed)),
+            *("silence", "1", "0.02", "0.1%", "reverse", "silence", "1", "0.02", "0.1%"),
+            "reverse",
+        ],
+        check=True,
+    )
+    duration = float(
         subprocess.run(
-            ["sox", "-D", str(trimmed), str(out), "pad", str(LEAD_SILENCE), str(TAIL_SILENCE)],
+            ["soxi", "-D", str(trimmed)], check=True, capture_output=True, text=True
+        ).stdout
+    )
+    subprocess.run(
+        ["sox", "-D", str(trimmed), str(out), "pad", str(LEAD_SILENCE), str(TAIL_SILENCE)],
+        check=True,
+    )
+    return duration
+
+
+def real_recordings(directory: Path) -> list[Utterance]:
+    """pocketsphinx's recordings of people, fetched with pip once."""
+    unpacked = directory / "pocketsphinx"
+    if not unpacked.exists():
+        with tempfile.TemporaryDirectory() as tmp:
+            subprocess.run(
+                [
+                    *(sys.executable, "-m", "pip", "download", "-q", "--no-deps"),
+                    *("--no-binary", ":all:", "-d", tmp, POCKETSPHINX_SDIST),
+                ],
+                check=True,
+            )
+            (archive,) = Path(tmp).glob("pocketsphinx-*.tar.gz")
+            subprocess.run(["tar", "-xzf", str(archive), "-C", tmp], check=True)
+            (root,) = (p for p in Path(tmp).iterdir() if p.is_dir())
+            staging = directory / "pocketsphinx.part"
+            shutil.rmtree(staging, ignore_errors=True)
+            for path, _, _ in REAL:
+                target = staging / path
+                target.parent.mkdir(parents=True, exist_ok=True)
+                shutil.copy(root / path, target)
+            staging.rename(unpacked)
+    made = []
+    for path, text, orders in REAL:
+        source = unpacked / path
+        wav = directory / f"real-{Path(path).stem}.wav"
+        if not wav.exists():
+            with tempfile.TemporaryDirectory() as tmp:
+                raw = Path(tmp) / "raw.wav"
+                if source.suffix == ".raw":
+                    convert = ["sox", "-D", "-t", "raw", "-r", "16000", "-e", "signed"]
+                    subprocess.run(
+                        [*convert, "-b", "16", "-c", "1", str(source), str(raw)], check=True
+                    )
+                else:
+                    shutil.copy(source, raw)
+                speech = _pad(raw, wav)
+                wav.with_suffix(".json").write_text(json.dumps({"speech": speech}))
+        speech = json.loads(wav.with_suffix(".json").read_text())["speech"]
+        made.append(
+            Utterance(
+                str(wav.relative_to(directory.parent)),
+                text,
+                orders,
+                "real",
+                "person",
+                directory.name,
+                "clean",
+                round(LEAD_SILENCE + speech, 3),
+            )
+        )
+    return made
+
+
+def _noisy(directory: Path, split: str, clean: list[Utterance]) -> list[Utterance]:
+    """Every second clean synthesized file (and every real one) in each noisy condition."""
+    chosen = [u for u in clean if u.source != "real"][::NOISE_EVERY]
+    chosen += [u for u in clean if u.source == "real"]
+    chatter = [u for u in clean if not u.command and u.source != "real"]
+    made = []
+    for utterance in chosen:
+        rng = random.Random(f"{split}|{utterance.file}")
+        for condition in CONDITIONS[1:]:
+            snr = round(rng.uniform(10.0, 15.0), 1) if condition != "reverb" else 0.0
+            source = directory / utterance.file
+            out = directory / split / condition / Path(utterance.file).name
+            if not out.exists():
+                out.parent.mkdir(parents=True, exist_ok=True)
+                match condition:
+                    case "noise":
+                        _mix(source, _pink(source), snr, out)
+                    case "babble":
+                        others = [c for c in chatter if c.voice != utterance.voice]
+                        talkers = rng.sample(others, 4)
+                        _mix(
+                            source, _babble(source, [directory / t.file for t in talkers]), snr, out
+                        )
+                    case "reverb":
+                        room = str(rng.randint(40, 70))
+                        subprocess.run(
+                            [
+                                "sox",
+                                "-D",
+                                str(source),
+                                str(out),
+                                "reverb",
+                                room,
+                                "50",
+                                "80",
+                                "100",
+                                "0",
+                                "0",
+                                "trim",
+                                "0",
+                                str(_seconds(source)),
+                            ],
+                            check=True,
+                        )
+            made.append(
+                Utterance(
+                    str(out.relative_to(directory)),
+                    utterance.text,
+                    utterance.orders,
+                    utterance.source,
+                    utterance.voice,
+                    split,
+                    condition,
+                    utterance.speech_end,
+                    snr,
+                )
+            )
+    return made
+
+
+def _seconds(path: Path) -> float:
+    out = subprocess.run(["soxi", "-D", str(path)], check=True, capture_output=True, text=True)
+    return float(out.stdout)
+
+
+def _pink(like: Path) -> Path:
+    """Pink noise as long as `like` (sox -R: the same noise on every run)."""
+    noise = like.with_name(f".pink-{like.stem}.wav")
+    subprocess.run(
+        [
+            "sox",
+            "-R",
+            "-D",
+            "-n",
+            "-r",
+            "16000",
+            "-c",
+            "1",
+            "-b",
+            "16",
+            str(noise),
+            "synth",
+            str(_seconds(like)),
+            "pinknoise",
+            "vol",
+            "0.3",
+        ],
+        check=True,
+    )
+    return noise
+
+
+def _babble(like: Path, talkers: list[Path]) -> Path:
+    """Several other voices at once, looped and cut to the length of `like`."""
+    length = str(_seconds(like))
+    babble = like.with_name(f".babble-{like.stem}.wav")
+    looped = []
+    for number, talker in enumerate(talkers):
+        part = like.with_name(f".talker{number}-{like.stem}.wav")
+        offset = f"{0.3 * number:.1f}"
+        subprocess.run(
+            ["sox", "-D", str(talker), str(part), "repeat", "6", "trim", offset, length],
             check=True,
         )
-    return duration
+        looped.append(str(part))
+    subprocess.run(["sox", "-D", "-m", *looped, str(babble)], check=True)
+    for part in looped:
+        Path(part).unlink()
+    return babble
+
+
+def _mix(speech: Path, noise: Path, snr: float, out: Path) -> None:
+    """`speech` with `noise` scaled so that the speech is `snr` dB above it (RMS)."""
+    speech_rms = _rms(speech, active=True)
+    noise_rms = _rms(noise, active=False)
+    gain = speech_rms / (noise_rms * 10 ** (snr / 20))
+    subprocess.run(
+        ["sox", "-D", "-m", str(speech), "-v", f"{gain:.6f}", str(noise), str(out)], check=True
+    )
+    noise.unlink()
+
+
+def _rms(path: Path, active: bool) -> float:
+    """RMS amplitude; of the speech only (silence trimmed) when `active`."""
+    effects = (
+        ["silence", "1", "0.02", "1%", "reverse", "silence", "1", "0.02", "1%"] if active else []
+    )
+    out = subprocess.run(
+        ["sox", str(path), "-n", *effects, "stat"], check=True, capture_output=True, text=True
+    )
+    for line in out.stderr.splitlines():
+        if line.startswith("RMS     amplitude"):
+            return float(line.split(":")[1])
+    raise RuntimeError(f"sox stat gave no RMS for {path}")
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -188,12 +535,14 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("directory", type=Path)
     args = parser.parse_args(argv)
     utterances = generate(args.directory)
-    commands = sum(u.command for u in utterances)
-    print(
-        f"{len(utterances)} utterances in {args.directory}: {commands} commands, "
-        f"{len(utterances) - commands} non-commands",
-        file=sys.stderr,
-    )
+    for split in ("dev", "test"):
+        part = [u for u in utterances if u.split == split]
+        commands = sum(u.command for u in part)
+        print(
+            f"{split}: {len(part)} utterances, {commands} commands, "
+            f"{len(part) - commands} non-commands",
+            file=sys.stderr,
+        )
     return 0
 
 

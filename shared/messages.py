@@ -131,6 +131,18 @@ class PartialTranscript(Message):
     text: str
 
 
+class Doubt(Data):
+    """A value in a transcript that the recogniser is not sure of: asked, never guessed."""
+
+    position: int
+    """Index of its first word in the transcript's words."""
+    words: str
+    """What the transcript says there ("ten")."""
+    alternatives: list[str] = msgspec.field(default_factory=list)
+    """What it may have been instead ("two"), most likely first."""
+    confidence: float = 0.0
+
+
 class Transcript(Message):
     """A final transcript: one per utterance, from the recogniser or typed by a person."""
 
@@ -148,6 +160,12 @@ class Transcript(Message):
     """Seconds from the start of the session's audio to where the speech began..."""
     speech_end: float | None = None
     """...and ended, as the recogniser found it."""
+    heard: str = ""
+    """An unconstrained transcript of the same speech: what the person seems to have said."""
+    word_confidences: list[float] = msgspec.field(default_factory=list)
+    """Per word of `text`, 0 to 1: how surely an unconstrained decode heard it too."""
+    doubts: list[Doubt] = msgspec.field(default_factory=list)
+    """Values to ask the person about; a transcript with doubts is never sent by itself."""
 
 
 class SttStatus(Message):
@@ -175,6 +193,8 @@ class Proposal(Message):
     utterance: int = 0
     rejected: bool = False
     """The recogniser rejected the speech: no orders, one error saying why."""
+    doubts: list[Doubt] = msgspec.field(default_factory=list)
+    """The transcript's doubtful values: the panel asks, and never sends these by itself."""
 
 
 class ParseRequest(Message):
@@ -207,6 +227,8 @@ class Grammar(Message):
     separator_phrases: list[str] = msgspec.field(default_factory=list)
     skip_words: list[str] = msgspec.field(default_factory=list)
     """Small words that may stand between and around the words of a command."""
+    number_words: list[str] = msgspec.field(default_factory=list)
+    """The words of spoken numbers in slots: values, which the recogniser checks apart."""
     unexpandable: list[str] = msgspec.field(default_factory=list)
     """Orders whose alias cannot be expanded to a finite set, one line each saying why."""
     version: str = ""

@@ -119,12 +119,22 @@ def test_phrases_spell_out_numbers_as_words() -> None:
     assert {"forty", "five", "point", "then", "dumpster"} <= set(GRAMMAR.words)
 
 
-def test_every_phrase_of_the_grammar_parses_to_exactly_one_order() -> None:
+def test_every_phrase_of_the_grammar_parses_to_one_order_or_names_the_range() -> None:
+    """The grammar listens for numbers beyond a slot's bounds, so that "ten metres" is heard
+    as ten and refused with the range, never forced onto an allowed "two"."""
     parser = Parser(SHIPPED)
+    refused = 0
     for phrase in GRAMMAR.phrases:
         result = parser.parse(phrase)
-        assert len(result.orders) == 1, (phrase, result)
-        assert not result.errors, (phrase, result)
+        if result.errors:
+            [error] = result.errors
+            assert "out of range" in error.reason, (phrase, result)
+            refused += 1
+        else:
+            assert len(result.orders) == 1, (phrase, result)
+    assert 0 < refused < len(GRAMMAR.phrases)
+    assert parser.parse("go forward ten meters").orders[0].target_pose.x == 10.0  # type: ignore[union-attr]
+    assert "out of range: 0.1 to 10 m" in parser.parse("go forward twenty meters").errors[0].reason
 
 
 def test_jsgf_has_one_rule_per_command_and_shared_number_rules() -> None:
@@ -133,7 +143,7 @@ def test_jsgf_has_one_rule_per_command_and_shared_number_rules() -> None:
     assert (
         "public <command> = <skip> <order> <skip> ( <separator> <skip> <order> <skip> )*;" in jsgf
     )
-    assert "<skip> = ( a | the | to | please | now )*;" in jsgf
+    assert "<skip> = [ ( a | the | to | please | now ) [ a | the | to | please | now ] ];" in jsgf
     assert "<separator> = then;" in jsgf
     assert "// turn_by/left" in jsgf
     # left and right turns share the same 180 values
@@ -180,7 +190,7 @@ def test_too_many_phrases_fall_back_to_words() -> None:
     grammar = build_grammar(orders)
     assert grammar.phrases == []
     assert grammar.unexpandable == [
-        "go: 120000 phrases, more than 5000; its words are listed instead"
+        "go: 484812 phrases, more than 5000; its words are listed instead"
     ]
     assert {"walk", "ninety", "by"} <= set(grammar.words)
     assert "<c0> = go <skip> <n0> <skip> by <skip> <n0>" in grammar.jsgf

@@ -182,7 +182,7 @@ def test_two_sessions_at_once_keep_their_own_speech(
     router: str, processes: Processes, speech: Speak
 ) -> None:
     first = _chunks(read_wav(speech("turn left")))
-    second = _chunks(read_wav(speech("reach the kitchen", "en-gb", 170)))
+    second = _chunks(read_wav(speech("reach the kitchen", "festival:kal_diphone")))
 
     async def body(listener: Listener) -> None:
         senders = [listener.bus.stream(KEYS.stt_audio(name)) for name in ("a", "b")]
@@ -270,7 +270,9 @@ def test_bad_input_is_logged_and_dropped_and_sessions_go_on(
 def test_speech_that_goes_on_is_cut_at_the_maximum_utterance(
     router: str, processes: Processes, speech: Speak
 ) -> None:
-    wav = speech("turn left then reach the kitchen then move forward then turn right", speed=120)
+    wav = speech(
+        "turn left then reach the kitchen then move forward then turn right", "festival:kal_diphone"
+    )
 
     async def body(listener: Listener) -> None:
         await stream(listener.bus, "long", wav, stop=False)
@@ -290,7 +292,7 @@ def test_speech_streamed_to_voicectl_up_moves_the_simulated_robot(
 ) -> None:
     """Done-when of the speech issue: generated speech from the shipped orders, streamed to
     the stack's recogniser, becomes orders that the simulated robot carries out."""
-    wav = speech("please turn left then go to the kitchen", "en-gb", 160)
+    wav = speech("please turn left then go to the kitchen", "festival:kal_diphone")
 
     async def run(bus: Bus) -> list[str]:
         listener = Listener(bus)

@@ -14,7 +14,7 @@ import msgspec
 
 from services.stt.audio import AudioError, frames, read_wav
 from services.stt.engine import Engine, Final
-from shared.messages import Order, ParseError, ParseResult
+from shared.messages import Doubt, Order, ParseError, ParseResult
 
 MAX_FILE_SECONDS = 600.0
 
@@ -31,6 +31,12 @@ class Transcription(msgspec.Struct):
     orders: list[Order]
     """What `voicectl parse` makes of the transcript (never dispatched if rejected)."""
     errors: list[ParseError]
+    heard: str = ""
+    """What an unconstrained decode heard: the person's words, command or not."""
+    word_confidences: list[float] = msgspec.field(default_factory=list)
+    """Per word of the transcript, 0..1."""
+    doubts: list[Doubt] = msgspec.field(default_factory=list)
+    """Values to ask about: a transcript with doubts is never sent by itself."""
 
 
 class Unreadable(msgspec.Struct):
@@ -73,4 +79,7 @@ def transcribe(
             confidence=min((f.confidence for f in finals), default=None),
             orders=result.orders if result is not None else [],
             errors=result.errors if result is not None else [],
+            heard=" ".join(f.heard for f in finals if f.heard),
+            word_confidences=[c for f in finals for c in f.confidences],
+            doubts=[] if reason or len(finals) != 1 else finals[0].doubts,
         )

@@ -7,7 +7,7 @@ more, or whose alias cannot be expanded at all, is listed in `unexpandable` and 
 words instead. In the JSGF such an alias becomes "one or more of its words".
 
 Skip words are optional wherever the parser lets them stand: between the words of a
-command and around it (`<skip>` is any number of them), never inside a spoken number.
+command and around it (`<skip>` is at most two of them), never inside a spoken number.
 """
 
 from __future__ import annotations
@@ -52,6 +52,7 @@ def build_grammar(orders: OrderSet) -> Grammar:
         words=sorted(builder.words),
         separator_phrases=separator_phrases,
         skip_words=list(orders.skip_words),
+        number_words=sorted(builder.number_words),
         unexpandable=builder.unexpandable,
         version=digest[:16],
     )
@@ -65,6 +66,7 @@ class _Builder:
         self.rules: list[tuple[str, str, str]] = []
         """(rule name, body, command name)."""
         self.number_rules: dict[tuple[str, ...], str] = {}
+        self.number_words: set[str] = set()
         self.phrases: list[str] = []
         self.words: set[str] = set(skip_words)
         self.unexpandable: list[str] = []
@@ -79,13 +81,14 @@ class _Builder:
             if loop:
                 self.rules.append((rule, loop, command.name))
             return
-        values = {name: [say_number(v) for v in s.grid()] for name, s in command.slots.items()}
+        values = {name: [say_number(v) for v in s.heard()] for name, s in command.slots.items()}
         alternatives = [self._jsgf_template(t, values) for t in expansion.templates]
         self.rules.append((rule, " | ".join(alternatives), command.name))
         for template in expansion.templates:
             self.words.update(w for w in template if isinstance(w, str))
         for spoken in values.values():
             self.words.update(w for value in spoken for w in value.split())
+            self.number_words.update(w for value in spoken for w in value.split())
         count = sum(_count(t, values) for t in expansion.templates)
         if count > MAX_PHRASES:
             self.unexpandable.append(
@@ -116,7 +119,10 @@ class _Builder:
             f"<separator> = {separator_rule};",
         ]
         if self.skip_words:
-            lines.append(f"<skip> = ( {' | '.join(self.skip_words)} )*;")
+            # At most two skip words stand together: an unbounded run let the search explain
+            # a whole stretch of conversation as "the to a to" between two command words.
+            words = " | ".join(self.skip_words)
+            lines.append(f"<skip> = [ ( {words} ) [ {words} ] ];")
         names = " | ".join(f"<{name}>" for name, _, _ in self.rules)
         lines.append(f"<order> = {names or '<VOID>'};")
         lines.extend(f"<{name}> = {body}; // {command}" for name, body, command in self.rules)

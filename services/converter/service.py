@@ -164,7 +164,9 @@ class ConverterService:
         robot = robot_of(key)
         if transcript.rejected:
             # Speech that is not a command never becomes orders, however it would parse.
-            reason = f"not a command: {transcript.reason}" if transcript.reason else "not a command"
+            reason = transcript.reason or "not a command"
+            if "not a command" not in reason:
+                reason = f"not a command: {reason}"
             proposal = Proposal(
                 transcript=transcript.text,
                 errors=[ParseError(text=transcript.text, reason=reason)],
@@ -188,5 +190,6 @@ class ConverterService:
                 errors=result.errors,
                 session=transcript.session,
                 utterance=transcript.utterance,
+                doubts=transcript.doubts,
             )
         self._bus.publish(RobotKeys(robot).proposal, proposal)

@@ -250,6 +250,25 @@ class SlotSpec:
         last = math.floor(Decimal(repr(self.max)) / step)
         return [float(k * step) for k in range(first, min(last, first + limit - 1) + 1)]
 
+    def heard(self, limit: int = MAX_GRID) -> list[float]:
+        """The values the recogniser listens for: the grid and every whole number, from zero
+        (or twice a negative minimum) to twice the maximum. Wider than what is allowed on
+        purpose: a grammar that listened only within the bounds turned a spoken "ten metres"
+        into its nearest allowed neighbour, "two"; heard as itself, it is refused with the
+        range instead."""
+        low = min(0.0, 2 * self.min)
+        high = max(0.0, 2 * self.max)
+        step = Decimal(repr(self.step))
+        multiples = {
+            float(k * step)
+            for k in range(
+                math.ceil(Decimal(repr(low)) / step), math.floor(Decimal(repr(high)) / step) + 1
+            )
+        }
+        whole = set(map(float, range(math.ceil(low), math.floor(high) + 1)))
+        values = sorted(multiples | whole, key=lambda v: (abs(v - self.min) + abs(v - self.max), v))
+        return sorted(values[:limit])
+
     def value(self, spoken: str) -> float:
         """The number `spoken` says, in `unit`; raises SlotValueError naming what is allowed."""
         value = read_number(spoken)

@@ -14,12 +14,12 @@ from __future__ import annotations
 
 import importlib
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Protocol
 
 from shared.errors import VoicectlError
-from shared.messages import Grammar
+from shared.messages import Doubt, Grammar
 
 ENGINES = ("pocketsphinx", "vosk")
 
@@ -54,6 +54,11 @@ class Final:
     """Why the engine rejects it ('' when it does not): no words, low confidence..."""
     speech_start: float
     speech_end: float
+    heard: str = ""
+    """What an unconstrained decode heard: the person's words, command or not."""
+    confidences: list[float] = field(default_factory=list)
+    """Per word of `text`: how surely the unconstrained decode heard it too."""
+    doubts: list[Doubt] = field(default_factory=list)
 
 
 Event = SpeechStarted | Heard | Final

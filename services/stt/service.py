@@ -359,6 +359,9 @@ class SttService:
             reason=reason,
             speech_start=round(final.speech_start, 3),
             speech_end=round(final.speech_end, 3),
+            heard=final.heard,
+            word_confidences=final.confidences,
+            doubts=[] if reason else final.doubts,
         )
 
     async def _parse_problem(self, text: str) -> str:

@@ -31,7 +31,8 @@ import logging
 import math
 import threading
 from collections import deque
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import pocketsphinx
@@ -40,6 +41,7 @@ from shared.messages import Grammar
 
 from .audio import NoiseFloor, seconds, whole
 from .engine import EngineError, Event, Final, Heard, SpeechStarted, logistic, rejection
+from .judge import FILLERS, Thresholds, Verdict, Vocabulary, Word, judge
 from .lexicon import pronunciations
 from .wordgraph import GrammarError, WordGraph, compile_jsgf
 
@@ -64,8 +66,12 @@ CONFIDENCE_MIDPOINT = -5.3
 """Acoustic score per 10 ms frame, in nats below the best senone, that maps to confidence
 0.5. Tuned on bench/speech_set.py's generated speech (docs/benchmarks.md)."""
 CONFIDENCE_WIDTH = 0.4
-POOL_SIZE = 2
-"""Idle decoders kept for the next sessions (each holds the acoustic model, ~28 MB)."""
+POOL_SIZE = 1
+"""Idle decoders kept for the next sessions (each holds the acoustic model and the open
+search, ~60 MB; the language model itself is loaded once and shared)."""
+OPEN_SEARCH = "open"
+FRAME_BYTES = 320
+"""One 10 ms feature frame of 16 kHz 16-bit audio."""
 
 
 @dataclass(frozen=True)
@@ -76,14 +82,17 @@ class _Compiled:
     graph: WordGraph
     added: dict[str, list[list[str]]]
     skip_words: frozenset[str]
+    number_words: frozenset[str]
     unpronounceable: frozenset[str]
 
 
 class _Decoder:
     """A pocketsphinx decoder and the grammar it has installed."""
 
-    def __init__(self) -> None:
+    def __init__(self, open_lm: Any) -> None:
         self.decoder: Any = pocketsphinx.Decoder(loglevel="FATAL", lm=None)
+        self.decoder.add_lm(OPEN_SEARCH, open_lm)
+        self._sounds: dict[str, frozenset[str]] = {}
         # pocketsphinx 5.1.1 ignores the first switch of the cepstral mean's mode unless the
         # features were re-initialised once before: without this line every second pass
         # silently kept the live mean.
@@ -100,6 +109,16 @@ class _Decoder:
         config = self.decoder.config
         config["cmn"] = mode
         self.decoder.reinit_feat(config)
+
+    def sounds(self, word: str) -> frozenset[str]:
+        """Every pronunciation of `word` ("four" and "for" share one)."""
+        if word not in self._sounds:
+            self._sounds[word] = frozenset(" ".join(p) for p in self.known(word))
+        return self._sounds[word]
+
+    def search(self, name: str) -> None:
+        if self.decoder.current_search() != name:
+            self.decoder.activate_search(name)
 
     def known(self, word: str) -> list[list[str]]:
         found = []
@@ -125,6 +144,7 @@ class _Decoder:
         if self.version:
             self.decoder.remove_search(f"grammar_{self.version}")
         self.version = compiled.version
+        self._sounds.clear()
 
     def _fsg_model(self, compiled: _Compiled) -> Any:
         graph = compiled.graph
@@ -163,11 +183,14 @@ class PocketsphinxEngine:
 
     name = "pocketsphinx"
 
-    def __init__(self, min_confidence: float = 0.5) -> None:
+    def __init__(self, min_confidence: float = 0.5, thresholds: Thresholds | None = None) -> None:
         self.min_confidence = min_confidence
+        self.thresholds = thresholds or Thresholds()
         self._compiled: _Compiled | None = None
         self._pool: list[_Decoder] = []
         self._lock = threading.Lock()
+        self._open_lm: Any = None
+        """pocketsphinx's general English language model, loaded once for every decoder."""
 
     def use_grammar(self, grammar: Grammar) -> list[str]:
         try:
@@ -186,6 +209,7 @@ class PocketsphinxEngine:
             graph=graph,
             added=found.added,
             skip_words=frozenset(grammar.skip_words),
+            number_words=frozenset(grammar.number_words),
             unpronounceable=frozenset(found.unpronounceable),
         )
         return found.unpronounceable
@@ -199,7 +223,11 @@ class PocketsphinxEngine:
         with self._lock:
             if self._pool:
                 return self._pool.pop()
-        return _Decoder()
+            if self._open_lm is None:
+                config = pocketsphinx.Config()
+                path = Path(pocketsphinx.get_model_path()) / "en-us" / "en-us.lm.bin"
+                self._open_lm = pocketsphinx.NGramModel(config, pocketsphinx.LogMath(), str(path))
+        return _Decoder(self._open_lm)
 
     def give_back(self, decoder: _Decoder) -> None:
         with self._lock:
@@ -229,8 +257,12 @@ class _Utterance:
         self.early: _Result | None = None
         """The final pass run when the speech paused; used if the pause is the end."""
         self.live = True
-        """Whether the first pass is running (it stops for the early final pass, and goes
-        on, from the start of the utterance, only if speech resumes)."""
+        """Whether the open first pass is running (it stops for the early final pass and
+        goes on with the new audio if speech resumes)."""
+        self.open_from = 0
+        """Where in `audio` the open pass's current decode began (bytes)."""
+        self.heard: list[Word] = []
+        """What the open pass heard in the decodes that ended, in frames of `audio`."""
 
 
 @dataclass(frozen=True)
@@ -239,11 +271,14 @@ class _Result:
     confidence: float
     mean: str
     """The utterance's own cepstral mean."""
+    verdict: Verdict = field(default_factory=lambda: Verdict("", ""))
 
 
 class SphinxRecogniser:
-    """One stream's recogniser: voice activity, a first pass while the person speaks, the
-    final pass at the end (started early, when the speech pauses)."""
+    """One stream's recogniser: voice activity, an open first pass while the person speaks
+    (pocketsphinx's general English model: the partials, and the second opinion), the
+    grammar's final pass at the end (started early, when the speech pauses), and the
+    judgement of one by the other."""
 
     def __init__(self, engine: PocketsphinxEngine, max_utterance: float, segment: bool) -> None:
         self._engine = engine
@@ -337,6 +372,7 @@ class SphinxRecogniser:
         self._count += 1
         self._flags.clear()
         events.append(SpeechStarted(self._utterance.number, speech_start))
+        self._decoder.search(OPEN_SEARCH)
         decoder = self._decoder.decoder
         decoder.set_cmn(self._prior or self._decoder.prior)
         decoder.start_utt()
@@ -377,24 +413,42 @@ class SphinxRecogniser:
             return
         result = utterance.early or self._final_pass(utterance)
         self._prior = result.mean
+        verdict = result.verdict
         events.append(
             Final(
                 utterance.number,
                 result.text,
                 round(result.confidence, 3),
-                rejection(result.text, result.confidence, self._engine.min_confidence),
+                rejection(result.text, result.confidence, self._engine.min_confidence)
+                or verdict.rejection,
                 utterance.start,
                 speech_end,
+                heard=verdict.heard,
+                confidences=verdict.confidences,
+                doubts=verdict.doubts,
             )
         )
 
     def _final_pass(self, utterance: _Utterance) -> _Result:
-        """Stop the first pass and decode the utterance again with its own cepstral mean."""
+        """End the open pass, decode the utterance again with the grammar and its own
+        cepstral mean, and judge the one by the other."""
         assert self._decoder is not None
         decoder = self._decoder.decoder
         if utterance.live:
+            if utterance.unfed:
+                decoder.process_raw(bytes(utterance.unfed))
+                utterance.unfed.clear()
             decoder.end_utt()
+            offset = utterance.open_from // FRAME_BYTES
+            utterance.heard += [
+                Word(s.word.split("(")[0], s.start_frame + offset, s.end_frame + offset, s.prob)
+                for s in decoder.seg() or ()
+                if s.word not in FILLERS
+            ]
+            utterance.open_from = len(utterance.audio)
             utterance.live = False
+        compiled = self._engine.compiled()
+        self._decoder.search(f"grammar_{self._decoder.version}")
         self._decoder.cepstral_mean("batch")
         decoder.start_utt()
         decoder.process_raw(bytes(utterance.audio), full_utt=True)
@@ -402,20 +456,33 @@ class SphinxRecogniser:
         hypothesis = decoder.hyp()
         text = hypothesis.hypstr if hypothesis is not None else ""
         frames = max(decoder.n_frames(), 1)
-        score = sum(math.log(max(s.ascore, 1e-320)) for s in decoder.seg() or ())
+        segments = list(decoder.seg() or ())
+        score = sum(math.log(max(s.ascore, 1e-320)) for s in segments)
         confidence = logistic(score / frames, CONFIDENCE_MIDPOINT, CONFIDENCE_WIDTH)
         mean = decoder.get_cmn()
         self._decoder.cepstral_mean("live")
-        return _Result(text, confidence if text else 0.0, mean)
+        self._decoder.search(OPEN_SEARCH)
+        grammar = [
+            Word(s.word.split("(")[0], s.start_frame, s.end_frame)
+            for s in segments
+            if s.word not in FILLERS
+        ]
+        vocabulary = Vocabulary(
+            words=frozenset(compiled.graph.words),
+            skip_words=compiled.skip_words,
+            number_words=compiled.number_words,
+            sounds=self._decoder.sounds,
+        )
+        verdict = judge(grammar, utterance.heard, vocabulary, self._engine.thresholds)
+        return _Result(text, confidence if text else 0.0, mean, verdict)
 
     def _resume(self, utterance: _Utterance) -> None:
-        """Start the first pass again over the utterance so far: the speech goes on."""
+        """Go on with the open pass from where it stopped: the speech goes on."""
         assert self._decoder is not None
         assert utterance.early is not None
         decoder = self._decoder.decoder
         decoder.set_cmn(utterance.early.mean)
         decoder.start_utt()
-        decoder.process_raw(bytes(utterance.audio))
-        utterance.unfed.clear()
+        utterance.unfed = bytearray(utterance.audio[utterance.open_from :])
         utterance.early = None
         utterance.live = True

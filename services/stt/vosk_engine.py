@@ -18,7 +18,7 @@ from typing import Any
 
 import vosk
 
-from shared.messages import Grammar
+from shared.messages import Doubt, Grammar
 
 from .audio import seconds, whole
 from .engine import EngineError, Event, Final, Heard, SpeechStarted, rejection
@@ -33,6 +33,9 @@ UNKNOWN_WORDS = ("[unk]", "<UNK>")
 """How models name speech outside the grammar (English models, and some others)."""
 CHUNK_BYTES = 3200
 """100 ms per call: partial results grow at that pace."""
+MIN_VALUE_CONFIDENCE = 0.9
+"""A number word Kaldi heard less surely than this is a doubt (not tuned: no English model
+is installable here to tune it on)."""
 
 
 class VoskEngine:
@@ -54,7 +57,9 @@ class VoskEngine:
         )
         self._grammar: str | None = None
         self._version = ""
+        self._numbers: frozenset[str] = frozenset()
         self._pool: list[tuple[str, Any]] = []
+        """Idle recognisers, each with the version of the grammar it was built with."""
         self._lock = threading.Lock()
 
     def use_grammar(self, grammar: Grammar) -> list[str]:
@@ -72,8 +77,10 @@ class VoskEngine:
             raise EngineError(f"grammar {grammar.version}: no phrase this model can hear")
         if self._unknown:
             listed.append(self._unknown)
-        self._grammar = json.dumps(listed, ensure_ascii=False)
-        self._version = grammar.version
+        with self._lock:  # a recogniser is lent with the grammar and version of one moment
+            self._grammar = json.dumps(listed, ensure_ascii=False)
+            self._version = grammar.version
+            self._numbers = frozenset(grammar.number_words)
         return missing
 
     def recogniser(self, max_utterance: float, segment: bool = True) -> VoskRecogniser:
@@ -81,23 +88,33 @@ class VoskEngine:
             raise EngineError("no grammar yet")
         return VoskRecogniser(self, max_utterance, segment)
 
-    def borrow(self) -> Any:
-        """A Kaldi recogniser with the grammar in use now."""
-        assert self._grammar is not None
+    def borrow(self) -> tuple[str, Any]:
+        """A Kaldi recogniser with the grammar in use now, and that grammar's version."""
         with self._lock:
+            grammar, version = self._grammar, self._version
             while self._pool:
-                version, recogniser = self._pool.pop()
-                if version == self._version:
-                    return recogniser
-        recogniser = vosk.KaldiRecognizer(self._model, 16000, self._grammar)
+                built_for, recogniser = self._pool.pop()
+                if built_for == version:
+                    return version, recogniser
+        assert grammar is not None
+        recogniser = vosk.KaldiRecognizer(self._model, 16000, grammar)
         recogniser.SetWords(True)
-        return recogniser
+        return version, recogniser
 
-    def give_back(self, recogniser: Any) -> None:
+    def give_back(self, version: str, recogniser: Any) -> None:
+        """Keep `recogniser` for later only if it still has the grammar in use."""
         recogniser.Reset()
         with self._lock:
-            if len(self._pool) < 2:
-                self._pool.append((self._version, recogniser))
+            if version == self._version and len(self._pool) < 2:
+                self._pool.append((version, recogniser))
+
+    def doubts(self, words: list[dict[str, Any]]) -> list[Doubt]:
+        """Number words Kaldi was not sure of: asked, never guessed."""
+        return [
+            Doubt(position=i, words=str(w["word"]), confidence=round(float(w["conf"]), 3))
+            for i, w in enumerate(words)
+            if w.get("word") in self._numbers and float(w.get("conf", 0.0)) < MIN_VALUE_CONFIDENCE
+        ]
 
     def judge(self, words: list[dict[str, Any]]) -> tuple[float, str]:
         """Confidence (mean word confidence) and why the utterance is rejected, if it is."""
@@ -115,7 +132,9 @@ class VoskRecogniser:
 
     def __init__(self, engine: VoskEngine, max_utterance: float, segment: bool) -> None:
         self._engine = engine
-        self._recogniser: Any = engine.borrow()
+        version, recogniser = engine.borrow()
+        self._version = version
+        self._recogniser: Any = recogniser
         self._max_utterance = max_utterance
         self._segment = segment
         self._pending = bytearray()
@@ -145,7 +164,7 @@ class VoskRecogniser:
 
     def close(self) -> None:
         if self._recogniser is not None:
-            self._engine.give_back(self._recogniser)
+            self._engine.give_back(self._version, self._recogniser)
             self._recogniser = None
 
     def _chunk(self, chunk: bytes, events: list[Event]) -> None:
@@ -179,7 +198,18 @@ class VoskRecogniser:
         confidence, rejection = self._engine.judge(words)
         start = self._offset + float(words[0]["start"]) if words else self._started or 0.0
         end = self._offset + float(words[-1]["end"]) if words else self._clock
-        events.append(Final(self._count, text, round(confidence, 3), rejection, start, end))
+        events.append(
+            Final(
+                self._count,
+                text,
+                round(confidence, 3),
+                rejection,
+                start,
+                end,
+                confidences=[round(float(w.get("conf", 0.0)), 3) for w in words],
+                doubts=[] if rejection else self._engine.doubts(words),
+            )
+        )
         self._count += 1
         self._started = None
         self._partial = ""

@@ -176,7 +176,8 @@ function handle(message) {
     case "transcript":
       if (mine && message.rejected) {
         const heard = message.text ? ` (heard “${message.text}”)` : "";
-        showHeard(`not a command${heard}: ${message.reason}`, "rejected");
+        showHeard(message.reason.startsWith("I heard") ? message.reason
+          : `not a command${heard}: ${message.reason}`, "rejected");
       } else if (mine) {
         showHeard(message.text, "final");
       }
@@ -278,8 +279,17 @@ function showHeard(text, kind) {
 function propose(proposal) {
   if (proposal.rejected) {
     showErrors(proposal.transcript, []); // the transcript line says why, next to the words
+    showDoubt(null);
     return;
   }
+  if ((proposal.doubts || []).length) {
+    // A doubtful value is asked, never guessed: nothing is staged or sent until the person
+    // picks what they said.
+    showErrors(proposal.transcript, proposal.errors);
+    showDoubt(proposal);
+    return;
+  }
+  showDoubt(null);
   if (store.autoSend && proposal.orders.length && !proposal.errors.length) {
     submit(proposal.orders.map((order) => ({ order, said: proposal.transcript })));
     showErrors(proposal.transcript, []);
@@ -287,6 +297,27 @@ function propose(proposal) {
   }
   stage(proposal.orders, proposal.transcript);
   showErrors(proposal.transcript, proposal.errors);
+}
+
+function showDoubt(proposal) {
+  const box = $("doubt");
+  if (!proposal) { box.hidden = true; box.replaceChildren(); return; }
+  const words = proposal.transcript.split(" ");
+  const [doubt] = proposal.doubts;
+  const size = doubt.words.split(" ").length;
+  const said = (choice) => [
+    ...words.slice(0, doubt.position), ...choice.split(" "), ...words.slice(doubt.position + size),
+  ].join(" ");
+  const shown = el("span", "", "muted");
+  shown.append(words.slice(0, doubt.position).join(" "), " ",
+    el("mark", doubt.words), " ", words.slice(doubt.position + size).join(" "));
+  box.replaceChildren(el("strong", "Did you say"), " ", shown, " ");
+  for (const choice of [doubt.words, ...doubt.alternatives]) {
+    box.append(button(choice, "choice", () => { showDoubt(null); addText(said(choice)); },
+      `stage "${said(choice)}"; nothing is sent until you send`), " ");
+  }
+  box.append(button("say again", "choice", () => showDoubt(null), "drop it and speak again"));
+  box.hidden = false;
 }
 
 function stage(orders, said) {

@@ -1,0 +1,232 @@
+"""A second opinion on what the grammar heard: accept it, doubt one value, or reject it.
+
+A grammar forces a best match out of any speech: "could you pass the salt" comes out as
+some command, and a number said outside the grammar as a nearby one. So every final
+result is compared with an unconstrained decode of the same audio (pocketsphinx's general
+English language model), word by word on the time axis:
+
+- **Foreign words.** The open decode transcribes ordinary speech nearly word for word; the
+  posterior mass of the words it hears that no command contains says "this was not a
+  command". Synthetic voices it cannot transcribe give it junk with low posteriors, which
+  weighs little.
+- **Support.** Each command word of the grammar's result is supported when the open decode
+  heard the same word (or a word that sounds the same: "for" and "four") over the same
+  stretch of audio. Too little support is a rejection.
+- **Values.** A spoken number is a value: when the command words agree and the open decode
+  heard another number there ("two" where the grammar says "ten"), or none that matches,
+  the value is a doubt, to be asked, never guessed.
+
+The thresholds are tuned on the development split of bench/speech_set.py and reported on
+its test split (docs/benchmarks.md).
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+
+from rapidfuzz.distance import Levenshtein
+
+from shared.messages import Doubt
+
+ALIKE = 0.75
+"""Words at least this alike sound like each other to the judge ("crimes"/"primes")."""
+SUPPORTS = 0.6
+"""An open word at least this alike to a command word at the same time supports it."""
+FILLERS = frozenset({"<s>", "</s>", "<sil>", "[noise]", "<unk>", "[unk]", "[breath]"})
+
+
+@dataclass(frozen=True)
+class Word:
+    """A word of a decode, in 10 ms frames from the start of the utterance's audio."""
+
+    text: str
+    start: int
+    end: int
+    posterior: float = 1.0
+
+
+@dataclass(frozen=True)
+class Thresholds:
+    max_foreign: float = 1.2
+    """Posterior mass of non-command words above which the utterance is not a command."""
+    min_support: float = 0.5
+    """Share of the command words the open decode must also hear."""
+    min_value_posterior: float = 0.0
+    """A value the open decode heard the same but less surely than this is a doubt."""
+
+
+@dataclass(frozen=True)
+class Vocabulary:
+    """The words of the grammar in use, and how to tell two words that sound alike."""
+
+    words: frozenset[str]
+    skip_words: frozenset[str]
+    number_words: frozenset[str]
+    sounds: Callable[[str], frozenset[str]]
+    """A word's pronunciations (phone strings); words sharing one sound the same."""
+
+    def same(self, a: str, b: str) -> bool:
+        return a == b or bool(self.sounds(a) & self.sounds(b))
+
+    def alike(self, a: str, b: str) -> float:
+        """How alike two words or runs of words sound, 0..1: one minus the phone edit
+        distance over the longer pronunciation ("crimes" and "primes" are 0.8)."""
+        if a == b:
+            return 1.0
+        best = 0.0
+        for one in self._spoken(a):
+            for other in self._spoken(b):
+                best = max(best, Levenshtein.normalized_similarity(one, other))
+        return best
+
+    def _spoken(self, words: str) -> list[list[str]]:
+        """Every pronunciation of a run of words, as lists of phones."""
+        runs: list[list[str]] = [[]]
+        for word in words.split():
+            variants = self.sounds(word) or frozenset({word})
+            runs = [run + v.split() for run in runs for v in sorted(variants)][:8]
+        return runs
+
+    def known(self, word: str) -> bool:
+        return word in self.words or any(self.alike(word, w) >= ALIKE for w in self.words)
+
+
+@dataclass(frozen=True)
+class Verdict:
+    rejection: str
+    """Why it is not a command, in plain words; '' when it is (possibly with doubts)."""
+    heard: str
+    """The open decode's transcript: what the person seems to have said."""
+    confidences: list[float] = field(default_factory=list)
+    """Per word of the transcript: how surely the open decode heard it too (0..1)."""
+    doubts: list[Doubt] = field(default_factory=list)
+    foreign: float = 0.0
+    """The posterior mass of words the open decode heard that no command has."""
+    support: float = 0.0
+    """The share of command words the open decode heard too."""
+
+
+@dataclass(frozen=True)
+class _Token:
+    """A command word, or a run of number words (one value)."""
+
+    first: int
+    words: list[Word]
+    value: bool
+
+    @property
+    def start(self) -> int:
+        return self.words[0].start
+
+    @property
+    def end(self) -> int:
+        return self.words[-1].end
+
+    @property
+    def text(self) -> str:
+        return " ".join(w.text for w in self.words)
+
+
+def judge(
+    grammar: list[Word], heard: list[Word], vocabulary: Vocabulary, thresholds: Thresholds
+) -> Verdict:
+    """Accept, doubt or reject what the grammar heard, given what the open decode heard."""
+    heard = [w for w in heard if w.text not in FILLERS]
+    said = " ".join(w.text for w in heard)
+    confidences = [0.0] * len(grammar)
+    foreign = round(sum(w.posterior for w in heard if not vocabulary.known(w.text)), 3)
+    tokens = list(_tokens(grammar, vocabulary))
+    commands = [t for t in tokens if not t.value]
+    supported = 0
+    for token in commands:
+        match = _support(token, heard, vocabulary)
+        confidences[token.first] = round(match, 3)
+        supported += match > 0
+    support = round(supported / len(commands), 3) if commands else 0.0
+    if foreign > thresholds.max_foreign or support < thresholds.min_support:
+        return Verdict(_not_a_command(said), said, confidences, [], foreign, support)
+    doubts = []
+    for token in (t for t in tokens if t.value):
+        others = _overlapping(token, heard)
+        numbers = [
+            w for w in others if w.text in vocabulary.number_words or _numeric(w, vocabulary)
+        ]
+        spoken = [_as_number(w.text, vocabulary) for w in numbers]
+        surely = min((w.posterior for w in numbers), default=0.0)
+        agree = len(spoken) == len(token.words) and all(
+            vocabulary.same(a, b.text) for a, b in zip(spoken, token.words, strict=True)
+        )
+        for offset in range(len(token.words)):
+            confidences[token.first + offset] = surely if agree else 0.0
+        if agree and surely >= thresholds.min_value_posterior:
+            continue
+        alternative = " ".join(spoken)
+        alternatives = [alternative] if alternative and not agree else []
+        doubts.append(
+            Doubt(
+                position=token.first,
+                words=token.text,
+                alternatives=alternatives,
+                confidence=round(surely if agree else 0.0, 3),
+            )
+        )
+    return Verdict("", said, [round(c, 3) for c in confidences], doubts, foreign, support)
+
+
+def _not_a_command(said: str) -> str:
+    return f"I heard '{said}': not a command" if said else "not a command"
+
+
+def _tokens(grammar: list[Word], vocabulary: Vocabulary) -> Iterable[_Token]:
+    run: list[Word] = []
+    first = 0
+    for index, word in enumerate(grammar):
+        if word.text in vocabulary.number_words:
+            if not run:
+                first = index
+            run.append(word)
+            continue
+        if run:
+            yield _Token(first, run, value=True)
+            run = []
+        if word.text not in vocabulary.skip_words:
+            yield _Token(index, [word], value=False)
+    if run:
+        yield _Token(first, run, value=True)
+
+
+def _overlapping(token: _Token, heard: list[Word]) -> list[Word]:
+    """Open words at least half inside the token's stretch of audio."""
+    found = []
+    for word in heard:
+        inside = min(word.end, token.end) - max(word.start, token.start) + 1
+        if inside * 2 >= word.end - word.start + 1:
+            found.append(word)
+    return found
+
+
+def _support(token: _Token, heard: list[Word], vocabulary: Vocabulary) -> float:
+    """How surely the open decode heard a command word: the posterior of the nearby open
+    word (or two) that sounds most like it, 0 when none sounds enough like it."""
+    word = token.words[0]
+    near = [w for w in heard if w.end >= word.start - 10 and w.start <= word.end + 10]
+    candidates = [[w] for w in near] + [list(pair) for pair in itertools.pairwise(near)]
+    best = 0.0
+    for run in candidates:
+        alike = vocabulary.alike(" ".join(w.text for w in run), word.text)
+        if alike >= SUPPORTS:
+            best = max(best, alike * min(w.posterior for w in run))
+    return best
+
+
+def _numeric(word: Word, vocabulary: Vocabulary) -> bool:
+    return any(vocabulary.same(word.text, n) for n in vocabulary.number_words)
+
+
+def _as_number(text: str, vocabulary: Vocabulary) -> str:
+    """The number word `text` sounds like ("for" is "four")."""
+    if text in vocabulary.number_words:
+        return text
+    return next((n for n in sorted(vocabulary.number_words) if vocabulary.same(text, n)), text)

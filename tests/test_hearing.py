@@ -1,0 +1,134 @@
+"""Hearing only commands: real recordings of people, values out of range, the judge's rules.
+
+The recordings are pocketsphinx's own test data (a man saying "go forward ten meters",
+read literature from LibriVox, card names), fetched from PyPI once per run.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pocketsphinx
+import pytest
+
+from bench.speech_set import Utterance, real_recordings
+from services.stt.judge import Thresholds, Vocabulary, Word, judge
+
+from .conftest import Speak, voicectl
+
+
+@pytest.fixture(scope="module")
+def people(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    directory = tmp_path_factory.mktemp("real") / "test"
+    found: list[Utterance] = real_recordings(directory)
+    return {Path(u.file).stem: directory.parent / u.file for u in found}
+
+
+def transcribe(*files: Path) -> list[dict[str, object]]:
+    done = voicectl("transcribe", *map(str, files))
+    assert done.returncode == 0, done.stderr
+    return [json.loads(line) for line in done.stdout.splitlines()]
+
+
+def test_a_person_saying_ten_metres_is_heard_as_ten_never_as_two(
+    people: dict[str, Path],
+) -> None:
+    [line] = transcribe(people["real-goforward"])
+    orders = line["orders"]
+    assert isinstance(orders, list)
+    doubts = line["doubts"]
+    assert isinstance(doubts, list)
+    if doubts:  # asked, never sent by itself: ten must be one of the choices
+        assert any("ten" in [d["words"], *d["alternatives"]] for d in doubts)
+    else:
+        assert line["rejected"] is False, line
+        [order] = orders
+        assert order["order"] == "drive"
+        assert order["target_pose"]["x"] == 10.0
+
+
+def test_read_literature_and_card_names_become_no_orders(people: dict[str, Path]) -> None:
+    reading = people["real-sense_and_sensibility_01_austen_64kb-0890"]
+    cards = people["real-005"]
+    for line in transcribe(reading, cards):
+        assert line["rejected"] is True, line
+        assert line["doubts"] == []
+
+
+def test_a_value_out_of_range_is_refused_by_name_not_heard_as_a_neighbour(
+    speech: Speak,
+) -> None:
+    [line] = transcribe(speech("go forward twenty meters", "festival:kal_diphone"))
+    assert line["transcript"] == "go forward twenty meters"
+    assert line["rejected"] is True
+    assert "out of range: 0.1 to 10 m" in str(line["reason"])
+
+
+# --- the judge's rules, on made-up decodes ----------------------------------------------
+
+_DECODER = pocketsphinx.Decoder(loglevel="FATAL", lm=None)
+
+
+def _sounds(word: str) -> frozenset[str]:
+    found, variant = set(), 1
+    while (
+        phones := _DECODER.lookup_word(word if variant == 1 else f"{word}({variant})")
+    ) is not None:
+        found.add(phones)
+        variant += 1
+    return frozenset(found)
+
+
+VOCABULARY = Vocabulary(
+    words=frozenset(
+        ["go", "forward", "move", "back", "turn", "left", "ten", "two", "meters", "the", "a", "to"]
+    ),
+    skip_words=frozenset({"the", "a", "to"}),
+    number_words=frozenset({"ten", "two"}),
+    sounds=_sounds,
+)
+
+
+def words(text: str, posterior: float = 0.9) -> list[Word]:
+    """`text` one word per 30 frames."""
+    return [Word(w, 30 * i, 30 * i + 29, posterior) for i, w in enumerate(text.split())]
+
+
+def test_the_judge_accepts_what_both_decodes_heard() -> None:
+    verdict = judge(
+        words("go forward ten meters"), words("go forward ten meters"), VOCABULARY, Thresholds()
+    )
+    assert verdict.rejection == ""
+    assert verdict.doubts == []
+    assert all(c > 0.5 for c in verdict.confidences)
+
+
+def test_the_judge_asks_about_a_number_the_open_decode_heard_otherwise() -> None:
+    verdict = judge(
+        words("go forward two meters"), words("go forward ten meters"), VOCABULARY, Thresholds()
+    )
+    assert verdict.rejection == ""
+    [doubt] = verdict.doubts
+    assert (doubt.position, doubt.words, doubt.alternatives) == (2, "two", ["ten"])
+
+
+def test_the_judge_hears_for_as_four_and_to_as_two() -> None:
+    vocabulary = Vocabulary(
+        VOCABULARY.words | {"four"}, VOCABULARY.skip_words, frozenset({"two", "four"}), _sounds
+    )
+    verdict = judge(
+        words("move back two meters"), words("move back to meters"), vocabulary, Thresholds()
+    )
+    assert verdict.doubts == []
+    assert verdict.rejection == ""
+
+
+def test_the_judge_rejects_conversation_with_what_it_heard() -> None:
+    verdict = judge(
+        words("move back two meters"),
+        words("could you please pass me the salt"),
+        VOCABULARY,
+        Thresholds(),
+    )
+    assert verdict.rejection == "I heard 'could you please pass me the salt': not a command"
