@@ -169,10 +169,10 @@ def test_wait_ten_seconds_is_a_parameter_in_seconds() -> None:
 
 
 def test_out_of_range_and_non_numbers_are_errors_naming_the_range() -> None:
-    result = ALL.parse("move forward 7 meters then turn left 45 degrees then wait one two seconds")
+    result = ALL.parse("move forward 12 meters then turn left 45 degrees then wait one two seconds")
     assert [(o.order, o.case) for o in result.orders] == [("turn_by", "left")]
     assert [(e.text, e.reason) for e in result.errors] == [
-        ("move forward 7 meters", "distance 7 is out of range: 0.1 to 5 m"),
+        ("move forward 12 meters", "distance 12 is out of range: 0.1 to 10 m"),
         ("wait one two seconds", "duration: 'one two' is not one number"),
     ]
     assert ALL.parse("wait -3 seconds").errors[0].reason == (
@@ -188,7 +188,7 @@ def test_a_number_makes_the_order_more_specific_than_the_demo_one() -> None:
         ("turn_by", "left"),
     ]
     # Out of range is an error, never the less specific "move forward" (1 m).
-    assert ALL.parse("move forward 9 meters").orders == []
+    assert ALL.parse("move forward 12 meters").orders == []
 
 
 def test_normalise_keeps_a_minus_sign_starting_a_number() -> None:
