@@ -167,7 +167,7 @@ def test_queue_reorder_cancel_and_stop(stack: Stack, tmp_path: Path) -> None:
 def test_speak_a_command_and_a_non_command(stack: Stack, speech: Speak, tmp_path: Path) -> None:
     from playwright.sync_api import expect
 
-    command = speech("turn left then reach kitchen")
+    command = speech("turn left then reach kitchen", voice="flite:slt")
     with panel(stack, tmp_path / "speak", microphone=command) as page:
         login(page, stack)
         page.click("#mic")
