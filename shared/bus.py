@@ -329,6 +329,19 @@ class Bus:
         )
         return await future
 
+    def query_and_forget(self, key: str, payload: bytes, timeout: float) -> None:
+        """Send an urgent query whose answer nobody waits for, from any thread: a cancel
+        sent by a thread whose event loop cannot wait for it (the executor's watchdog)."""
+        self._session.get(
+            key,
+            _direct(_ignore_reply),
+            payload=payload,
+            timeout=timeout,
+            congestion_control=zenoh.CongestionControl.BLOCK,
+            priority=zenoh.Priority.REAL_TIME,
+            express=True,
+        )
+
     async def request(
         self,
         key: str,
@@ -382,6 +395,29 @@ class Bus:
             return self._encoder.encode(answer), JSON
 
         self._answer_queries(key, respond)
+
+    def serve_now(self, key: str, decode: Decode[T], handler: Callable[[T], Message]) -> None:
+        """Answer queries on `key` on Zenoh's own thread, never waiting for the loop: for
+        the one request that must be answered however busy or blocked the loop is (an
+        emergency stop). `handler` must be quick and thread-safe."""
+
+        def on_query(query: zenoh.Query) -> None:
+            raw = query.payload.to_bytes() if query.payload is not None else b""
+            try:
+                answer: Message = handler(decode(raw))
+            except (msgspec.DecodeError, ValueError) as exc:
+                _LOGGER.warning("rejected undecodable request on %s: %s", key, exc)
+                answer = Failed(reason=f"undecodable request: {exc}")
+            except Exception as exc:
+                _LOGGER.exception("handler for %s failed", key)
+                answer = Failed(reason=f"internal error: {exc}")
+            try:
+                query.reply(query.key_expr, self._encoder.encode(answer), encoding=JSON)
+            finally:
+                query.drop()
+
+        queryable = self._session.declare_queryable(key, _direct(on_query))
+        self._closers.callback(queryable.undeclare)
 
     def serve_bytes(self, key: str, handler: Callable[[bytes], Awaitable[bytes | None]]) -> None:
         """Answer queries whose payloads are raw bytes (CDR), for ROS-side services; a
@@ -576,6 +612,10 @@ def _direct(callback: Callable[[T], None]) -> zenoh.handlers.Callback[T]:
     """Run `callback` on Zenoh's own thread: every callback here only decodes and hands
     over to the loop, so skipping the hop to a Python thread halves a round trip's cost."""
     return zenoh.handlers.Callback(callback, indirect=False)
+
+
+def _ignore_reply(_reply: zenoh.Reply) -> None:
+    pass
 
 
 async def _awaitable(awaitable: Awaitable[T]) -> T:

@@ -4,25 +4,35 @@ request is built, sent and its reply decoded in one place, with one timeout.
 
 A service that cannot be reached raises `Unreachable`; one that answers `Failed` raises
 `Refused`; both name the service. Anything else comes back typed.
+
+STOP is the exception: it never waits on one process (`stop`).
 """
 
 from __future__ import annotations
 
+import asyncio
+import contextlib
 import uuid
 
 import msgspec
 
 from .bus import Bus, json_decoder
 from .errors import BusError, VoicectlError
-from .keys import ConverterKeys, RobotKeys
+from .halting import Cancelled, RobotStop
+from .keys import ConverterKeys, RobotKeys, robot_of
 from .messages import (
+    Done,
     EmergencyStop,
+    ExecutorInfo,
+    ExecutorReply,
     Failed,
+    Latch,
     Message,
     Order,
     ParseReply,
     ParseRequest,
     ParseResult,
+    Stopped,
     Submit,
     Submitted,
     SupervisorReply,
@@ -31,6 +41,11 @@ from .messages import (
 TIMEOUT = 10.0
 """Seconds a service has to answer. Each answers at once (a submit once it is stored);
 the margin is for a loaded machine, not for slow work."""
+STOP_ANSWER = 1.5
+"""Seconds the supervisor has to answer a STOP (it answers within a third of a second)
+before the robot is stopped from here instead."""
+INFO_WAIT = 0.5
+"""Seconds a STOP waits to learn the robot's keys (what its executor last announced)."""
 
 
 class Refused(VoicectlError):
@@ -67,6 +82,96 @@ class VoicectlClient:
         self.timeout = timeout
         self._parse_decode = json_decoder(ParseReply | Failed)
         self._supervisor_decode = json_decoder(SupervisorReply)
+        self._executor_decode = json_decoder(ExecutorReply)
+        self._robots: dict[str, ExecutorInfo] = {}
+        """What each robot's executor last said about reaching it: how to stop it
+        without any other voicectl process."""
+        self._announced = asyncio.Event()
+        self._pending: set[asyncio.Future[Cancelled]] = set()
+        bus.subscribe(
+            RobotKeys.any_robot().executor_info,
+            json_decoder(ExecutorInfo),
+            self._on_info,
+            history=True,
+        )
+
+    def _on_info(self, key: str, info: ExecutorInfo) -> None:
+        self._robots[robot_of(key)] = info
+        self._announced.set()
+
+    async def _robot_stop(self, robot: str) -> RobotStop | None:
+        """How to stop `robot`, once its executor's announcement is in (waiting at most
+        `INFO_WAIT`); None if no executor ever announced it."""
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + INFO_WAIT
+        while robot not in self._robots and loop.time() < deadline:
+            self._announced.clear()
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self._announced.wait(), deadline - loop.time())
+        info = self._robots.get(robot)
+        return None if info is None else RobotStop.of(info, robot)
+
+    async def stop(self, robot: str) -> Stopped:
+        """Emergency stop that waits on no other process. Zero velocity and a cancel of
+        every navigation goal go out from here at once, while the supervisor is asked to
+        stop, latch and clear; its answer is the answer. If it gives none within
+        `STOP_ANSWER`, this client also latches the executor itself and says what it did.
+        Raises only when nothing at all could be done: no supervisor answered and no
+        executor ever announced the robot, so that its keys are unknown."""
+        asked = asyncio.ensure_future(self.request(robot, EmergencyStop()))
+        direct = await self._robot_stop(robot)
+        sent, cancelling = "", None
+        if direct is not None:
+            sent = direct.zero_velocity(self.bus)
+            cancelling = asyncio.ensure_future(direct.cancel_goals(self.bus))
+            self._pending.add(cancelling)  # the loop keeps only weak references
+            cancelling.add_done_callback(self._pending.discard)
+        try:
+            reply = await asyncio.wait_for(asyncio.shield(asked), STOP_ANSWER)
+        except (TimeoutError, Unreachable) as exc:
+            asked.cancel()
+            why = str(exc) or f"no answer in {STOP_ANSWER:g} s"
+        else:
+            match reply:
+                case Stopped():
+                    return reply
+                case Failed(reason=reason):
+                    why = reason
+                case other:
+                    why = f"answered {type(other).__name__}"
+        if direct is None or cancelling is None:
+            raise Unreachable(
+                "supervisor",
+                BusError(f"{why}; and no executor has announced robot '{robot}': nothing stopped"),
+            )
+        latched = await self._latch(robot)
+        cancelled = await cancelling
+        confirmed = latched[0] and (cancelled.confirmed or not cancelled.answered)
+        detail = (
+            f"SUPERVISOR DID NOT STOP IT ({why}); stopped from here: {sent}; "
+            f"{cancelled.detail}; {latched[1]}; not latched: start the supervisor before "
+            "new orders"
+        )
+        return Stopped(confirmed=confirmed, detail=detail)
+
+    async def _latch(self, robot: str) -> tuple[bool, str]:
+        """Latch the executor's stop directly: (whether it is safe, what happened)."""
+        try:
+            reply = await self.bus.request(
+                RobotKeys(robot).executor_latch,
+                Latch(on=True),
+                self._executor_decode,
+                STOP_ANSWER,
+                urgent=True,
+            )
+        except BusError:
+            return True, "no executor answered (a dead executor commands nothing)"
+        match reply:
+            case Done(detail=detail):
+                return True, f"executor: {detail}"
+            case Failed(reason=reason):
+                return False, f"EXECUTOR: {reason}"
+        return False, f"executor answered {type(reply).__name__}"
 
     async def parse(self, text: str) -> ParseResult:
         """What the converter makes of `text`."""

@@ -104,6 +104,11 @@ class RobotKeys:
         return f"{self.prefix}/executor/control"
 
     @property
+    def executor_latch(self) -> str:
+        """The emergency stop's latch, answered off the executor's event loop."""
+        return f"{self.prefix}/executor/latch"
+
+    @property
     def executor_info(self) -> str:
         """How the executor reaches the robot (namespace, distro), kept for late subscribers."""
         return f"{self.prefix}/executor/info"

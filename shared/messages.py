@@ -329,6 +329,9 @@ class State(Data):
     paused: str = ""
     """Why the queue waits instead of dispatching (orders restored after a restart wait
     for Resume); empty when it runs."""
+    stop_detail: str = ""
+    """What the robot, navigation and the executor answered to the last emergency stop:
+    they answer after the stop is acknowledged, and their answers land here."""
 
 
 class Submit(Message):
@@ -398,6 +401,15 @@ class Failed(Message):
     reason: str
 
 
+class Stopped(Message):
+    """The answer to an emergency stop: zero velocity has gone out and the stop is latched;
+    `confirmed` when what could still move the robot (navigation, the executor) said
+    within moments that it stopped. An unconfirmed stop says what is in doubt."""
+
+    confirmed: bool
+    detail: str
+
+
 class StateReply(Message):
     state: State
 
@@ -415,7 +427,7 @@ class StateUpdate(Message):
     state: State
 
 
-SupervisorReply = Submitted | Done | Failed | StateReply | HistoryPage
+SupervisorReply = Submitted | Done | Stopped | Failed | StateReply | HistoryPage
 
 ConverterReply = ParseReply | Grammar | Failed
 
@@ -436,6 +448,15 @@ class CancelOrder(Message):
 
 class Halt(Message):
     """Stop all motion now, outside any order."""
+
+
+class Latch(Message):
+    """The emergency stop, told to the executor on a key of its own: answered on the
+    thread that receives it, never on the executor's event loop, so that an executor
+    whose loop is blocked still stops commanding the robot. `on` refuses every command
+    and ends the running order at once; off (on release) lets orders command again."""
+
+    on: bool = True
 
 
 class GetRunning(Message):

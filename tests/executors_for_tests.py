@@ -4,13 +4,14 @@ the way an integrator binds their own module."""
 from __future__ import annotations
 
 import asyncio
+import time
 from typing import Annotated
 
 import msgspec
 
 from services.executor import ExecutionContext, Executor
 from shared.errors import OrderFailed
-from shared.messages import Order
+from shared.messages import Order, TargetPose
 
 
 class Speed(msgspec.Struct):
@@ -106,3 +107,40 @@ class Greeter(Executor):
 
     async def execute(self, order: Order, ctx: ExecutionContext) -> str | None:
         return " ".join([self.greeting] * self.times)
+
+
+class BlockingNavigator(Executor):
+    """Starts a navigation goal, then blocks its event loop (`time.sleep` where an
+    `await` belonged) for `seconds` (default 6): nothing on the loop runs meanwhile."""
+
+    labels = ("blocknav",)
+
+    async def execute(self, order: Order, ctx: ExecutionContext) -> str | None:
+        target = TargetPose(frame="map", x=float(order.params.get("x", 8.0)), y=0.0)
+        going = asyncio.ensure_future(ctx.robot.navigate(target, lambda _pose, _left: None))
+        start = await ctx.robot.next_pose()
+        while abs((await ctx.robot.next_pose()).x - start.x) < 0.3:
+            pass
+        ctx.progress("navigating; blocking the loop")
+        time.sleep(float(order.params.get("seconds", 6)))  # noqa: ASYNC251 (the fault)
+        await going
+        return "arrived"
+
+
+class BlockedDriver(Executor):
+    """Commands velocity from a blocked loop: drive, `time.sleep(0.1)`, drive... for
+    `seconds` (default 6), swallowing whatever the robot handle raises."""
+
+    labels = ("blockdrive",)
+
+    async def execute(self, order: Order, ctx: ExecutionContext) -> str | None:
+        ctx.progress("driving from a blocked loop")
+        end = time.monotonic() + float(order.params.get("seconds", 6))
+        refused = 0
+        while time.monotonic() < end:
+            try:
+                ctx.robot.drive(0.3, 0.0)
+            except Exception:
+                refused += 1
+            time.sleep(0.1)  # noqa: ASYNC251 (the fault under test)
+        return f"drove; {refused} commands refused"

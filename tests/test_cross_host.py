@@ -20,7 +20,7 @@ import pytest
 from bench.cross_host import RobotWatch, observer, start_stack
 from bench.netns import LEASE_MS, TwoHosts, impairment_unavailable, unavailable
 from shared.bus import Bus
-from shared.messages import Done, EmergencyStop, Order, OrderStatus, TargetPose
+from shared.messages import EmergencyStop, Order, OrderStatus, Stopped, TargetPose
 
 from .support import Client, client_wait_ready, order
 
@@ -142,7 +142,7 @@ def test_a_slow_lossy_link_still_runs_orders_and_stops_the_robot(rig: TwoHosts) 
             (moving,) = await client.submit(FAR)
             await watch.moving()
             sent = time.monotonic()
-            assert isinstance(await client.ask(EmergencyStop()), Done)
+            assert isinstance(await client.ask(EmergencyStop()), Stopped)
             took = await watch.stopped(sent, timeout=10.0)
             print(f"emergency stop across 100 ms / 5 % loss: {took * 1000:.0f} ms to zero on odom")
             assert took < STOP_BOUND

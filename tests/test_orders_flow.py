@@ -19,6 +19,7 @@ from shared.messages import (
     EmergencyStop,
     Failed,
     OrderStatus,
+    Stopped,
 )
 
 from .conftest import Processes
@@ -220,7 +221,8 @@ def test_emergency_stop_clears_everything(robot: Robot) -> None:
         )
         await client.wait_state(lambda s: s.current is not None, "the order to start")
         reply = await client.ask(EmergencyStop())
-        assert isinstance(reply, Done), reply
+        assert isinstance(reply, Stopped), reply
+        assert reply.confirmed, reply
         records = [await client.finished(i) for i in ids]
         assert [r.status for r in records] == [OrderStatus.CANCELLED] * 3
         assert records[0].message == "emergency stop"

@@ -26,6 +26,7 @@ from shared.messages import (
     Release,
     Reorder,
     Resume,
+    Stopped,
     TargetPose,
 )
 from shared.ros2 import Odometry, Pose2D, Ros2Codec, RosDistro, new_goal_id
@@ -211,10 +212,11 @@ def test_stop_stops_the_robot_when_the_executor_is_dead(robot: Robot) -> None:
         await robot.driving()
         asked = asyncio.get_running_loop().time()
         stop = await client.ask(EmergencyStop())
-        assert isinstance(stop, Done), stop
-        assert stop.detail.startswith("executor unreachable: ")
-        assert "sent zero velocity on 'cmd_vel'" in stop.detail
-        assert "navigation cancelled its goals" in stop.detail
+        assert isinstance(stop, Stopped), stop
+        assert stop.detail.startswith("sent zero velocity on 'cmd_vel'")
+        assert "no executor online" in stop.detail
+        assert stop.confirmed
+        assert "navigation cancelled every goal" in stop.detail
         stopped = await robot.standing(asked)
         await asyncio.sleep(1.0)
         assert abs(robot.odometry[-1][1].pose.x - stopped.x) < 0.01, "it moved again"
@@ -228,7 +230,7 @@ def test_the_emergency_stop_latches_until_released(robot: Robot) -> None:
 
     async def body(bus: Bus, client: Client) -> None:
         await client_wait_ready(client)
-        assert isinstance(await client.ask(EmergencyStop()), Done)
+        assert isinstance(await client.ask(EmergencyStop()), Stopped)
         refused = await client.ask_submit(order("mul", first=2, second=3))
         assert isinstance(refused, Failed)
         assert refused.reason.startswith("the emergency stop is on: release it first")

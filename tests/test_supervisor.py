@@ -27,6 +27,7 @@ from shared.messages import (
     OrderStatus,
     Reorder,
     Resume,
+    Stopped,
     Submit,
     Submitted,
     TargetPose,
@@ -357,7 +358,7 @@ def test_emergency_stop_halts_a_moving_robot_at_once(site: Site) -> None:
             lambda: odometry and odometry[-1][1].linear_x > 0.3, 20.0, "the robot to drive"
         )
         stopped_at = loop.time()
-        assert isinstance(await client.ask(EmergencyStop()), Done)
+        assert isinstance(await client.ask(EmergencyStop()), Stopped)
         await async_wait_until(
             lambda: (
                 odometry[-1][0] > stopped_at

@@ -21,7 +21,6 @@ from shared.keys import BridgeKeys, ConverterKeys, RobotKeys
 from shared.messages import (
     Cancel,
     CancelAll,
-    EmergencyStop,
     GetHistory,
     GetState,
     Message,
@@ -139,7 +138,11 @@ def build_parser() -> argparse.ArgumentParser:
     history.add_argument("--limit", type=int, default=20)
     supervisor_command("cancel", "cancel a queued or running order").add_argument("order_id")
     supervisor_command("cancel-all", "cancel the queue and the running order")
-    supervisor_command("stop", "emergency stop: halt the robot now, clear the queue, latch")
+    supervisor_command(
+        "stop",
+        "emergency stop: zero velocity now, clear the queue, latch; the robot is stopped "
+        "from here when no supervisor answers (exit status 4: sent but not confirmed)",
+    )
     supervisor_command("release", "release the emergency stop: accept orders again")
     supervisor_command("resume", "run orders that wait since a restart")
     reorder = supervisor_command("reorder", "move a queued order (position 0 is next)")
@@ -226,7 +229,7 @@ def _main(argv: list[str]) -> int:
         case "cancel-all":
             return asyncio.run(_ask_supervisor(args, CancelAll()))
         case "stop":
-            return asyncio.run(_ask_supervisor(args, EmergencyStop()))
+            return asyncio.run(_stop(args))
         case "release":
             return asyncio.run(_ask_supervisor(args, Release()))
         case "resume":
@@ -420,6 +423,23 @@ async def _ask_supervisor(args: argparse.Namespace, request: Message) -> int:
             _print_json(state)
         case _:
             _print_json(reply)
+    return 0
+
+
+async def _stop(args: argparse.Namespace) -> int:
+    """STOP, through the supervisor or, when it does not answer, from here; prints what
+    answered. Exit status 0 when the stop is confirmed, 4 when it was sent but not
+    confirmed, 3 when nothing could be stopped."""
+    try:
+        with Bus.open(bus_options(args, wait=False), asyncio.get_running_loop()) as bus:
+            stopped = await VoicectlClient(bus).stop(args.robot)
+    except BusError as exc:
+        print(f"voicectl stop: {exc}", file=sys.stderr)
+        return 3
+    _print_json(stopped)
+    if not stopped.confirmed:
+        print(f"voicectl stop: sent, but not confirmed: {stopped.detail}", file=sys.stderr)
+        return 4
     return 0
 
 

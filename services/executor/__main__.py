@@ -18,7 +18,7 @@ from shared.robot_options import add_robot_arguments, robot_options
 from .builtin import builtin_executors
 from .framework import BindingError, Bindings, load_binding, load_bindings_file
 from .robot import RESULT_GRACE, RobotLink
-from .runner import ExecutorService
+from .runner import STALL_LIMIT, ExecutorService
 
 _LOGGER = logging.getLogger(__name__)
 
@@ -59,6 +59,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         help="seconds an executor has to honour a cancel before the robot is halted",
     )
     parser.add_argument(
+        "--stall-limit",
+        type=float,
+        default=STALL_LIMIT,
+        help="seconds the event loop may stall (blocking code in an executor) before an "
+        "order that commands the robot is halted",
+    )
+    parser.add_argument(
         "--result-grace",
         type=float,
         default=RESULT_GRACE,
@@ -96,7 +103,12 @@ async def main(argv: list[str] | None = None) -> int:
             result_grace=args.result_grace,
         )
         service = ExecutorService(
-            bus, RobotKeys(args.robot), robot, bindings, cancel_deadline=args.cancel_deadline
+            bus,
+            RobotKeys(args.robot),
+            robot,
+            bindings,
+            cancel_deadline=args.cancel_deadline,
+            stall_limit=args.stall_limit,
         )
         service.start()
         _LOGGER.info("executor ready for %s; labels: %s", args.robot, ", ".join(bindings.labels))

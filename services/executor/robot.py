@@ -18,14 +18,13 @@ from collections.abc import Callable
 from shared.bus import Bus
 from shared.errors import BusError, OrderFailed
 from shared.geometry import compose
+from shared.halting import RobotStop
 from shared.keys import BRIDGE_TOKENS, BridgeKeys, BridgeKind, BridgeToken
 from shared.messages import RobotPose, TargetPose
 from shared.robot_options import RobotOptions
 from shared.ros2 import (
-    CANCEL_ALL,
     NAVIGATION_ERRORS,
     CameraType,
-    CancelCode,
     CdrError,
     CmdVelType,
     CompressedImage,
@@ -51,10 +50,7 @@ RESULT_TIMEOUT = 24 * 3600.0
 RESULT_GRACE = 10.0
 """Seconds get_result may keep failing (a link down) before the goal is cancelled."""
 RESULT_RETRY = 0.5
-CANCEL_TIMEOUT = 2.0
 PROBE_TIMEOUT = 3.0
-STOP_REPEAT = 3
-"""Zero velocity is sent this many times: one lost sample must not leave the robot moving."""
 ROBOT_FRAME = "base_link"
 ODOM_FRAME = "odom"
 
@@ -100,6 +96,9 @@ class RobotLink:
         self._cmd_vel_learnt = asyncio.Event()
         self.bridge_camera: CameraType | None = None
         self._warned_cmd_vel = False
+        self.latched = False
+        """The emergency stop is on: no order may command the robot. Set from whatever
+        thread hears the stop; read wherever a command is about to go out."""
 
     # --- what the robot takes -------------------------------------------------------------
 
@@ -295,9 +294,14 @@ class RobotLink:
         payload = self.codec.velocity(kind, linear_x, angular_z, time.time())
         self.bus.publish_bytes(self.keys.cmd_vel, payload, urgent=stop)
 
-    def stop_moving(self) -> None:
-        for _ in range(STOP_REPEAT):
-            self.drive(0.0, 0.0)
+    @property
+    def stopper(self) -> RobotStop:
+        """How to stop this robot, as far as it is known now."""
+        return RobotStop(self.keys, self.codec, self.cmd_vel_type)
+
+    def stop_moving(self) -> str:
+        """Zero velocity, at once; callable from any thread."""
+        return self.stopper.zero_velocity(self.bus)
 
     # --- stopping -------------------------------------------------------------------------
 
@@ -310,33 +314,15 @@ class RobotLink:
     async def cancel_goals(self, goal_id: bytes | None = None) -> str | None:
         """Cancel one navigation goal (or all); None when navigation confirmed it or had
         nothing to cancel, else what went wrong, logged, with zero velocity sent again."""
-        codec = self.codec
-        key = self.keys.navigate("cancel_goal")
-        what = f"goal {goal_id.hex()[:8]}" if goal_id is not None else "every goal"
-        request = codec.cancel_goal_request(goal_id or CANCEL_ALL)
-        problem = None
-        try:
-            reply = codec.read_cancel_goal_response(
-                await self.bus.request_bytes(key, request, CANCEL_TIMEOUT, urgent=True)
-            )
-        except BusError as exc:
-            if self.navigation_seen or goal_id is not None:
-                problem = f"navigation did not answer the cancel of {what} ({exc})"
-        except CdrError as exc:
-            problem = f"navigation's answer to the cancel of {what} does not decode: {exc}"
-        else:
-            self.navigation_seen = True
-            match reply.return_code:
-                case CancelCode.REJECTED:
-                    problem = f"navigation refused to cancel {what}"
-                case CancelCode.UNKNOWN_GOAL_ID:
-                    _LOGGER.info("navigation does not know %s: nothing to cancel", what)
-                case CancelCode.NONE | CancelCode.GOAL_TERMINATED:
-                    pass
-        if problem is not None:
-            _LOGGER.warning("%s; the robot may still be moving", problem)
-            self.stop_moving()
-        return problem
+        cancelled = await self.stopper.cancel_goals(self.bus, goal_id)
+        self.navigation_seen |= cancelled.answered
+        if cancelled.confirmed:
+            return None
+        if not cancelled.answered and not self.navigation_seen and goal_id is None:
+            return None  # a robot without navigation: nothing to cancel
+        _LOGGER.warning("%s; the robot may still be moving", cancelled.detail)
+        self.stop_moving()
+        return cancelled.detail
 
     # --- navigation -----------------------------------------------------------------------
 
@@ -427,6 +413,7 @@ def _raise_unless_succeeded(result: NavigateResult, distro: RosDistro) -> None:
 
 UNSUPERVISED = "supervisor lost: the robot takes no command while no one could STOP it"
 """Why an order may not command the robot while the supervisor is lost."""
+LATCHED = "the emergency stop is on: the robot takes no command until it is released"
 
 
 class OrderRobot:
@@ -451,6 +438,7 @@ class OrderRobot:
         """What the robot did not confirm while this order ran (a refused cancel)."""
 
     def revoke(self) -> None:
+        """End the handle; a plain flag, so any thread may do it (the emergency stop's)."""
         self._revoked = True
 
     @property
@@ -465,6 +453,8 @@ class OrderRobot:
     def _command(self) -> RobotLink:
         """The link, for a call that may move the robot."""
         link = self._live()
+        if link.latched:
+            raise RobotRevoked(LATCHED)
         if self._unsupervised():
             raise OrderFailed(UNSUPERVISED)
         self.commanded = True
@@ -485,9 +475,11 @@ class OrderRobot:
 
     def drive(self, linear_x: float, angular_z: float) -> None:
         """Publish one velocity command on the robot's cmd_vel (a zero one is a stop,
-        always allowed)."""
-        stop = linear_x == 0.0 and angular_z == 0.0
-        (self._live() if stop else self._command()).drive(linear_x, angular_z)
+        always allowed, even once the handle is revoked)."""
+        if linear_x == 0.0 and angular_z == 0.0:
+            self._link.drive(0.0, 0.0)  # even revoked: an executor's clean-up may stop
+            return
+        self._command().drive(linear_x, angular_z)
 
     async def next_pose(self, timeout: float = 5.0) -> Pose2D:
         return await self._live().next_pose(timeout)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import asyncio
 import collections
+import contextlib
 import logging
 from collections.abc import Callable, Coroutine
 
@@ -28,6 +29,7 @@ from shared.messages import (
     GetResult,
     GetRunning,
     Halt,
+    Latch,
     Message,
     Order,
     OrderFinished,
@@ -40,11 +42,14 @@ from shared.messages import (
 
 from .framework import Bindings, ExecutionContext, Executor, ParamsMismatch, order_params
 from .robot import OrderRobot, RobotLink
+from .watchdog import LoopWatchdog
 
 _LOGGER = logging.getLogger(__name__)
 RECENT_RESULTS = 32
 CMD_VEL_TYPE_WAIT = 2.0
 """Seconds the start-up stop waits for the bridge to say what cmd_vel takes."""
+STALL_LIMIT = 0.5
+"""Seconds the event loop may stall before an order commanding the robot is halted."""
 SUPERVISOR_LOST = "supervisor lost: robot stopped (no one could STOP it)"
 """How an order that commanded the robot ends when the supervisor goes."""
 
@@ -60,6 +65,9 @@ class _Execution:
         """True once its result has been published, so it is published once."""
         self.cancel_reason = "cancelled"
         self.cancel_status = OrderStatus.CANCELLED
+        self.ended_by: tuple[OrderStatus, str] | None = None
+        """Set when something outside the order ended it (an emergency stop, a stalled
+        loop): how it ended, whatever `execute` returns afterwards."""
 
 
 class ExecutorService:
@@ -72,6 +80,7 @@ class ExecutorService:
         robot: RobotLink,
         bindings: Bindings,
         cancel_deadline: float = 2.0,
+        stall_limit: float = STALL_LIMIT,
     ) -> None:
         self._bus = bus
         self._keys = keys
@@ -91,11 +100,20 @@ class ExecutorService:
         """The supervisor was seen, and its token has gone since: no one could STOP."""
         self._tasks: set[asyncio.Task[str | None]] = set()
         """Halts in progress (the loop keeps only weak references to tasks)."""
+        self._stall_limit = stall_limit
+        self._watchdog: LoopWatchdog | None = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._stalled: _Execution | None = None
+        """The order halted because the loop stalled under it, until the loop runs again."""
 
     def start(self) -> None:
         self._robot.start()
         self._bus.serve(self._keys.executor_execute, json_decoder(Execute), self.handle)
         self._bus.serve(self._keys.executor_control, json_decoder(ControlRequest), self.handle)
+        self._bus.serve_now(self._keys.executor_latch, json_decoder(Latch), self._on_latch)
+        self._loop = loop = asyncio.get_running_loop()
+        self._watchdog = LoopWatchdog(loop, self._stall_limit, self._on_stall, self._on_recover)
+        self._watchdog.start()
         for label in self._bindings.labels:
             try:
                 self._bus.announce(self._keys.label(label))
@@ -173,9 +191,12 @@ class ExecutorService:
         self._robot.stop_moving()
         running = self._running
         if running is not None:
-            # Before the robot's goals, so that the order ends as cancelled, not as a
-            # navigation the robot dropped.
+            # Revoked at once, without the cancel deadline: whatever the executor does
+            # now, it cannot move the robot. Cancelled before the robot's goals, so that
+            # the order ends as cancelled, not as a navigation the robot dropped.
+            running.robot.revoke()
             running.cancel_reason = why
+            running.ended_by = running.ended_by or (running.cancel_status, why)
             running.task.cancel()
         return self._end_halt(running, why)
 
@@ -184,6 +205,70 @@ class ExecutorService:
         if running is not None:
             await self._cancel(running, why)
         return problem
+
+    # --- the emergency stop and the stalled loop: on other threads than the loop --------------
+
+    def _on_latch(self, latch: Latch) -> Message:
+        """On Zenoh's thread, whatever the loop is doing: from now on the robot takes no
+        command from any order, the running order's handle is revoked (no cancel deadline),
+        zero velocity goes out; the loop then ends the order and cancels the robot's goals."""
+        if not latch.on:
+            self._robot.latched = False
+            _LOGGER.info("emergency stop released: orders may command the robot again")
+            return Done(detail="released")
+        self._robot.latched = True
+        running = self._running
+        if running is not None:
+            running.robot.revoke()
+            running.ended_by = (OrderStatus.CANCELLED, "emergency stop")
+        sent = self._robot.stop_moving()
+        _LOGGER.warning("emergency stop: %s", sent)
+        if self._loop is not None:
+            with contextlib.suppress(RuntimeError):  # the loop is closing: nothing to end
+                self._loop.call_soon_threadsafe(self._halt_soon, "emergency stop")
+        revoked = f"; order {running.order_id} may no longer command it" if running else ""
+        return Done(detail=f"latched{revoked}")
+
+    def _halt_soon(self, why: str) -> None:
+        task = asyncio.get_running_loop().create_task(self._halt(why))
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+
+    def _on_stall(self, seconds: float) -> None:
+        """On the watchdog's thread: the loop has not run for `seconds`. An order that
+        commands the robot is stopped from here, since its own loop cannot."""
+        running = self._running
+        if running is None or not running.robot.commanded or running.reported:
+            _LOGGER.warning("the event loop has not run for %.1f s", seconds)
+            return
+        running.robot.revoke()
+        stopper = self._robot.stopper
+        stopper.zero_velocity(self._bus)
+        stopper.cancel_goals_now(self._bus)
+        running.cancel_status = OrderStatus.FAILED
+        running.cancel_reason = (
+            f"the executor's event loop stalled (blocking code in execute?): robot halted "
+            f"after {seconds:.1f} s"
+        )
+        running.ended_by = (running.cancel_status, running.cancel_reason)
+        self._stalled = running
+        _LOGGER.error(
+            "the event loop has not run for %.1f s while order %s commanded the robot: "
+            "robot halted, its handle revoked; execute() must never block (use "
+            "asyncio.to_thread)",
+            seconds,
+            running.order_id,
+        )
+        note = OrderProgress(
+            order_id=running.order_id, progress=Progress(text=running.cancel_reason)
+        )
+        self._bus.publish(self._keys.executor_events, note, superseded=True)
+
+    def _on_recover(self, seconds: float) -> None:
+        stalled, self._stalled = self._stalled, None
+        _LOGGER.warning("the event loop runs again after a %.1f s stall", seconds)
+        if stalled is not None and stalled is self._running and not stalled.task.done():
+            stalled.task.cancel()
 
     def _on_supervisor(self, _key: str, alive: bool) -> None:
         if alive:
@@ -218,6 +303,8 @@ class ExecutorService:
     async def shutdown(self) -> None:
         # Offline first, so the supervisor holds its queue instead of sending the next order.
         self._withdraw()
+        if self._watchdog is not None:
+            self._watchdog.stop()
         if self._running is not None:
             # Interrupted, not cancelled: the rest of its command is dropped, as after a
             # failure, so that the next start does not carry on with it unasked.
@@ -232,6 +319,10 @@ class ExecutorService:
             return Rejected(
                 order_id=order_id,
                 reason=f"unknown label '{order.label}'; bound labels: {bound}",
+            )
+        if self._robot.latched:
+            return Rejected(
+                order_id=order_id, reason="the emergency stop is latched on this executor"
             )
         if self._running is not None:
             return Rejected(order_id=order_id, reason=f"busy with order '{self._running.order_id}'")
@@ -291,6 +382,10 @@ class ExecutorService:
         running.reported = True
         running.robot.revoke()
         self._running = None
+        if running.ended_by is not None:
+            # It may have run on past its end (a blocked loop): what it says is not how it ended.
+            status, why = running.ended_by
+            message = why if message == why else f"{why}; it then said: {message}"
         if running.robot.problems:
             message = "; ".join([message, *running.robot.problems])
         _LOGGER.info("order %s %s: %s", order_id, status, message)

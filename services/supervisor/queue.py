@@ -53,6 +53,8 @@ class RobotQueue:
         """False while a current order restored from the store awaits the executor's word."""
         self.stopped = False
         """The emergency stop is latched: no order starts, none is accepted."""
+        self.stop_detail = ""
+        """What answered the last emergency stop, as it came in."""
         self.paused = ""
         """Why queued orders wait (restored after a restart); '' when they run."""
         self.queue: deque[OrderRecord] = deque()
@@ -242,11 +244,13 @@ class RobotQueue:
             history=[self.history[i] for i in range(min(SNAPSHOT_HISTORY, len(self.history)))],
             stopped=self.stopped,
             paused=self.paused,
+            stop_detail=self.stop_detail if self.stopped else "",
         )
 
     def release(self) -> None:
         """Let the latched emergency stop go."""
         self.stopped = False
+        self.stop_detail = ""
 
     def _to_history(self, record: OrderRecord, status: OrderStatus, message: str) -> None:
         ended = msgspec.structs.replace(

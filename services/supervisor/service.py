@@ -11,11 +11,11 @@ from __future__ import annotations
 import asyncio
 import logging
 import sqlite3
-import time
 
 from shared.bus import Bus, json_decoder
 from shared.errors import BusError
-from shared.keys import BridgeKeys, RobotKeys, robot_of
+from shared.halting import Cancelled, RobotStop
+from shared.keys import RobotKeys, robot_of
 from shared.messages import (
     Accepted,
     Cancel,
@@ -34,6 +34,7 @@ from shared.messages import (
     GetState,
     Halt,
     HistoryPage,
+    Latch,
     Message,
     OrderFinished,
     OrderProgress,
@@ -46,11 +47,11 @@ from shared.messages import (
     State,
     StateReply,
     StateUpdate,
+    Stopped,
     Submit,
     Submitted,
     SupervisorRequest,
 )
-from shared.ros2 import CancelCode, CmdVelType, Ros2Codec, RosDistro
 
 from .queue import RobotQueue
 from .store import OrderStore
@@ -65,16 +66,11 @@ order interrupted."""
 LOST_GRACE = 0.5
 """After the executor's token goes, how long its running order may still report a result."""
 PUBLISH_INTERVAL = 0.02
-STOP_REPEAT = 3
-"""Zero-velocity commands sent by an emergency stop (each blocks for room, never dropped)."""
-STOP_TIMEOUT = 2.0
-"""How long an emergency stop waits for navigation to answer its cancel."""
-CANCEL_ANSWERS = {
-    CancelCode.NONE: "navigation cancelled its goals",
-    CancelCode.REJECTED: "NAVIGATION REFUSED TO CANCEL its goals",
-    CancelCode.UNKNOWN_GOAL_ID: "navigation had no goal to cancel",
-    CancelCode.GOAL_TERMINATED: "navigation's goals had already ended",
-}
+CONFIRM_WAIT = 0.3
+"""How long an emergency stop waits for navigation and the executor to confirm before it
+is acknowledged: the zero velocity is out before, so this delays only the answer."""
+HOLD_EVERY = 0.1
+"""While the stop is latched, zero velocity goes out this often."""
 
 
 class RobotSupervisor:
@@ -89,7 +85,8 @@ class RobotSupervisor:
         self._wake = asyncio.Event()
         self._publish_handle: asyncio.TimerHandle | None = None
         self._last_publish = 0.0
-        self._tasks: list[asyncio.Task[None]] = []
+        self._tasks: list[asyncio.Future[None]] = []
+        self._holding: asyncio.Future[None] | None = None
         self.executor_info = ExecutorInfo()
         """How to reach the robot without its executor: the executor's last word on it."""
 
@@ -102,12 +99,15 @@ class RobotSupervisor:
         self._tasks.append(loop.create_task(self._dispatch_loop()))
         if not self._queue.current_verified:
             self._tasks.append(loop.create_task(self._expire_unverified()))
+        if self._queue.stopped:  # latched before a restart: held still again
+            self._hold()
         self._changed()
 
     async def stop(self) -> None:
-        for task in self._tasks:
+        tasks = [*self._tasks, *([self._holding] if self._holding is not None else [])]
+        for task in tasks:
             task.cancel()
-        await asyncio.gather(*self._tasks, return_exceptions=True)
+        await asyncio.gather(*tasks, return_exceptions=True)
         if self._publish_handle is not None:
             self._publish_handle.cancel()
 
@@ -151,6 +151,9 @@ class RobotSupervisor:
                 self._queue.release()
                 self._store.write([self._store.save_stopped(self.robot, False)])
                 self._changed()
+                match await self._latch_executor(False):
+                    case Failed(reason=reason):
+                        return Done(detail=f"emergency stop released; EXECUTOR: {reason}")
                 return Done(detail="emergency stop released")
             case Resume():
                 if not self._queue.paused:
@@ -189,55 +192,131 @@ class RobotSupervisor:
         return Done(detail=f"cancelling {order_id}")
 
     async def _emergency_stop(self) -> Message:
-        """Latch, clear the queue, halt through the executor, and stop the robot directly
-        too: zero velocity and every navigation goal cancelled on the bridge's keys, so
-        that STOP stops the robot whatever process has died."""
+        """Zero velocity first, at once, before anything is asked of anyone; then latch,
+        clear the queue, and in parallel latch the executor (answered off its event loop)
+        and cancel every navigation goal on the robot's bridge keys, so that STOP stops the
+        robot whatever process has died or blocked. Acknowledged after at most
+        `CONFIRM_WAIT`, with what answered by then; later answers land in the state."""
+        stop = self._robot_stop()
+        sent = stop.zero_velocity(self._bus)
         self._queue.stopped = True
         cleared = self._queue.clear_queue("emergency stop")
         self._store.write([self._store.save_stopped(self.robot, True)])
+        self._hold()
+        latch = asyncio.ensure_future(self._latch_executor(True))
+        cancel = asyncio.ensure_future(stop.cancel_goals(self._bus))
+        await asyncio.wait({latch, cancel}, timeout=CONFIRM_WAIT)
+        confirmed, detail = self._stop_outcome(sent, cleared, latch, cancel)
+        self._queue.stop_detail = detail
         self._changed()
-        halted = await self._send_control(Halt())
-        direct = await self._halt_robot()
-        current = self._queue.current
-        if isinstance(halted, Failed):
-            if current is not None:
-                self._finish(current.id, OrderStatus.CANCELLED, f"emergency stop; {halted.reason}")
-            return Done(detail=f"{halted.reason}; {direct}; cancelled {cleared} queued order(s)")
-        return Done(detail=f"halted by the executor; {direct}; cancelled {cleared} queued order(s)")
+        if not (latch.done() and cancel.done()):
+            self._tasks.append(
+                asyncio.ensure_future(self._stop_settles(sent, cleared, latch, cancel))
+            )
+        return Stopped(confirmed=confirmed, detail=detail)
 
-    async def _halt_robot(self) -> str:
-        """Zero velocity and cancel every navigation goal on the robot's bridge keys, as
-        the executor announced them; says what it did."""
-        info = self.executor_info
+    def _stop_outcome(
+        self,
+        sent: str,
+        cleared: int,
+        latch: asyncio.Future[Message | None],
+        cancel: asyncio.Future[Cancelled],
+    ) -> tuple[bool, str]:
+        """Whether the stop is confirmed, and what answered it, in one line."""
+        parts = [sent]
+        confirmed = True
+        if not cancel.done():
+            parts.append("navigation has not answered the cancel yet")
+            confirmed = False
+        else:
+            navigation = cancel.result()
+            parts.append(navigation.detail)
+            # No navigation at all (a robot driven by cmd_vel alone): zero velocity is all.
+            confirmed &= navigation.confirmed or not navigation.answered
+        if not latch.done():
+            parts.append("the executor has not answered yet")
+            confirmed = False
+        else:
+            match latch.result():
+                case None:
+                    parts.append("no executor online")
+                case Done(detail=detail):
+                    parts.append(f"executor: {detail}")
+                case Failed(reason=reason):
+                    parts.append(f"EXECUTOR: {reason}")
+                    confirmed = False
+                case other:
+                    parts.append(f"executor answered {type(other).__name__}")
+                    confirmed = False
+        parts.append(f"cancelled {cleared} queued order(s)")
+        return confirmed, "; ".join(parts)
+
+    async def _stop_settles(
+        self,
+        sent: str,
+        cleared: int,
+        latch: asyncio.Future[Message | None],
+        cancel: asyncio.Future[Cancelled],
+    ) -> None:
+        """The stop's late answers, into the state and the log; an order the executor
+        could not be told to end is ended here, its robot handle being beyond reach."""
+        await latch
+        await cancel
+        _, detail = self._stop_outcome(sent, cleared, latch, cancel)
+        if self._queue.stopped:
+            self._queue.stop_detail = detail
+        _LOGGER.info("%s: emergency stop: %s", self.robot, detail)
+        current = self._queue.current
+        if current is not None and isinstance(latch.result(), Failed):
+            self._finish(current.id, OrderStatus.CANCELLED, f"emergency stop; {detail}")
+        self._changed()
+
+    async def _latch_executor(self, on: bool) -> Message | None:
+        """Tell the executor to latch (or release) the stop; None when none is online."""
+        if not self._queue.executor_online:
+            return None
         try:
-            keys = BridgeKeys(
-                info.namespace, cmd_vel_name=info.cmd_vel, navigate_name=info.navigate
-            )
-            codec = Ros2Codec(RosDistro(info.distro))
-            stop = codec.velocity(CmdVelType(info.cmd_vel_type), 0.0, 0.0, time.time())
-        except ValueError as exc:  # an executor that says nonsense: fall back to the defaults
-            _LOGGER.warning(
-                "%s: unusable executor info (%s); stopping on default keys", self.robot, exc
-            )
-            keys, codec = BridgeKeys(), Ros2Codec()
-            stop = codec.twist(0.0, 0.0)
-        for _ in range(STOP_REPEAT):  # a lost sample must not leave the robot moving
-            self._bus.publish_bytes(keys.cmd_vel, stop, urgent=True)
-        try:
-            reply = await self._bus.request_bytes(
-                keys.navigate("cancel_goal"), codec.cancel_goal_request(), STOP_TIMEOUT, urgent=True
+            return await self._bus.request(
+                self._keys.executor_latch,
+                Latch(on=on),
+                self._reply_decode,
+                EXECUTOR_TIMEOUT,
+                urgent=True,
             )
         except BusError as exc:
-            cancelled = f"no navigation to cancel ({exc})"
-        else:
-            try:
-                answer = codec.read_cancel_goal_response(reply)
-            except Exception as exc:  # a reply that does not decode is the robot's problem
-                cancelled = f"navigation's answer to the cancel does not decode: {exc}"
-            else:
-                cancelled = CANCEL_ANSWERS[answer.return_code]
-        where = f"'{keys.cmd_vel}'"
-        return f"sent zero velocity on {where}; {cancelled}"
+            return Failed(reason=f"executor unreachable: {exc}")
+
+    def _robot_stop(self) -> RobotStop:
+        return RobotStop.of(self.executor_info, self.robot)
+
+    def _hold(self) -> None:
+        """While the stop is latched, keep the robot at zero velocity and without goals,
+        so that no late command (a stuck executor, another client) moves it."""
+        if self._holding is None or self._holding.done():
+            self._holding = asyncio.ensure_future(self._hold_still())
+
+    async def _hold_still(self) -> None:
+        stop = self._robot_stop()
+        goals = asyncio.Event()
+        unsubscribe = self._bus.subscribe(
+            stop.keys.navigate("feedback"), bytes, lambda _key, _raw: goals.set()
+        )
+        try:
+            while self._queue.stopped:
+                stop = self._robot_stop()
+                stop.zero_velocity(self._bus)
+                if goals.is_set():  # navigation works on a goal: nobody may, now
+                    goals.clear()
+                    cancelled = await stop.cancel_goals(self._bus)
+                    _LOGGER.warning("%s: a goal during the stop: %s", self.robot, cancelled.detail)
+                await asyncio.sleep(HOLD_EVERY)
+        finally:
+            unsubscribe()
+
+    async def _halt_robot(self) -> str:
+        """Zero velocity and cancel every navigation goal, on the robot's bridge keys as
+        the executor announced them; says what it did."""
+        return (await self._robot_stop().halt(self._bus)).detail
 
     async def _send_control(self, request: CancelOrder | Halt | GetRunning | GetResult) -> Message:
         try:
@@ -449,10 +528,11 @@ class SupervisorService:
 
     async def _on_request(self, key: str, request: SupervisorRequest) -> Message:
         name = robot_of(key)
-        if name in self._robots or isinstance(request, EmergencyStop):
+        if name in self._robots:
             return await self.robot(name).handle(request)
         # A name nobody has configured or served: answer without creating a robot, so that
-        # made-up names cannot grow the process without limit.
+        # made-up names cannot grow the process without limit. Not even a STOP creates
+        # one: with no executor ever heard of, there is no robot to know the keys of.
         match request:
             case GetState():
                 return StateReply(state=State(robot=name))

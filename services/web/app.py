@@ -35,7 +35,6 @@ from shared.messages import (
     Cancel,
     CancelAll,
     Done,
-    EmergencyStop,
     GetHistory,
     GetState,
     Message,
@@ -283,7 +282,12 @@ class Panel:
         return await self._done(self._robot(request), CancelAll())
 
     async def _stop(self, request: Request) -> object:
-        return await self._done(self._robot(request), EmergencyStop())
+        """Never a timeout: stopped through the supervisor, or from here when it does not
+        answer; an error only when nothing at all could be stopped."""
+        keys = self._robot(request)
+        with _as_api_errors():
+            stopped = await self.client.stop(keys.robot)
+        return {"detail": stopped.detail, "confirmed": stopped.confirmed}
 
     async def _release(self, request: Request) -> object:
         return await self._done(self._robot(request), Release())

@@ -436,6 +436,7 @@ function showState(state) {
     : state.paused;
   $("held").hidden = !why;
   $("held-why").textContent = why || "";
+  $("held-detail").textContent = state.stopped ? state.stop_detail : "";
   $("release").hidden = !state.stopped;
   $("resume").hidden = state.stopped || !state.paused;
   $("stop").classList.toggle("latched", state.stopped);
@@ -523,7 +524,11 @@ $("cancel-all").onclick = () => {
     api("/api/cancel_all", {}).catch(report);
   }
 };
-$("stop").onclick = () => api("/api/stop", {}).catch(report); // never asks: it stops now
+// Never asks: it stops now, and says what stopped the robot (or what did not confirm).
+$("stop").onclick = () =>
+  api("/api/stop", {})
+    .then((stopped) => setStatus(stopped.confirmed ? "Stopped." : `STOP NOT CONFIRMED: ${stopped.detail}`))
+    .catch(report);
 $("release").onclick = () => api("/api/release", {}).catch(report);
 $("resume").onclick = () => api("/api/resume", {}).catch(report);
 $("newer").onclick = () => page(view.historyOffset - PAGE);

@@ -1,0 +1,114 @@
+"""Stopping a robot on its bridge keys: the one implementation of "stop the robot".
+
+Zero velocity on cmd_vel, then a cancel of every navigation goal, and what navigation
+answered. The executor stops its robot with it, the supervisor on STOP and when the
+executor is lost, and `voicectl stop` and the panel when no supervisor answers: whoever
+is left alive can stop the robot the same way.
+
+`zero_velocity` is a plain put: it may be called from any thread (a Zenoh callback, the
+executor's watchdog), never waits for an event loop, and goes out at once.
+"""
+
+from __future__ import annotations
+
+import logging
+import time
+from dataclasses import dataclass
+
+from .bus import Bus
+from .errors import BusError
+from .keys import BridgeKeys
+from .messages import ExecutorInfo
+from .ros2 import CANCEL_ALL, CancelCode, CdrError, CmdVelType, Ros2Codec, RosDistro
+
+_LOGGER = logging.getLogger(__name__)
+
+STOP_REPEAT = 3
+"""Zero velocity is sent this many times: one lost sample must not leave the robot moving."""
+CANCEL_TIMEOUT = 2.0
+"""How long navigation has to answer a cancel."""
+
+
+@dataclass(frozen=True)
+class RobotStop:
+    """How to stop one robot: its bridge keys, its distribution, what cmd_vel takes."""
+
+    keys: BridgeKeys
+    codec: Ros2Codec
+    cmd_vel_type: CmdVelType
+
+    @classmethod
+    def of(cls, info: ExecutorInfo, robot: str = "") -> RobotStop:
+        """From what the executor announced; the defaults (with a warning) when it makes
+        no sense, since a stop on the usual keys beats no stop."""
+        try:
+            keys = BridgeKeys(
+                info.namespace, cmd_vel_name=info.cmd_vel, navigate_name=info.navigate
+            )
+            return cls(keys, Ros2Codec(RosDistro(info.distro)), CmdVelType(info.cmd_vel_type))
+        except ValueError as exc:
+            _LOGGER.warning("%s: unusable executor info (%s); stopping on default keys", robot, exc)
+            return cls(BridgeKeys(), Ros2Codec(), CmdVelType.TWIST)
+
+    def zero_velocity(self, bus: Bus) -> str:
+        """Send zero velocity, first and at once; says where."""
+        payload = self.codec.velocity(self.cmd_vel_type, 0.0, 0.0, time.time())
+        for _ in range(STOP_REPEAT):
+            bus.publish_bytes(self.keys.cmd_vel, payload, urgent=True)
+        return f"sent zero velocity on '{self.keys.cmd_vel}'"
+
+    async def cancel_goals(
+        self, bus: Bus, goal_id: bytes | None = None, timeout: float = CANCEL_TIMEOUT
+    ) -> Cancelled:
+        """Cancel one navigation goal, or every goal; what navigation answered."""
+        what = f"goal {goal_id.hex()[:8]}" if goal_id is not None else "every goal"
+        request = self.codec.cancel_goal_request(goal_id or CANCEL_ALL)
+        try:
+            raw = await bus.request_bytes(
+                self.keys.navigate("cancel_goal"), request, timeout, urgent=True
+            )
+        except BusError as exc:
+            return Cancelled(
+                False, False, f"navigation did not answer the cancel of {what} ({exc})"
+            )
+        try:
+            code = self.codec.read_cancel_goal_response(raw).return_code
+        except CdrError as exc:
+            return Cancelled(
+                True, False, f"navigation's answer to the cancel does not decode: {exc}"
+            )
+        match code:
+            case CancelCode.REJECTED:
+                return Cancelled(True, False, f"navigation refused to cancel {what}")
+            case CancelCode.UNKNOWN_GOAL_ID:
+                return Cancelled(True, True, "navigation had no goal to cancel")
+            case CancelCode.GOAL_TERMINATED:
+                return Cancelled(True, True, "navigation's goals had already ended")
+            case _:
+                return Cancelled(True, True, f"navigation cancelled {what}")
+
+    def cancel_goals_now(self, bus: Bus) -> None:
+        """Ask navigation to cancel every goal without waiting for its answer; from any
+        thread (one whose event loop is stalled)."""
+        bus.query_and_forget(
+            self.keys.navigate("cancel_goal"), self.codec.cancel_goal_request(), CANCEL_TIMEOUT
+        )
+
+    async def halt(self, bus: Bus) -> Cancelled:
+        """Zero velocity now, then every goal cancelled; the cancel's outcome, its detail
+        prefixed with where the zero velocity went."""
+        sent = self.zero_velocity(bus)
+        cancelled = await self.cancel_goals(bus)
+        return Cancelled(cancelled.answered, cancelled.confirmed, f"{sent}; {cancelled.detail}")
+
+
+@dataclass(frozen=True)
+class Cancelled:
+    """What navigation said to a cancel."""
+
+    answered: bool
+    """Navigation answered at all (a robot without Nav2 never does)."""
+    confirmed: bool
+    """Nothing it was asked to cancel goes on: cancelled, unknown or already ended."""
+    detail: str
+    """In one line, for a person."""

@@ -1,0 +1,249 @@
+"""A robot under every fault STOP must beat, and a stopwatch at the simulator.
+
+One simulated robot with its supervisor and executor as processes on a router; the
+executor also serves the faulty executors of tests/executors_for_tests.py. `run(case)`
+puts the robot in motion the way the case says (a healthy navigation, an executor that
+blocks its loop, one that commands from a blocked loop, one that swallows its cancel,
+processes killed, a long queue), sends STOP through `VoicectlClient.stop` (what the panel
+and `voicectl stop` use), and measures, from the moment STOP is asked:
+
+- the first zero velocity on cmd_vel, and for a navigation the goal's end in the status
+  the simulator publishes when it handles the cancel, each timed on arrival (Zenoh's
+  thread), one hop from the simulator like the robot itself;
+- the motion afterwards: how far the robot moved from `SETTLE` to `WATCH` seconds after
+  STOP, and whether any odometry after `SETTLE` shows velocity.
+
+Used by tests/test_stop.py (one round per case, bounds for a busy machine) and by
+bench/stop.py (many rounds, percentiles).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import math
+import subprocess
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from shared.bus import Bus
+from shared.client import VoicectlClient
+from shared.errors import BusError
+from shared.keys import BridgeKeys
+from shared.messages import GetState, Order, Release, StateReply, Stopped, Submit, TargetPose
+from shared.ros2 import Odometry, Ros2Codec
+
+from .conftest import Processes, async_wait_until
+
+ROBOT = "r1"
+CODEC = Ros2Codec()
+SETTLE = 0.3
+"""Seconds after STOP from which the robot must stand still."""
+WATCH = 1.5
+"""Seconds after STOP until which it is watched for motion."""
+WAIT = 30.0
+EXECUTORS = (
+    "tests.executors_for_tests:BlockingNavigator",
+    "tests.executors_for_tests:BlockedDriver",
+    "tests.executors_for_tests:Runaway",
+)
+CASES = (
+    "healthy",
+    "blocked-loop",
+    "commanding-from-blocked-loop",
+    "swallowed-cancel",
+    "executor-killed",
+    "supervisor-and-executor-killed",
+    "50-queued",
+)
+NAVIGATING = {
+    "healthy",
+    "blocked-loop",
+    "executor-killed",
+    "supervisor-and-executor-killed",
+    "50-queued",
+}
+
+
+@dataclass(frozen=True)
+class Outcome:
+    case: str
+    stopped: Stopped
+    zero_velocity: float
+    """Seconds from STOP to the first zero velocity at the simulator's side of the bus."""
+    cancelled: float | None
+    """Seconds from STOP to the goal's end in the simulator's status (navigation only)."""
+    moved: float
+    """Metres the robot moved from SETTLE to WATCH after STOP."""
+    fastest_after: float
+    """The highest speed any odometry showed after SETTLE."""
+
+    @property
+    def latency(self) -> float:
+        """STOP to the robot told to stop: the later of the two for a navigation."""
+        return max(self.zero_velocity, self.cancelled or 0.0)
+
+
+def order(label: str, **params: object) -> Order:
+    return Order(order=label, label=label, description=f"do {label}", params=params)
+
+
+class StopRig:
+    def __init__(
+        self,
+        router: str,
+        processes: Processes,
+        db: Path,
+        time_scale: float = 1.0,
+        stall_limit: float = 30.0,
+    ) -> None:
+        self.stall_limit = stall_limit
+        """30 s by default: the watchdog is tested on its own, STOP must do it alone."""
+        self.router = router
+        self.processes = processes
+        self.db = db
+        self.sim = processes.start(
+            "services.sim", "--connect", router, "--time-scale", f"{time_scale:g}"
+        )
+        self.supervisor: subprocess.Popen[bytes] | None = None
+        self.executor: subprocess.Popen[bytes] | None = None
+        self.odometry: list[tuple[float, Odometry]] = []
+        self.zero_at: list[float] = []
+        self.status_at: list[float] = []
+        self.start_supervisor()
+        self.start_executor()
+
+    def start_supervisor(self) -> None:
+        self.supervisor = self.processes.start(
+            "services.supervisor", "--connect", self.router, "--robot", ROBOT, "--db", str(self.db)
+        )
+
+    def start_executor(self) -> None:
+        executors = [arg for name in EXECUTORS for arg in ("--executor", name)]
+        self.executor = self.processes.start(
+            "services.executor",
+            "--connect",
+            self.router,
+            "--robot",
+            ROBOT,
+            "--stall-limit",
+            f"{self.stall_limit:g}",
+            *executors,
+        )
+
+    @staticmethod
+    def kill(process: subprocess.Popen[bytes] | None) -> None:
+        if process is not None and process.poll() is None:
+            process.kill()
+            process.wait()
+
+    def listen(self, bus: Bus) -> None:
+        """Timestamps, on Zenoh's thread as they arrive: odometry, zero velocities, and
+        the navigation status the simulator publishes when a goal ends."""
+        keys = BridgeKeys()
+
+        def on_cmd_vel(_key: str, twist: tuple[float, float]) -> None:
+            if twist == (0.0, 0.0):
+                self.zero_at.append(time.monotonic())
+
+        bus.subscribe(keys.cmd_vel, CODEC.read_twist, on_cmd_vel, on_loop=False)
+        bus.subscribe(
+            keys.navigate("status"),
+            bytes,
+            lambda _key, _raw: self.status_at.append(time.monotonic()),
+            on_loop=False,
+        )
+        bus.subscribe(
+            keys.odom,
+            CODEC.read_odometry,
+            lambda _key, odom: self.odometry.append((time.monotonic(), odom)),
+            on_loop=False,
+        )
+
+    async def ready(self, client: VoicectlClient) -> None:
+        """Supervisor and executor up, the stop released, the executor idle."""
+        if self.supervisor is None or self.supervisor.poll() is not None:
+            self.start_supervisor()
+        if self.executor is None or self.executor.poll() is not None:
+            self.start_executor()
+
+        async def up() -> bool:
+            try:
+                await client.request(ROBOT, Release())
+                reply = await client.ask(ROBOT, GetState())
+            except BusError:
+                return False
+            assert isinstance(reply, StateReply)
+            state = reply.state
+            return state.executor_online and not state.stopped and state.current is None
+
+        await async_wait_until(up, WAIT, "supervisor and executor ready, stop released")
+        await async_wait_until(lambda: self.odometry, WAIT, "odometry")
+
+    async def driving(self) -> None:
+        await async_wait_until(
+            lambda: self.odometry and abs(self.odometry[-1][1].linear_x) > 0.2,
+            WAIT,
+            "the robot to drive",
+        )
+
+    def _away(self) -> Order:
+        """A goal far from where the robot is, on the x axis: round after round it goes
+        back and forth instead of arriving."""
+        x = 0.0 if self.odometry[-1][1].pose.x > 4.0 else 8.0
+        return Order(
+            order="goal",
+            label="mbgoal",
+            description=f"reach x {x:g}",
+            target_pose=TargetPose(frame="map", x=x),
+        )
+
+    async def run(self, case: str, client: VoicectlClient) -> Outcome:
+        await self.ready(client)
+        far = self._away()
+        match case:
+            case "healthy" | "executor-killed" | "supervisor-and-executor-killed":
+                await self._submit(client, far)
+            case "blocked-loop":
+                x = far.target_pose.x if far.target_pose else 8.0
+                await self._submit(client, order("blocknav", seconds=4, x=x))
+            case "commanding-from-blocked-loop":
+                await self._submit(client, order("blockdrive", seconds=4))
+            case "swallowed-cancel":
+                await self._submit(client, order("runaway"))
+            case "50-queued":
+                await self._submit(
+                    client, far, *[order("mul", first=i, second=2) for i in range(49)]
+                )
+            case _:
+                raise ValueError(f"unknown case {case!r}")
+        await self.driving()
+        await asyncio.sleep(0.3)  # well under way (a blocked loop is blocked by now)
+        if case in ("executor-killed", "supervisor-and-executor-killed"):
+            self.kill(self.executor)
+        if case == "supervisor-and-executor-killed":
+            self.kill(self.supervisor)
+        asked = time.monotonic()
+        stopped = await client.stop(ROBOT)
+        await asyncio.sleep(max(0.0, asked + WATCH - time.monotonic()))
+        outcome = self._measure(case, stopped, asked)
+        if case == "swallowed-cancel":
+            # It never ends on its own: only a new executor process does away with it.
+            self.kill(self.executor)
+        return outcome
+
+    async def _submit(self, client: VoicectlClient, *orders: Order) -> None:
+        await client.ask(ROBOT, Submit(request_id=f"{time.monotonic_ns()}", orders=list(orders)))
+
+    def _measure(self, case: str, stopped: Stopped, asked: float) -> Outcome:
+        zero = next((at for at in self.zero_at if at >= asked), math.inf) - asked
+        cancelled = None
+        if case in NAVIGATING or case == "50-queued":
+            cancelled = next((at for at in self.status_at if at >= asked), math.inf) - asked
+        settled = [(at, odom) for at, odom in self.odometry if at >= asked + SETTLE]
+        moved = math.dist(
+            (settled[0][1].pose.x, settled[0][1].pose.y),
+            (settled[-1][1].pose.x, settled[-1][1].pose.y),
+        )
+        fastest = max(abs(odom.linear_x) + abs(odom.angular_z) for _, odom in settled)
+        return Outcome(case, stopped, zero, cancelled, moved, fastest)

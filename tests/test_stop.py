@@ -1,0 +1,107 @@
+"""STOP first, whatever the executor is doing: each fault of tests/stop_rig.py, once, with
+real processes on loopback and the simulator. The bounds leave room for a busy machine;
+bench/stop.py measures the same cases many times for the percentiles."""
+
+from __future__ import annotations
+
+import asyncio
+from pathlib import Path
+
+import pytest
+
+from shared.bus import Bus, BusOptions
+from shared.client import VoicectlClient
+from shared.messages import GetState, OrderRecord, OrderStatus, StateReply
+
+from .conftest import Processes, async_wait_until
+from .stop_rig import CASES, ROBOT, StopRig, order
+from .support import on_bus
+
+BOUND = 0.25
+"""Seconds from STOP to the robot told to stop, on a loaded two-core machine (the bench's
+p99 on an idle one is in docs/benchmarks.md)."""
+
+
+@pytest.mark.parametrize("case", CASES)
+def test_stop_stops_the_robot_at_once_and_for_good(
+    case: str, router: str, processes: Processes, tmp_path: Path
+) -> None:
+    rig = StopRig(router, processes, tmp_path / "supervisor.sqlite3")
+
+    async def body(bus: Bus) -> None:
+        # The stopwatch listens in a session of its own, as the robot does: one that
+        # shared the client's would hear its puts without the router.
+        with Bus.open(BusOptions(connect=[router]), asyncio.get_running_loop()) as ear:
+            rig.listen(ear)
+            client = VoicectlClient(bus)
+            outcome = await rig.run(case, client)
+        print(case, outcome)
+        assert outcome.zero_velocity < BOUND, outcome
+        if outcome.cancelled is not None:
+            assert outcome.cancelled < BOUND, outcome
+        assert outcome.moved < 0.01, outcome
+        assert outcome.fastest_after == 0.0, outcome
+        if case == "supervisor-and-executor-killed":
+            assert outcome.stopped.detail.startswith("SUPERVISOR DID NOT STOP IT"), outcome
+            assert "navigation cancelled every goal" in outcome.stopped.detail
+            assert outcome.stopped.confirmed
+            return
+        assert outcome.stopped.confirmed, outcome
+        reply = await client.ask(ROBOT, GetState())
+        assert isinstance(reply, StateReply)
+        assert reply.state.stopped
+        assert reply.state.queue_length == 0
+        if case == "commanding-from-blocked-loop":
+            # Its commands went on, and the robot handle refused every one after the stop.
+            async def ended() -> list[OrderRecord]:
+                reply = await client.ask(ROBOT, GetState())
+                assert isinstance(reply, StateReply)
+                return [r for r in reply.state.history if r.order.label == "blockdrive"]
+
+            await async_wait_until(ended, 20.0, "the blocked order to end")
+            (record,) = await ended()
+            assert record.status == OrderStatus.CANCELLED, record
+            refused = int(record.message.split("drove; ")[1].split()[0])
+            assert refused >= 3, record
+        if case == "50-queued":
+            history = reply.state.history
+            assert sum(r.message == "emergency stop" for r in history) >= 10, history
+
+    on_bus(router, body)
+
+
+def test_a_stalled_event_loop_is_noticed_and_the_robot_halted(
+    router: str, processes: Processes, tmp_path: Path
+) -> None:
+    """No STOP at all: an executor drives from a blocked loop, and the executor's own
+    watchdog halts the robot once the loop has stalled for its limit (0.5 s)."""
+    rig = StopRig(router, processes, tmp_path / "supervisor.sqlite3", stall_limit=0.5)
+
+    async def body(bus: Bus) -> None:
+        with Bus.open(BusOptions(connect=[router]), asyncio.get_running_loop()) as ear:
+            rig.listen(ear)
+            client = VoicectlClient(bus)
+            await rig.ready(client)
+            (order_id,) = await client.submit(ROBOT, [order("blockdrive", seconds=3)])
+            await rig.driving()
+            # Stopped by the watchdog within its limit and a beat, not after the 3 s block.
+            await async_wait_until(
+                lambda: rig.odometry[-1][1].linear_x == 0.0, 2.5, "the watchdog to halt it"
+            )
+            halted = rig.odometry[-1][0]
+            await asyncio.sleep(0.5)
+            moved = [o for at, o in rig.odometry if at > halted]
+            assert all(o.linear_x == 0.0 for o in moved), "it moved again"
+
+            async def finished() -> OrderRecord | None:
+                reply = await client.ask(ROBOT, GetState())
+                assert isinstance(reply, StateReply)
+                return next((r for r in reply.state.history if r.id == order_id), None)
+
+            await async_wait_until(finished, 20.0, "the stalled order to end")
+            record = await finished()
+            assert record is not None
+            assert record.status == OrderStatus.FAILED, record
+            assert "event loop stalled" in record.message, record
+
+    on_bus(router, body)
