@@ -167,17 +167,23 @@ class StopRig:
         if self.executor is None or self.executor.poll() is not None:
             self.start_executor()
 
+        seen: list[object] = ["nothing"]
+
         async def up() -> bool:
             try:
                 await client.request(ROBOT, Release())
                 reply = await client.ask(ROBOT, GetState())
-            except BusError:
+            except BusError as exc:
+                seen[0] = exc
                 return False
             assert isinstance(reply, StateReply)
-            state = reply.state
+            state = seen[0] = reply.state
             return state.executor_online and not state.stopped and state.current is None
 
-        await async_wait_until(up, WAIT, "supervisor and executor ready, stop released")
+        try:
+            await async_wait_until(up, WAIT, "supervisor and executor ready, stop released")
+        except AssertionError as exc:
+            raise AssertionError(f"{exc}; last seen: {seen[0]}") from None
         await async_wait_until(lambda: self.odometry, WAIT, "odometry")
 
     async def driving(self) -> None:

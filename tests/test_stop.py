@@ -105,3 +105,36 @@ def test_a_stalled_event_loop_is_noticed_and_the_robot_halted(
             assert "event loop stalled" in record.message, record
 
     on_bus(router, body)
+
+
+def test_an_executor_back_at_once_leaves_no_order_running(
+    router: str, processes: Processes, tmp_path: Path
+) -> None:
+    """An executor killed and started again within the supervisor's grace (as `voicectl
+    up` restarts it) no longer runs the order: the order ends, the robot stands."""
+    rig = StopRig(router, processes, tmp_path / "supervisor.sqlite3")
+
+    async def body(bus: Bus) -> None:
+        with Bus.open(BusOptions(connect=[router]), asyncio.get_running_loop()) as ear:
+            rig.listen(ear)
+            client = VoicectlClient(bus)
+            await rig.ready(client)
+            (order_id,) = await client.submit(ROBOT, [order("runaway")])
+            await rig.driving()
+            rig.kill(rig.executor)
+            rig.start_executor()
+
+            async def ended() -> OrderRecord | None:
+                reply = await client.ask(ROBOT, GetState())
+                assert isinstance(reply, StateReply)
+                return next((r for r in reply.state.history if r.id == order_id), None)
+
+            await async_wait_until(ended, 20.0, "the order to end")
+            record = await ended()
+            assert record is not None
+            assert record.status in (OrderStatus.FAILED, OrderStatus.INTERRUPTED), record
+            await async_wait_until(
+                lambda: rig.odometry[-1][1].linear_x == 0.0, 5.0, "the robot to stand"
+            )
+
+    on_bus(router, body)

@@ -108,7 +108,7 @@ def test_sigkill_with_orders_in_flight_loses_nothing_and_resumes(site: Site) -> 
         record = await client.finished(running)
         assert (record.status, record.message) == (OrderStatus.CANCELLED, SUPERVISOR_LOST)
         assert site.supervisor is not None
-        assert f"{running} ended while the supervisor was away" in site.processes.log(
+        assert f"{running} ended while the supervisor restarted" in site.processes.log(
             site.supervisor
         )
         state = await client.state()

@@ -87,6 +87,8 @@ class RobotSupervisor:
         self._last_publish = 0.0
         self._tasks: list[asyncio.Future[None]] = []
         self._holding: asyncio.Future[None] | None = None
+        self._lost_pending = False
+        """The executor's token went while an order ran, and the grace has not run out."""
         self.executor_info = ExecutorInfo()
         """How to reach the robot without its executor: the executor's last word on it."""
 
@@ -377,14 +379,21 @@ class RobotSupervisor:
         self._queue.executor_online = alive
         current = self._queue.current
         loop = asyncio.get_running_loop()
-        if alive and current is not None and not self._queue.current_verified:
+        if alive and current is not None and self._lost_pending:
+            # Back (or a new one) before the grace ran out: ask it whether it still runs it.
+            self._lost_pending = False
+            self._queue.current_verified = False
+            self._tasks.append(loop.create_task(self._verify(current.id, "the executor")))
+        elif alive and current is not None and not self._queue.current_verified:
             self._tasks.append(loop.create_task(self._verify(current.id)))
         elif not alive and current is not None and self._queue.current_verified:
             # Its last result may still be on the way: a token's end travels ahead of data.
+            self._lost_pending = True
             loop.call_later(LOST_GRACE, self._lost, current.id)
         self._changed()
 
     def _lost(self, order_id: str) -> None:
+        self._lost_pending = False
         current = self._queue.current
         if self._queue.executor_online or current is None or current.id != order_id:
             return
@@ -396,8 +405,9 @@ class RobotSupervisor:
         what = await self._halt_robot()
         _LOGGER.warning("%s: executor lost while an order ran: %s", self.robot, what)
 
-    async def _verify(self, order_id: str) -> None:
-        """After a restart: resume the restored order if the executor still runs it."""
+    async def _verify(self, order_id: str, restarted: str = "the supervisor") -> None:
+        """After a restart (of `restarted`): resume the current order if the executor
+        still runs it, else record how it ended, or that it was interrupted."""
         reply = await self._send_control(GetRunning())
         current = self._queue.current
         if current is None or current.id != order_id or self._queue.current_verified:
@@ -410,13 +420,13 @@ class RobotSupervisor:
         # It ended while the supervisor was away: the executor may still know how.
         result = await self._send_control(GetResult(order_id=order_id))
         if isinstance(result, OrderFinished) and result.order_id == order_id:
-            _LOGGER.info("%s: %s ended while the supervisor was away", self.robot, order_id)
+            _LOGGER.info("%s: %s ended while %s restarted", self.robot, order_id, restarted)
             self._finish(order_id, result.status, result.message)
         else:
             self._finish(
                 order_id,
                 OrderStatus.INTERRUPTED,
-                "the supervisor restarted while it ran and the executor no longer runs it",
+                f"{restarted} restarted while it ran and the executor no longer runs it",
             )
 
     async def _expire_unverified(self) -> None:
