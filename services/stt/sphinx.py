@@ -136,7 +136,15 @@ class _Decoder:
                 continue
             first = len(self.known(word)) + 1
             for offset, phones in enumerate(variants):
-                self.decoder.add_word(_numbered(word, first + offset), " ".join(phones), False)
+                name = _numbered(word, first + offset)
+                try:
+                    self.decoder.add_word(name, " ".join(phones), False)
+                except RuntimeError:
+                    # The language model is shared by every decoder of the process: a word
+                    # another decoder added is already in it, and pocketsphinx reports the
+                    # model's refusal although this decoder's dictionary took the word.
+                    if self.decoder.lookup_word(name) is None:
+                        raise
             self._words.add(word)
         name = f"grammar_{compiled.version}"
         self.decoder.add_fsg(name, self._fsg_model(compiled))
