@@ -18,6 +18,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import platform
+import signal
 import statistics
 import sys
 import tempfile
@@ -90,6 +91,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--rounds", type=int, default=20)
     args = parser.parse_args()
+    # SIGTERM unwinds like Ctrl-C, so that the processes started are stopped too.
+    signal.signal(signal.SIGTERM, lambda *_: sys.exit(1))
     print(
         f"{platform.machine()}, {len(__import__('os').sched_getaffinity(0))} cores, "
         f"Python {platform.python_version()}, {args.rounds} rounds per case, "
