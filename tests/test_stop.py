@@ -10,8 +10,16 @@ from pathlib import Path
 import pytest
 
 from shared.bus import Bus, BusOptions
-from shared.client import VoicectlClient
-from shared.messages import GetState, OrderRecord, OrderStatus, StateReply
+from shared.client import Unreachable, VoicectlClient
+from shared.messages import (
+    EmergencyStop,
+    Failed,
+    GetState,
+    OrderRecord,
+    OrderStatus,
+    Release,
+    StateReply,
+)
 
 from .conftest import Processes, async_wait_until
 from .stop_rig import CASES, ROBOT, StopRig, order
@@ -136,5 +144,30 @@ def test_an_executor_back_at_once_leaves_no_order_running(
             await async_wait_until(
                 lambda: rig.odometry[-1][1].linear_x == 0.0, 5.0, "the robot to stand"
             )
+
+    on_bus(router, body)
+
+
+def test_a_stop_for_a_robot_nobody_serves_creates_none(
+    router: str, processes: Processes, tmp_path: Path
+) -> None:
+    """A made-up name is refused by the supervisor without becoming a robot; the client,
+    knowing no keys for it either, says that nothing was stopped."""
+    rig = StopRig(router, processes, tmp_path / "supervisor.sqlite3")
+
+    async def body(bus: Bus) -> None:
+        rig.listen(bus)
+        client = VoicectlClient(bus)
+        await rig.ready(client)
+        for name in ("nobody", "made-up-2"):
+            reply = await client.request(name, EmergencyStop())
+            assert isinstance(reply, Failed), reply
+            assert f"no executor has served robot '{name}'" in reply.reason
+            with pytest.raises(Unreachable, match="nothing stopped"):
+                await client.stop(name)
+        # Neither STOP made it a robot: the supervisor still knows only r1.
+        known = await client.request("nobody", Release())
+        assert isinstance(known, Failed), known
+        assert "(known robots: r1)" in known.reason, known
 
     on_bus(router, body)
