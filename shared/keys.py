@@ -19,6 +19,11 @@ _CHUNK = re.compile(r"^[A-Za-z0-9_-]+$")
 ANY = "*"
 
 
+MAX_CHUNK = 64
+"""The longest robot name or other key chunk: a name is for people, and every one a
+service meets costs it memory."""
+
+
 def robot_of(key: str) -> str:
     """The robot name inside any ``voice/<robot>/...`` key."""
     return key.split("/")[1]
@@ -31,6 +36,8 @@ def last_chunk(key: str) -> str:
 
 def check_chunk(name: str, what: str) -> str:
     """Return `name` if it is usable as one key chunk, else raise ValueError naming `what`."""
+    if len(name) > MAX_CHUNK:
+        raise ValueError(f"{what} '{name[:20]}...' is longer than {MAX_CHUNK} characters")
     if not _CHUNK.match(name):
         raise ValueError(f"{what} {name!r} must be letters, digits, '_' or '-'")
     return name

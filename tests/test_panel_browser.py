@@ -127,6 +127,35 @@ def test_log_in_type_stage_edit_suggest_send_and_watch(stack: Stack, tmp_path: P
         expect(page.locator("#history tr").nth(0)).to_contain_text("succeeded")
 
 
+def test_a_send_retried_after_a_lost_answer_queues_once(stack: Stack, tmp_path: Path) -> None:
+    from playwright.sync_api import Route, expect
+
+    with panel(stack, tmp_path / "profile") as page:
+        login(page, stack)
+        page.fill("#text", "wait ten seconds then wait two seconds")
+        page.press("#text", "Enter")
+        sent: list[str] = []
+
+        def lose_the_first_answer(route: Route) -> None:
+            sent.append(route.request.post_data_json["request_id"])
+            if len(sent) == 1:
+                route.fetch()  # the server queues the orders...
+                route.abort()  # ...and its answer is lost on the way back
+            else:
+                route.continue_()
+
+        page.route("**/api/submit*", lose_the_first_answer)
+        page.click("#send")
+        expect(page.locator("#status")).not_to_be_empty()
+        expect(page.locator("#staged li")).to_have_count(2)  # still there to send again
+        page.click("#send")
+        expect(page.locator("#staged li")).to_have_count(0)
+        expect(page.locator("#current")).to_contain_text("wait 10 s")
+        expect(page.locator("#queue li .what")).to_have_text(["wait 2 s"])
+        assert len(sent) == 2
+        assert sent[0] == sent[1], sent
+
+
 def test_queue_reorder_cancel_and_stop(stack: Stack, tmp_path: Path) -> None:
     from playwright.sync_api import expect
 

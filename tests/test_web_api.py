@@ -5,11 +5,14 @@ from __future__ import annotations
 
 import json
 import threading
+import time
 from collections.abc import Iterator
 
 import msgspec
 import pytest
 import zenoh
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from starlette.testclient import TestClient
 from starlette.websockets import WebSocketDisconnect
 
@@ -284,12 +287,18 @@ def test_the_api_drives_the_converter_and_supervisor(
 def test_robots_follow_the_services_on_the_bus(
     client: TestClient, router: str, processes: Processes
 ) -> None:
-    processes.start("services.supervisor", "--robot", "r2", "--connect", router)
-    wait_until(
-        lambda: "r2" in client.get("/api/robots", headers=AUTH).json()["robots"],
-        30.0,
-        "robot r2 in the list",
-    )
+    # An open panel hears of the new robot on its event stream, without asking.
+    with client.stream("GET", "/api/events?robot=robot", headers=AUTH) as response:
+        processes.start("services.supervisor", "--robot", "r2", "--connect", router)
+        deadline = time.monotonic() + 30.0
+        heard: list[object] = []
+        for line in response.iter_lines():
+            if line.startswith("data: "):
+                heard.append(json.loads(line[6:]))
+            if {"type": "robots", "robots": ["r2", "robot"]} in heard:
+                break
+            assert time.monotonic() < deadline, f"no robots frame naming r2 in {heard}"
+    assert "r2" in client.get("/api/robots", headers=AUTH).json()["robots"]
     assert client.get("/api/robots", headers=AUTH).json()["default"] == "robot"
     wait_until(
         lambda: client.get("/api/state?robot=r2", headers=AUTH).status_code == 200,
@@ -305,3 +314,61 @@ def test_robots_follow_the_services_on_the_bus(
     assert parts["robot"] == "r2"
     assert parts["parts"]["supervisor"] is True
     assert parts["parts"]["executor"] is False
+
+
+BODY_ROUTES = ("/api/parse", "/api/say", "/api/cancel", "/api/submit", "/api/reorder")
+
+
+@settings(
+    max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(
+    route=st.sampled_from(BODY_ROUTES),
+    field=st.sampled_from(["text", "order_id", "request_id"]),
+    junk=st.one_of(st.binary(min_size=1, max_size=12), st.sampled_from([b"\xc3", b"\xff"])),
+    cut=st.integers(min_value=0, max_value=30),
+)
+def test_undecodable_bodies_are_a_400_never_a_500(
+    client: TestClient, route: str, field: str, junk: bytes, cut: int
+) -> None:
+    """Invalid or truncated UTF-8 inside a JSON string, on every route that reads a body:
+    one line saying what is wrong, and the server goes on answering."""
+    body = b'{"' + field.encode() + b'":"turn left' + junk + b'"}'
+    for sent in (body, body[: len(body) - cut]):
+        response = client.post(
+            route, content=sent, headers={**AUTH, "Content-Type": "application/json"}
+        )
+        assert response.status_code != 500, (sent, response.text)  # 503: no service here
+        try:
+            sent.decode()
+        except UnicodeDecodeError:
+            assert response.status_code == 400, (sent, response.text)
+            assert "\n" not in response.json()["error"]
+    assert client.get("/api/robots", headers=AUTH).status_code == 200
+
+
+def test_a_request_id_reused_for_other_orders_is_a_conflict(
+    client: TestClient, router: str, processes: Processes
+) -> None:
+    processes.start("services.supervisor", "--robot", "robot", "--connect", router)
+    wait_until(
+        lambda: client.get("/api/state", headers=AUTH).status_code == 200, 30.0, "the supervisor"
+    )
+    wait = {"order": "wait", "label": "wait", "description": "wait 1 s", "params": {"s": 1}}
+    other = {**wait, "description": "wait 2 s", "params": {"s": 2}}
+    first = client.post("/api/submit", json={"orders": [wait], "request_id": "a1"}, headers=AUTH)
+    assert first.status_code == 200, first.text
+    again = client.post("/api/submit", json={"orders": [wait], "request_id": "a1"}, headers=AUTH)
+    assert again.json() == first.json()  # a retry: the same ids, nothing queued twice
+    clash = client.post("/api/submit", json={"orders": [other], "request_id": "a1"}, headers=AUTH)
+    assert clash.status_code == 409, clash.text
+    assert "request id 'a1' was used for other orders" in clash.json()["error"]
+    empty = client.post("/api/submit", json={"orders": [wait], "request_id": ""}, headers=AUTH)
+    assert empty.status_code == 400, empty.text
+    assert client.get("/api/state", headers=AUTH).json()["queue_length"] == 1
+
+
+def test_a_robot_name_has_a_length_limit(client: TestClient) -> None:
+    response = client.get(f"/api/state?robot={'r' * 60_000}", headers=AUTH)
+    assert response.status_code == 400
+    assert "longer than 64 characters" in response.json()["error"]

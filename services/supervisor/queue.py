@@ -6,6 +6,7 @@ the store; the queue itself never touches a file or the bus.
 
 from __future__ import annotations
 
+import hashlib
 import random
 import time
 from collections import deque
@@ -13,6 +14,7 @@ from collections.abc import Callable
 
 import msgspec
 
+from shared.errors import VoicectlError
 from shared.messages import Order, OrderRecord, OrderStatus, Progress, State
 
 FINAL = frozenset(
@@ -28,6 +30,10 @@ BREAKS_SEQUENCE = frozenset({OrderStatus.FAILED, OrderStatus.REJECTED, OrderStat
 """Results after which the rest of the same utterance is cancelled (unless configured not to)."""
 SNAPSHOT_QUEUE = 20
 SNAPSHOT_HISTORY = 20
+
+
+class RequestConflict(VoicectlError):
+    """A submit whose request id was already used for other orders."""
 
 
 class RobotQueue:
@@ -62,6 +68,8 @@ class RobotQueue:
         self._clock = clock
         self._continue_on_failure = continue_on_failure
         self._requests: dict[str, list[str]] = {}
+        self._digests: dict[str, bytes] = {}
+        """What each request id of this run carried, to tell a retry from a conflict."""
         self._positions: dict[str, float] = {}
         self._next_position = 0.0
         self._changed: dict[str, OrderRecord] = {}
@@ -99,9 +107,17 @@ class RobotQueue:
     # --- changes ------------------------------------------------------------------------------
 
     def submit(self, request_id: str, orders: list[Order], transcript: str) -> list[str]:
-        """Queue `orders`; the same `request_id` again returns the first answer, queues nothing."""
+        """Queue `orders`; the same `request_id` again returns the first answer, queues
+        nothing. The same id with other orders is a RequestConflict: never dropped quietly."""
+        digest = hashlib.blake2b(msgspec.json.encode(orders), digest_size=16).digest()
         if request_id in self._requests:
+            if self._digests.get(request_id, digest) != digest:
+                raise RequestConflict(
+                    f"request id '{request_id}' was used for other orders; send these "
+                    "with a new request id"
+                )
             return self._requests[request_id]
+        self._digests[request_id] = digest
         now = self._clock()
         records = [
             OrderRecord(
@@ -126,6 +142,7 @@ class RobotQueue:
 
     def withdraw(self, request_id: str) -> None:
         """Undo a submit whose orders could not be stored: they were never accepted."""
+        self._digests.pop(request_id, None)
         ids = set(self._requests.pop(request_id, []))
         for record in [r for r in self.queue if r.id in ids]:
             self.queue.remove(record)

@@ -53,7 +53,7 @@ from shared.messages import (
     SupervisorRequest,
 )
 
-from .queue import RobotQueue
+from .queue import RequestConflict, RobotQueue
 from .store import OrderStore
 
 _LOGGER = logging.getLogger(__name__)
@@ -125,7 +125,10 @@ class RobotSupervisor:
                         reason="the emergency stop is on: release it first "
                         "(voicectl release, or Release in the panel)"
                     )
-                ids = self._queue.submit(request_id, orders, transcript)
+                try:
+                    ids = self._queue.submit(request_id, orders, transcript)
+                except RequestConflict as exc:
+                    return Failed(reason=str(exc))
                 stored = self._changed()
                 if stored is not None:
                     try:

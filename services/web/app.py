@@ -22,7 +22,7 @@ from typing import Annotated, TypeVar
 
 import msgspec
 from starlette.applications import Starlette
-from starlette.requests import Request
+from starlette.requests import ClientDisconnect, Request
 from starlette.responses import FileResponse, JSONResponse, Response, StreamingResponse
 from starlette.routing import Route, WebSocketRoute
 from starlette.websockets import WebSocket
@@ -65,7 +65,10 @@ S = TypeVar("S", bound=msgspec.Struct)
 class SubmitBody(msgspec.Struct, forbid_unknown_fields=True):
     orders: list[Order]
     transcript: str = ""
-    request_id: str = msgspec.field(default_factory=lambda: uuid.uuid4().hex)
+    request_id: Annotated[str, msgspec.Meta(min_length=1, max_length=128)] = msgspec.field(
+        default_factory=lambda: uuid.uuid4().hex
+    )
+    """One per batch a person means to send once: a retry with it queues nothing twice."""
 
 
 class TextBody(msgspec.Struct, forbid_unknown_fields=True):
@@ -115,6 +118,13 @@ class Access:
         scheme = "https" if websocket.url.scheme == "wss" else "http"
         own = f"{scheme}://{websocket.headers.get('host', '')}"
         return origin == own or origin in self.origins
+
+
+def _one_line(exc: Exception) -> str:
+    """An exception's text for a person: the first line, without a codec's byte dump."""
+    if isinstance(exc, UnicodeDecodeError):
+        return f"invalid UTF-8 at byte {exc.start} of a string"
+    return str(exc).splitlines()[0] if str(exc) else type(exc).__name__
 
 
 @contextlib.contextmanager
@@ -223,14 +233,18 @@ class Panel:
         if declared.isdigit() and int(declared) > MAX_BODY:
             raise ApiError(413, f"request body over {MAX_BODY} bytes")
         raw = bytearray()
-        async for chunk in request.stream():
-            raw += chunk
-            if len(raw) > MAX_BODY:
-                raise ApiError(413, f"request body over {MAX_BODY} bytes")
+        try:
+            async for chunk in request.stream():
+                raw += chunk
+                if len(raw) > MAX_BODY:
+                    raise ApiError(413, f"request body over {MAX_BODY} bytes")
+        except ClientDisconnect:
+            raise ApiError(400, "the client left before sending its whole body") from None
         try:
             return msgspec.json.decode(bytes(raw), type=kind)
-        except (msgspec.DecodeError, msgspec.ValidationError) as exc:
-            raise ApiError(400, f"bad request body: {exc}") from exc
+        except (msgspec.DecodeError, UnicodeDecodeError) as exc:
+            # msgspec checks UTF-8 inside strings with Python's codec: UnicodeDecodeError.
+            raise ApiError(400, f"bad request body: {_one_line(exc)}") from exc
 
     @property
     def client(self) -> VoicectlClient:

@@ -153,14 +153,14 @@ class Hub:
 
     def _on_alive(self, key: str, alive: bool) -> None:
         robot, service = robot_of(key), last_chunk(key)
+        new = robot not in self.robots
         services = self._alive.setdefault(robot, set())
-        known = set(self._alive)
         if alive:
             services.add(service)
         else:
             services.discard(service)
         self._send_parts(robot)
-        if robot not in known or robot not in self.robots:
+        if new:  # every open panel learns of it
             robots = self._frame(Robots(robots=self.robots))
             for listeners in self._listeners.values():
                 for queue in listeners:

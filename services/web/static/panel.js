@@ -16,6 +16,8 @@ const store = {
 const view = {
   robot: "",
   staged: [], // {order, said}
+  batch: "", // the staged orders the request id below was made for
+  batchId: null, // the request id of the staged batch, kept while Send is retried
   state: null,
   historyOffset: 0,
   events: null, // AbortController of the event stream
@@ -348,6 +350,9 @@ async function addText(text) {
 }
 
 function showStaged() {
+  const batch = JSON.stringify(view.staged.map((item) => item.order));
+  if (batch !== view.batch) view.batchId = null; // a different batch: a new request
+  view.batch = batch;
   const list = $("staged");
   list.replaceChildren(...view.staged.map((item, index) => {
     const row = el("li");
@@ -390,9 +395,18 @@ function remove(index) {
   showStaged();
 }
 
-async function submit(items) {
+function newRequestId() {
+  // getRandomValues works without a secure context too (crypto.randomUUID does not).
+  const bytes = crypto.getRandomValues(new Uint8Array(16));
+  return Array.from(bytes, (byte) => byte.toString(16).padStart(2, "0")).join("");
+}
+
+// One request id per batch a person sends: a Send retried after a lost answer carries the
+// same id, and the supervisor queues nothing twice. Any change to the batch makes it new.
+async function submit(items, requestId = newRequestId()) {
   const said = [...new Set(items.map((item) => item.said))].join(" / ");
-  await api("/api/submit", { orders: items.map((item) => item.order), transcript: said });
+  const orders = items.map((item) => item.order);
+  await api("/api/submit", { orders, transcript: said, request_id: requestId });
 }
 
 // --- watching ---------------------------------------------------------------------------------
@@ -510,8 +524,9 @@ $("command").onsubmit = (event) => {
 $("send").onclick = async () => {
   const items = view.staged.slice();
   $("send").disabled = true;
+  view.batchId = view.batchId || newRequestId();
   try {
-    await submit(items);
+    await submit(items, view.batchId);
     view.staged.splice(0, items.length);
     showStaged();
     setStatus("");
