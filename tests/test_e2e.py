@@ -83,6 +83,10 @@ def test_spoken_sequence_moves_the_simulated_robot(stack: Stack) -> None:
         (first, OrderStatus.SUCCEEDED),
     ]
     assert history[0]["transcript"] == "turn left then reach kitchen"
+    # a typo is not an idle robot: the known ones are named, as `say` does
+    unknown = stack.voicectl("state", "--connect", stack.router, "--robot", "nobody")
+    assert unknown.returncode == 1, unknown
+    assert "no executor has served robot 'nobody' (known robots: robot)" in unknown.stderr
 
 
 def test_panel_api_needs_the_token_and_drives_the_robot(stack: Stack) -> None:
@@ -210,7 +214,8 @@ def test_supervisor_commands_from_the_cli(stack: Stack) -> None:
     assert unknown.stderr == "voicectl cancel: order 'nope' is neither queued nor running\n"
     stopped = stack.voicectl("stop", "--connect", stack.router)
     assert stopped.returncode == 0, stopped.stderr
-    assert json.loads(stopped.stdout)["type"] == "done"
+    assert json.loads(stopped.stdout)["type"] == "stopped"
+    assert json.loads(stopped.stdout)["confirmed"] is True
 
     def both_finished() -> bool:
         page = json.loads(stack.voicectl("history", "--connect", stack.router).stdout)

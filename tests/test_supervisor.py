@@ -23,6 +23,7 @@ from shared.messages import (
     EmergencyStop,
     Failed,
     GetHistory,
+    GetState,
     Order,
     OrderStatus,
     Reorder,
@@ -321,7 +322,9 @@ def test_each_robot_has_its_own_queue_and_executor(site: Site) -> None:
         assert refused.reason.startswith(
             "no executor has served robot 'nobody' (known robots: r1, r2)"
         )
-        assert (await made_up.state()).queue == []
+        unknown = await made_up.ask(GetState())  # a typo is not an idle robot
+        assert isinstance(unknown, Failed)
+        assert "known robots: r1, r2)" in unknown.reason
         again = await made_up.ask_submit(order("mul", first=1, second=1))
         assert isinstance(again, Failed)
         assert "known robots: r1, r2)" in again.reason

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 import signal
+import socket
 import subprocess
 import sys
 import threading
@@ -12,6 +13,8 @@ import time
 from pathlib import Path
 
 import pytest
+
+from voicectl.stack import port_in_use
 
 from .conftest import REPO, Stack, free_port, voicectl, wait_until
 
@@ -136,3 +139,19 @@ def test_ctrl_c_during_start_up_stops_everything(tmp_path: Path) -> None:
         ["pgrep", "-f", "--", f"--connect {router}"], capture_output=True, text=True, check=False
     )
     assert not left.stdout.strip()
+
+
+def test_a_port_left_in_time_wait_is_free_but_a_listened_one_is_not() -> None:
+    """`voicectl up` right after a clean stop: the old connections wait in TIME_WAIT on
+    the router's port, which must not read as 'in use'; a listener still does."""
+    with socket.socket() as listener:
+        listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        listener.bind(("127.0.0.1", 0))
+        listener.listen()
+        port = listener.getsockname()[1]
+        assert port_in_use("127.0.0.1", port)
+        client = socket.create_connection(("127.0.0.1", port))
+        served, _ = listener.accept()
+        served.close()  # the server side closes first: its port enters TIME_WAIT
+        client.close()
+    assert not port_in_use("127.0.0.1", port)

@@ -86,8 +86,11 @@ def _die_with_parent() -> None:
 
 
 def port_in_use(host: str, port: int) -> bool:
-    """Whether something already listens on `host:port`."""
+    """Whether something already listens on `host:port`. With SO_REUSEADDR, as every
+    server sets it: connections of a stack just stopped, left in TIME_WAIT, do not count,
+    while a port another process listens on still does."""
     with socket.socket() as sock:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         try:
             sock.bind((host, port))
         except OSError:

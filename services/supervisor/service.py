@@ -44,7 +44,6 @@ from shared.messages import (
     Reorder,
     Resume,
     Running,
-    State,
     StateReply,
     StateUpdate,
     Stopped,
@@ -546,11 +545,8 @@ class SupervisorService:
         # A name nobody has configured or served: answer without creating a robot, so that
         # made-up names cannot grow the process without limit. Not even a STOP creates
         # one: with no executor ever heard of, there is no robot to know the keys of.
-        match request:
-            case GetState():
-                return StateReply(state=State(robot=name))
-            case GetHistory():
-                return HistoryPage(records=[], total=0)
+        # Asking its state is refused as well, naming the robots there are: a typo
+        # answered with an empty state looks like an idle robot.
         known = ", ".join(sorted(self._robots)) or "none"
         return Failed(
             reason=f"no executor has served robot '{name}' (known robots: {known}); start "
