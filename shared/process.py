@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
+import ctypes
 import logging
 import os
 import signal
@@ -129,11 +131,32 @@ def _exit(prog: str, message: str) -> None:
 
 
 def setup_logging(debug: bool) -> None:
+    """Logging for a service; the first thing each does, so also where a service started
+    by `voicectl up` ties its life to it (`_die_with_parent`)."""
     logging.basicConfig(
         level=logging.DEBUG if debug else logging.INFO,
         format="%(asctime)s %(levelname)s %(name)s: %(message)s",
     )
     zenoh.init_log_from_env_or("error")
+    _die_with_parent()
+
+
+PR_SET_PDEATHSIG = 1
+
+
+def _die_with_parent() -> None:
+    """When `voicectl up` started this process (VOICECTL_PARENT holds its pid): SIGTERM
+    when it dies, even by SIGKILL, so that no service is left holding ports, the database
+    or the robot (Linux). Done here, in the service itself, rather than between fork and
+    exec, where a threaded parent may run nothing."""
+    parent = os.environ.pop("VOICECTL_PARENT", "")
+    if not parent.isdigit():
+        return
+    with contextlib.suppress(OSError, AttributeError):
+        libc = ctypes.CDLL(None, use_errno=True)  # this process's own C library
+        libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+    if os.getppid() != int(parent):  # it died before the line above took effect
+        os.kill(os.getpid(), signal.SIGTERM)
 
 
 async def wait_for_stop(*tasks: Awaitable[object], keep_running: bool = False) -> None:

@@ -4,6 +4,7 @@ refuse a bad configuration in one line, junk on the bus answered and survived.""
 from __future__ import annotations
 
 import json
+import socket
 import subprocess
 import sys
 from pathlib import Path
@@ -104,3 +105,26 @@ def test_supervisor_answers_junk_and_keeps_serving(router: str, processes: Proce
         10.0,
         "the supervisor to log the junk event",
     )
+
+
+def test_web_on_a_busy_port_says_so_in_one_line(router: str, tmp_path: Path) -> None:
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        port = taken.getsockname()[1]
+        result = voicectl(
+            "web",
+            "--port",
+            str(port),
+            "--connect",
+            router,
+            "--token-file",
+            str(tmp_path / "token"),
+            timeout=60.0,
+        )
+    assert result.returncode == 2, result
+    assert result.stderr.strip().splitlines()[-1] == (
+        f"voicectl web: cannot serve on 127.0.0.1:{port}: Address already in use"
+    )
+    assert "panel on" not in result.stderr + result.stdout
+    assert "Traceback" not in result.stderr

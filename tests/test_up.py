@@ -3,6 +3,7 @@ a second stack does not touch the first one's data."""
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 import socket
@@ -14,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from voicectl.stack import port_in_use
+from voicectl.stack import port_in_use, wait_for_port
 
 from .conftest import REPO, Stack, free_port, voicectl, wait_until
 
@@ -155,3 +156,34 @@ def test_a_port_left_in_time_wait_is_free_but_a_listened_one_is_not() -> None:
         served.close()  # the server side closes first: its port enters TIME_WAIT
         client.close()
     assert not port_in_use("127.0.0.1", port)
+
+
+def test_a_crashed_service_is_restarted_and_the_stack_stays_up(stack: Stack) -> None:
+    """One executor crash no longer takes the panel and the STOP path down with it."""
+
+    def executor_pid() -> int | None:
+        found = subprocess.run(
+            ["pgrep", "-f", "--", f"services.executor .*--connect {stack.router}"],
+            capture_output=True,
+            text=True,
+            check=False,
+        ).stdout.split()
+        return int(found[0]) if len(found) == 1 else None
+
+    first = executor_pid()
+    assert first is not None
+    os.kill(first, signal.SIGKILL)
+    wait_until(
+        lambda: "voicectl up: executor exited with -9; restarting (1/5)" in stack.output,
+        20.0,
+        "the restart to be announced",
+    )
+
+    def online_again() -> bool:
+        state = stack.voicectl("state", "--connect", stack.router)
+        return state.returncode == 0 and json.loads(state.stdout)["executor_online"]
+
+    wait_until(online_again, 40.0, "a new executor online")
+    assert executor_pid() not in (None, first)
+    assert stack.process.poll() is None
+    assert wait_for_port("127.0.0.1", stack.port, timeout=5.0)  # the panel never left

@@ -3,8 +3,7 @@
 from __future__ import annotations
 
 import contextlib
-import ctypes
-import ctypes.util
+import os
 import signal
 import socket
 import subprocess
@@ -22,7 +21,10 @@ from shared.bus import BusOptions
 
 STOP_TIMEOUT = 10.0
 START_TIMEOUT = 60.0
-PR_SET_PDEATHSIG = 1
+RESTARTS = 5
+"""A service that crashes is started again, at most this many times within..."""
+RESTART_WINDOW = 60.0
+"""...this many seconds; past that, the stack stops."""
 
 
 @dataclass(frozen=True)
@@ -42,16 +44,21 @@ class Child:
     argv: list[str]
     process: subprocess.Popen[bytes] | None = None
     _pump: threading.Thread | None = field(default=None, repr=False)
+    restarts: list[float] = field(default_factory=list)
+    """When it was restarted after a crash (monotonic seconds)."""
 
     def start(self) -> None:
+        self._close_output()
         # Own session: a Ctrl-C in the terminal reaches `voicectl up` alone, which then
-        # stops the children in order (web first, router last).
+        # stops the children in order (web first, router last). VOICECTL_PARENT makes each
+        # service end with `voicectl up` even when it is killed (shared.process): set by the
+        # child itself, since a fork of this threaded process may run nothing before exec.
         self.process = subprocess.Popen(
             [sys.executable, "-m", *self.argv],
             stdout=subprocess.PIPE,
             stderr=subprocess.STDOUT,
             start_new_session=True,
-            preexec_fn=_die_with_parent,
+            env={**os.environ, "VOICECTL_PARENT": str(os.getpid())},
         )
         self._pump = threading.Thread(
             target=_prefix_lines, args=(self.name, self.process.stdout), daemon=True
@@ -70,19 +77,15 @@ class Child:
                 print(f"voicectl up: {self.name} did not stop in {STOP_TIMEOUT:g} s; killing")
                 process.kill()
                 process.wait()
-        if self._pump is not None:
-            self._pump.join(timeout=2.0)
-        if process.stdout is not None:
-            process.stdout.close()
+        self._close_output()
         return process.returncode
 
-
-def _die_with_parent() -> None:
-    """In the child, before it runs: SIGTERM when `voicectl up` dies, even by SIGKILL, so
-    that no service is left holding ports, the database or the robot (Linux only)."""
-    with contextlib.suppress(OSError, AttributeError):
-        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
-        libc.prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+    def _close_output(self) -> None:
+        if self._pump is not None:
+            self._pump.join(timeout=2.0)
+            self._pump = None
+        if self.process is not None and self.process.stdout is not None:
+            self.process.stdout.close()
 
 
 def port_in_use(host: str, port: int) -> bool:
@@ -155,6 +158,32 @@ def wait_for_tokens(
     return missing
 
 
+def _restart(child: Child, stop: threading.Event) -> bool:
+    """Start a crashed service again, after a back-off that grows with each restart in
+    `RESTART_WINDOW`; False when it has crashed too often (or a stop came meanwhile)."""
+    assert child.process is not None
+    code = child.process.returncode
+    now = time.monotonic()
+    child.restarts = [at for at in child.restarts if at > now - RESTART_WINDOW]
+    if len(child.restarts) >= RESTARTS:
+        print(
+            f"voicectl up: {child.name} exited with {code}, the {RESTARTS + 1}th time in "
+            f"{RESTART_WINDOW:g} s; stopping the stack",
+            flush=True,
+        )
+        return False
+    child.restarts.append(now)
+    print(
+        f"voicectl up: {child.name} exited with {code}; restarting "
+        f"({len(child.restarts)}/{RESTARTS})",
+        flush=True,
+    )
+    if stop.wait(0.25 * 2 ** (len(child.restarts) - 1)):
+        return True  # stopping: the main loop sees it
+    child.start()
+    return True
+
+
 def run_stack(
     children: list[Child],
     web: Panel | None,
@@ -197,14 +226,7 @@ def run_stack(
                 print(f"voicectl up: panel on {web.address}", flush=True)
             print("voicectl up: ready; Ctrl-C stops everything", flush=True)
             while not stop.wait(0.2):
-                if dead():
-                    for child in dead():
-                        assert child.process is not None
-                        print(
-                            f"voicectl up: {child.name} exited with {child.process.returncode};"
-                            " stopping the stack",
-                            flush=True,
-                        )
+                if not all(_restart(child, stop) for child in dead()):
                     exit_code = 1
                     break
         finally:

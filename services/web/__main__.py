@@ -6,6 +6,7 @@ import argparse
 import asyncio
 import contextlib
 import logging
+import socket
 import sys
 from collections.abc import Iterator
 from pathlib import Path
@@ -28,6 +29,24 @@ class _QuietServer(uvicorn.Server):
     @contextlib.contextmanager
     def capture_signals(self) -> Iterator[None]:
         yield
+
+
+def _bind(host: str, port: int) -> socket.socket:
+    """The panel's listening socket, bound before anything says the panel is up: a port
+    in use is one clear line, not a traceback after 'panel on ...'."""
+    family, kind, proto, _, address = socket.getaddrinfo(
+        host, port, type=socket.SOCK_STREAM, flags=socket.AI_PASSIVE
+    )[0]
+    listening = socket.socket(family, kind, proto)
+    try:
+        listening.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        listening.bind(address)
+        listening.listen(128)
+    except OSError:
+        listening.close()
+        raise
+    listening.set_inheritable(True)
+    return listening
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -73,8 +92,16 @@ async def main(argv: list[str] | None = None) -> int:
         ssl_certfile=str(args.certfile) if args.certfile else None,
         ssl_keyfile=str(args.keyfile) if args.keyfile else None,
     )
+    try:
+        listening = _bind(args.host, args.port)
+    except OSError as exc:
+        print(
+            f"voicectl web: cannot serve on {args.host}:{args.port}: {exc.strerror}",
+            file=sys.stderr,
+        )
+        return 2
     server = _QuietServer(config)
-    serving = asyncio.create_task(server.serve())
+    serving = asyncio.create_task(server.serve(sockets=[listening]))
     stopping = asyncio.create_task(wait_for_stop())
     scheme = "https" if args.certfile else "http"
     _LOGGER.info("panel on %s://%s:%d (token in %s)", scheme, args.host, args.port, token_file)
@@ -82,6 +109,7 @@ async def main(argv: list[str] | None = None) -> int:
     server.should_exit = True  # uvicorn closes connections and returns
     stopping.cancel()
     await serving
+    listening.close()
     await asyncio.gather(stopping, return_exceptions=True)
     return 0 if server.started else 1
 
