@@ -4,8 +4,10 @@ WAV made with espeak-ng), staging, sending, watching, reordering, cancelling, st
 
 from __future__ import annotations
 
+import concurrent.futures
 import os
 import shutil
+import wave
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -13,7 +15,14 @@ from typing import Any
 
 import pytest
 
-from .conftest import REPO, Speak, Stack
+from services.converter.orders import OrderSet
+from services.converter.parser import Parser
+from shared.bus import Bus
+from shared.keys import RobotKeys, last_chunk
+from shared.messages import Doubt, Proposal
+
+from .conftest import REPO, Speak, Stack, async_wait_until
+from .support import on_bus
 
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
 CHROMIUM_FLAGS = [
@@ -242,3 +251,55 @@ def test_without_https_the_panel_says_why_there_is_no_microphone(
         page.click("#mic")
         expect(page.locator("#mic-note")).to_contain_text("only over HTTPS or on localhost")
         expect(page.locator("#mic")).to_have_attribute("aria-pressed", "false")
+
+
+def test_a_doubtful_value_is_asked_never_sent(stack: Stack, tmp_path: Path) -> None:
+    """The recogniser's doubt ("ten", or "two"?) reaches the panel as a choice; with
+    auto-send on, nothing is sent until the person picks. The proposal is published on
+    the converter's key by the test (a stand-in for a recogniser that doubted): which
+    speech makes the real one doubt is tests/test_hearing.py's business."""
+    from playwright.sync_api import expect
+
+    silence = tmp_path / "silence.wav"
+    with wave.open(str(silence), "wb") as out:
+        out.setnchannels(1)
+        out.setsampwidth(2)
+        out.setframerate(16000)
+        out.writeframes(bytes(2 * 16000 * 20))
+    with panel(stack, tmp_path / "doubt", microphone=silence) as page:
+        login(page, stack)
+        page.check("#auto-send")
+        page.click("#mic")
+        expect(page.locator("#mic")).to_have_attribute("aria-pressed", "true")
+        keys = RobotKeys("robot")
+
+        async def doubt(bus: Bus) -> None:
+            sessions: list[str] = []
+            bus.subscribe(
+                keys.stt_audio_any, bytes, lambda key, _raw: sessions.append(last_chunk(key))
+            )
+            await async_wait_until(lambda: sessions, 20.0, "the panel's audio session")
+            said = "go forward ten meters"
+            parsed = Parser(OrderSet.load(REPO / "orders")).parse(said)
+            proposal = Proposal(
+                transcript=said,
+                orders=parsed.orders,
+                session=sessions[-1],
+                doubts=[Doubt(position=2, words="ten", alternatives=["two"], confidence=0.0)],
+            )
+            bus.publish(keys.proposal, proposal)
+
+        # Playwright's sync API keeps an event loop in this thread: the bus gets its own.
+        with concurrent.futures.ThreadPoolExecutor(1) as thread:
+            thread.submit(on_bus, stack.router, doubt).result(timeout=60)
+        box = page.locator("#doubt")
+        expect(box).to_be_visible()
+        expect(box.locator("mark")).to_have_text("ten")
+        expect(box.locator("button")).to_have_text(["ten", "two", "say again"])
+        expect(page.locator("#staged li")).to_have_count(0)
+        page.wait_for_timeout(500)  # auto-send had its chance: it must not have taken it
+        expect(page.locator("#current")).to_have_text("idle")
+        expect(page.locator("#queue li")).to_have_count(0)
+        box.locator("button", has_text="two").click()
+        expect(box).to_be_hidden()
+        expect(page.locator("#staged li .what")).to_have_text(["move forward 2 m"])

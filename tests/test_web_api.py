@@ -186,6 +186,18 @@ def test_the_audio_socket_needs_the_token_first(client: TestClient) -> None:
             assert closed.value.code == code
 
 
+def test_a_greeting_sent_as_bytes_is_refused_in_words(client: TestClient) -> None:
+    with client.websocket_connect("/api/audio", headers={"origin": "http://testserver"}) as socket:
+        socket.send_bytes(json.dumps({"token": TOKEN, "robot": "robot"}).encode())
+        assert socket.receive_json() == {
+            "type": "error",
+            "error": "first message must be text: {token, robot}",
+        }
+        with pytest.raises(WebSocketDisconnect) as closed:
+            socket.receive_text()
+        assert closed.value.code == 1003
+
+
 def test_the_audio_socket_says_when_no_recogniser_listens(client: TestClient) -> None:
     with client.websocket_connect("/api/audio") as socket:  # no Origin: not a browser
         socket.send_text(json.dumps({"token": TOKEN, "robot": "robot"}))

@@ -15,15 +15,24 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
+import queue
+import threading
 import uuid
 from collections.abc import Callable
 
 import msgspec
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
-from shared.bus import Bus
+from shared.bus import Bus, Stream
 from shared.keys import RobotKeys, check_chunk
-from shared.messages import FRAME_BYTES, MAX_CHUNK_FRAMES, AudioChunk, AudioStart, AudioStop
+from shared.messages import (
+    FRAME_BYTES,
+    MAX_CHUNK_FRAMES,
+    AudioChunk,
+    AudioMessage,
+    AudioStart,
+    AudioStop,
+)
 
 _LOGGER = logging.getLogger(__name__)
 
@@ -31,6 +40,8 @@ HELLO_TIMEOUT = 5.0
 MATCH_TIMEOUT = 3.0
 """How long to wait for the recogniser to be subscribed before telling the browser so."""
 MAX_MESSAGE = FRAME_BYTES * MAX_CHUNK_FRAMES
+QUEUED = 100
+"""Audio messages that may wait for the bus before new ones are dropped (2 s of 20 ms)."""
 
 # WebSocket close codes (4000-4999 are the application's).
 UNAUTHORISED = 4401
@@ -78,7 +89,13 @@ class AudioSocket:
 
     async def _greet(self, websocket: WebSocket) -> str | None:
         """The robot the first message names, once its token is right; else None."""
-        text = await asyncio.wait_for(websocket.receive_text(), HELLO_TIMEOUT)
+        message = await asyncio.wait_for(websocket.receive(), HELLO_TIMEOUT)
+        if message["type"] == "websocket.disconnect":
+            raise WebSocketDisconnect(message.get("code", 1000))
+        text = message.get("text")
+        if text is None:  # audio before the greeting, or a greeting sent as bytes
+            await _refuse(websocket, BAD_DATA, "first message must be text: {token, robot}")
+            return None
         try:
             hello = self._hello.decode(text)
         except (msgspec.DecodeError, msgspec.ValidationError) as exc:
@@ -95,7 +112,7 @@ class AudioSocket:
 
     async def _bridge(self, websocket: WebSocket, robot: str) -> None:
         session = uuid.uuid4().hex[:16]
-        stream = self._bus().stream(RobotKeys(robot).stt_audio(session))
+        stream = _Sender(self._bus().stream(RobotKeys(robot).stt_audio(session)), session)
         try:
             if not await stream.matched(MATCH_TIMEOUT):
                 await _refuse(websocket, UNAVAILABLE, "speech recognition is not running")
@@ -131,6 +148,45 @@ class AudioSocket:
             stream.send(AudioStop())
             stream.close()
             _LOGGER.info("audio session %s for %s closed", session, robot)
+
+
+class _Sender:
+    """A session's audio, put on the bus from a thread of its own: a put that waits for
+    room under congestion must never hold up the event loop the panel's STOP is served
+    on. Past `QUEUED` waiting messages, new chunks are dropped (said once in the log);
+    the session's start and stop are never dropped."""
+
+    def __init__(self, stream: Stream, session: str) -> None:
+        self._stream = stream
+        self._session = session
+        self._queue: queue.Queue[AudioMessage | None] = queue.Queue()
+        self._dropped = 0
+        self._thread = threading.Thread(target=self._run, name=f"audio-{session}", daemon=True)
+        self._thread.start()
+
+    async def matched(self, timeout: float) -> bool:
+        return await self._stream.matched(timeout)
+
+    def send(self, message: AudioMessage) -> None:
+        if isinstance(message, AudioChunk) and self._queue.qsize() >= QUEUED:
+            self._dropped += 1
+            if self._dropped == 1:
+                _LOGGER.warning(
+                    "audio session %s: the bus is congested; dropping audio", self._session
+                )
+            return
+        self._queue.put_nowait(message)
+
+    def close(self) -> None:
+        """Send what is queued, then close the stream (on the sender's thread)."""
+        self._queue.put_nowait(None)
+        if self._dropped:
+            _LOGGER.warning("audio session %s: %d chunks dropped", self._session, self._dropped)
+
+    def _run(self) -> None:
+        while (message := self._queue.get()) is not None:
+            self._stream.send(message)
+        self._stream.close()
 
 
 def _is_stop(text: str | None) -> bool:
