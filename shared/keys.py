@@ -95,6 +95,11 @@ class RobotKeys:
         """The supervisor's request/reply queryable (submit, cancel, state...)."""
         return f"{self.prefix}/supervisor/request"
 
+    def supervisor_owner(self, tag: str) -> str:
+        """Liveliness token of the supervisor serving this robot (`tag`: when it started,
+        and its Zenoh id), so that a second one on the bus knows to stand down."""
+        return f"{self.prefix}/supervisor/owner/{tag}"
+
     @property
     def state(self) -> str:
         """The supervisor's state snapshot, published on every change."""

@@ -380,3 +380,30 @@ def test_emergency_stop_halts_a_moving_robot_at_once(site: Site) -> None:
         assert (await client.finished(queued)).message == "emergency stop"
 
     site.run(body)
+
+
+def test_a_second_supervisor_on_the_bus_stands_down(site: Site, tmp_path: Path) -> None:
+    """Two supervisors for one robot would both accept and dispatch every order: the one
+    that came second refuses, naming the first, and the first goes on serving."""
+    site.start_supervisor()
+
+    async def body(bus: Bus) -> None:
+        client = Client(bus, "r1")
+        await client_wait_ready(client, executor=False)
+        second = site.processes.start(
+            "services.supervisor",
+            "--connect",
+            site.router,
+            "--robot",
+            "r1",
+            "--db",
+            str(tmp_path / "second.sqlite3"),
+            name="second-supervisor",
+        )
+        await async_wait_until(lambda: second.poll() is not None, 30.0, "the second to stop")
+        assert second.returncode == 2
+        log = site.processes.log(second)
+        assert "robot 'r1' already has a supervisor (Zenoh id " in log, log
+        assert not (await client.state()).stopped  # the first still answers
+
+    site.run(body)

@@ -71,9 +71,12 @@ async def main(argv: list[str] | None = None) -> int:
         await service.start(args.robot)
         _LOGGER.info("supervisor ready; history in %s", db_path)
         try:
-            await wait_for_stop()
+            await wait_for_stop(service.conflict)
         finally:
             await service.stop()
+        if service.conflict.done() and not service.conflict.cancelled():
+            print(f"voicectl supervisor: {service.conflict.result()}", file=sys.stderr)
+            return 2
     return 0
 
 

@@ -11,11 +11,12 @@ from __future__ import annotations
 import asyncio
 import logging
 import sqlite3
+import time
 
 from shared.bus import Bus, json_decoder
 from shared.errors import BusError
 from shared.halting import Cancelled, RobotStop
-from shared.keys import RobotKeys, robot_of
+from shared.keys import RobotKeys, last_chunk, robot_of
 from shared.messages import (
     Accepted,
     Cancel,
@@ -492,6 +493,13 @@ class SupervisorService:
         self._continue_on_failure = continue_on_failure
         self._history = history_in_memory
         self._robots: dict[str, RobotSupervisor] = {}
+        self._tag = f"{time.time_ns()}-{bus.session.zid()}"
+        """Who this supervisor is on the bus: when it started, then its Zenoh id."""
+        self._owners: dict[str, set[str]] = {}
+        """Every supervisor's tag seen, by robot."""
+        self.conflict: asyncio.Future[str] = asyncio.get_running_loop().create_future()
+        """Set, saying why, when a supervisor that started earlier serves one of this
+        one's robots: a robot has one supervisor, and this one must stop."""
 
     async def start(self, robots: list[str]) -> None:
         saved = await self._store.call(self._store.load(self._history))
@@ -507,6 +515,7 @@ class SupervisorService:
         self._bus.serve_keyed(
             RobotKeys.any_robot().supervisor, json_decoder(SupervisorRequest), self._on_request
         )
+        self._bus.watch(RobotKeys.any_robot().supervisor_owner("*"), self._on_owner)
         self._bus.subscribe(
             RobotKeys.any_robot().executor_events, json_decoder(ExecutorEvent), self._on_event
         )
@@ -537,6 +546,32 @@ class SupervisorService:
         supervisor = RobotSupervisor(self._bus, self._store, queue)
         self._robots[queue.robot] = supervisor
         supervisor.start()
+        self._bus.announce(RobotKeys(queue.robot).supervisor_owner(self._tag))
+        self._check_owners(queue.robot)
+
+    def _on_owner(self, key: str, alive: bool) -> None:
+        robot, tag = robot_of(key), last_chunk(key)
+        owners = self._owners.setdefault(robot, set())
+        if alive:
+            owners.add(tag)
+        else:
+            owners.discard(tag)
+        self._check_owners(robot)
+
+    def _check_owners(self, robot: str) -> None:
+        """Stand down if a supervisor that started earlier serves `robot` too: two
+        supervisors would both accept and dispatch every order."""
+        if robot not in self._robots or self.conflict.done():
+            return
+        earlier = sorted(t for t in self._owners.get(robot, ()) if _order(t) < _order(self._tag))
+        if earlier:
+            started, _, zid = earlier[0].partition("-")
+            since = time.strftime("%H:%M:%S", time.localtime(int(started) / 1e9))
+            self.conflict.set_result(
+                f"robot '{robot}' already has a supervisor (Zenoh id {zid}, up since "
+                f"{since}); a robot has one supervisor: stop the other one, or give this "
+                "one a router of its own"
+            )
 
     async def _on_request(self, key: str, request: SupervisorRequest) -> Message:
         name = robot_of(key)
@@ -561,3 +596,8 @@ class SupervisorService:
 
     def _on_info(self, key: str, info: ExecutorInfo) -> None:
         self.robot(robot_of(key)).executor_info = info
+
+
+def _order(tag: str) -> tuple[int, str]:
+    started, _, zid = tag.partition("-")
+    return (int(started) if started.isdigit() else 0, zid)
