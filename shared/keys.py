@@ -71,6 +71,10 @@ class RobotKeys:
         """One recognition session's audio: start, chunks, stop."""
         return f"{self.prefix}/stt/audio/{check_chunk(session, 'session id')}"
 
+    def stt_session(self, session: str) -> str:
+        """What the recogniser says about one audio session (it ended, it was refused)."""
+        return f"{self.prefix}/stt/session/{check_chunk(session, 'session id')}"
+
     @property
     def stt_audio_any(self) -> str:
         return f"{self.prefix}/stt/audio/*"

@@ -182,6 +182,14 @@ class SttStatus(Message):
     """Grammar words without a pronunciation: commands that use them cannot be heard."""
 
 
+class SessionEnded(Message):
+    """The recogniser ended an audio session, or refused to start it (`refused`): told to
+    whoever streams it, so that a person is never left talking to nobody."""
+
+    reason: str
+    refused: bool = False
+
+
 class Proposal(Message):
     """The converter's reading of a transcript, for the panel to show and confirm."""
 

@@ -208,6 +208,9 @@ def test_speak_a_command_and_a_non_command(stack: Stack, speech: Speak, tmp_path
     command = speech("turn left then reach kitchen", voice="flite:slt")
     with panel(stack, tmp_path / "speak", microphone=command) as page:
         login(page, stack)
+        # what the recogniser listens with is shown beside the microphone
+        expect(page.locator("#stt-status")).to_contain_text("pocketsphinx · grammar ")
+        expect(page.locator("#stt-status")).to_contain_text("listening for")
         page.click("#mic")
         expect(page.locator("#mic")).to_have_attribute("aria-pressed", "true")
         expect(page.locator("#heard")).to_have_text("turn left then reach kitchen")

@@ -7,6 +7,7 @@ import json
 import threading
 import time
 from collections.abc import Iterator
+from typing import Any
 
 import msgspec
 import pytest
@@ -384,3 +385,39 @@ def test_a_robot_name_has_a_length_limit(client: TestClient) -> None:
     response = client.get(f"/api/state?robot={'r' * 60_000}", headers=AUTH)
     assert response.status_code == 400
     assert "longer than 64 characters" in response.json()["error"]
+
+
+def test_a_session_the_recogniser_cannot_serve_is_refused_in_words(
+    client: TestClient, router: str, processes: Processes
+) -> None:
+    """Past --max-sessions the browser is told, instead of streaming into the void; the
+    recogniser says so once, not once per chunk."""
+    stt = processes.start(
+        "services.stt", "--robot", "robot", "--max-sessions", "1", "--connect", router
+    )
+    hello = json.dumps({"token": TOKEN, "robot": "robot"})
+    origin = {"origin": "http://testserver"}
+
+    def first_message(socket: Any) -> dict[str, Any]:
+        socket.send_text(hello)
+        message: dict[str, Any] = socket.receive_json()
+        return message
+
+    wait_until(lambda: "stt ready" in processes.log(stt), 60.0, "the recogniser")
+    with client.websocket_connect("/api/audio", headers=origin) as first:
+        opened = first_message(first)
+        assert opened["type"] == "session", opened
+        first.send_bytes(bytes(640))
+        with client.websocket_connect("/api/audio", headers=origin) as second:
+            assert first_message(second)["type"] == "session"
+            for _ in range(20):
+                second.send_bytes(bytes(640))
+            refused = second.receive_json()
+            assert refused["type"] == "error", refused
+            assert refused["error"].startswith("speech recognition is busy (1 microphones open)")
+            with pytest.raises(WebSocketDisconnect) as closed:
+                second.receive_text()
+            assert closed.value.code == 4503
+    log = processes.log(stt)
+    assert log.count("refused: 1 sessions open already") == 1, log
+    assert "not started: dropped" not in log, log

@@ -11,6 +11,7 @@ command out of any speech.
 from __future__ import annotations
 
 import asyncio
+import collections
 import contextlib
 import logging
 import queue
@@ -30,6 +31,7 @@ from shared.messages import (
     AudioStop,
     Grammar,
     PartialTranscript,
+    SessionEnded,
     SttStatus,
     Transcript,
     excerpt,
@@ -193,6 +195,10 @@ class SttService:
         self._compiling: asyncio.Task[None] | None = None
         self._status: Latest | None = None
         self._unpronounceable: list[str] = []
+        self._detail = ""
+        self._refused = _Recent(256)
+        """Sessions refused or unknown, so that their audio is dropped without a line
+        per chunk (the last few hundred names)."""
         self._client = VoicectlClient(bus)
 
     def __enter__(self) -> SttService:
@@ -233,6 +239,8 @@ class SttService:
                         "session %s idle for %g s: stopped", session.name, self.limits.idle_seconds
                     )
                     self._stop(session)
+                    idle = f"no audio for {self.limits.idle_seconds:g} s: the microphone closed"
+                    self._tell(session.name, SessionEnded(reason=idle))
 
     # --- grammar ---------------------------------------------------------------------------
 
@@ -268,13 +276,15 @@ class SttService:
             self._publish_status(f"listening for {len(grammar.phrases)} phrases")
 
     def _publish_status(self, detail: str) -> None:
+        """Publish the status; an empty `detail` keeps the last one (a session count)."""
         assert self._status is not None
+        self._detail = detail or self._detail
         self._status.publish(
             SttStatus(
                 engine=self.engine.name,
                 ready=bool(self._grammar),
                 grammar_version=self._grammar,
-                detail=detail,
+                detail=self._detail,
                 sessions=len(self._sessions),
                 unpronounceable=self._unpronounceable,
             )
@@ -292,17 +302,30 @@ class SttService:
                     _LOGGER.warning(
                         "session %s refused: %d sessions open already", name, len(self._sessions)
                     )
+                    self._refused.add(name)
+                    self._tell(
+                        name,
+                        SessionEnded(
+                            reason=f"speech recognition is busy ({len(self._sessions)} "
+                            "microphones open): try again when one closes",
+                            refused=True,
+                        ),
+                    )
                     return
                 assert self._loop is not None
                 session = self._sessions[name] = Session(name, self, self._loop)
+                self._refused.discard(name)
                 _LOGGER.info("session %s started", name)
+                self._loop.call_soon_threadsafe(self._publish_status, "")
                 return
         match message:
             case AudioStart():
                 pass  # a repeated start: the session goes on
             case AudioChunk():
                 if session is None:
-                    _LOGGER.warning("audio for session %s, which was not started: dropped", name)
+                    if name not in self._refused:  # said once, not once per chunk
+                        self._refused.add(name)
+                        _LOGGER.warning("audio for session %s, not started: dropped", name)
                 elif not session.stopping:
                     session.feed(message)
             case AudioStop():
@@ -324,6 +347,16 @@ class SttService:
                 if session.finished is finished:
                     del self._sessions[name]
                     _LOGGER.info("session %s ended", name)
+        self._publish_status("")
+
+    def _tell(self, session: str, ended: SessionEnded) -> None:
+        """Any thread: tell the session's sender how it ended, from the loop (a put that
+        may wait for room never runs on Zenoh's thread)."""
+        assert self._loop is not None
+        with contextlib.suppress(RuntimeError):  # the loop is closing
+            self._loop.call_soon_threadsafe(
+                self.bus.publish, self._keys.stt_session(session), ended
+            )
 
     async def publish(self, session: str, event: Event) -> None:
         """Put one recogniser event on the bus; a final one is checked against the orders."""
@@ -379,3 +412,24 @@ class SttService:
         if not result.orders:
             return "not a command"
         return ""
+
+
+class _Recent:
+    """A set that remembers only its last `size` names (thread-safe enough: used under
+    the sessions lock)."""
+
+    def __init__(self, size: int) -> None:
+        self._size = size
+        self._names: collections.OrderedDict[str, None] = collections.OrderedDict()
+
+    def __contains__(self, name: object) -> bool:
+        return name in self._names
+
+    def add(self, name: str) -> None:
+        self._names[name] = None
+        self._names.move_to_end(name)
+        while len(self._names) > self._size:
+            self._names.popitem(last=False)
+
+    def discard(self, name: str) -> None:
+        self._names.pop(name, None)

@@ -18,7 +18,8 @@ import logging
 import queue
 import threading
 import uuid
-from collections.abc import Callable
+from collections.abc import Callable, MutableMapping
+from typing import Any
 
 import msgspec
 from starlette.websockets import WebSocket, WebSocketDisconnect
@@ -32,6 +33,7 @@ from shared.messages import (
     AudioMessage,
     AudioStart,
     AudioStop,
+    SessionEnded,
 )
 
 _LOGGER = logging.getLogger(__name__)
@@ -44,6 +46,7 @@ QUEUED = 100
 """Audio messages that may wait for the bus before new ones are dropped (2 s of 20 ms)."""
 
 # WebSocket close codes (4000-4999 are the application's).
+NORMAL = 1000
 UNAUTHORISED = 4401
 FORBIDDEN = 4403
 UNAVAILABLE = 4503
@@ -70,6 +73,7 @@ class AudioSocket:
         self._token_ok = token_ok
         self._origin_ok = origin_ok
         self._hello = msgspec.json.Decoder(Hello)
+        self._ended = msgspec.json.Decoder(SessionEnded).decode
 
     async def serve(self, websocket: WebSocket) -> None:
         if not self._origin_ok(websocket):
@@ -112,7 +116,19 @@ class AudioSocket:
 
     async def _bridge(self, websocket: WebSocket, robot: str) -> None:
         session = uuid.uuid4().hex[:16]
-        stream = _Sender(self._bus().stream(RobotKeys(robot).stt_audio(session)), session)
+        keys = RobotKeys(robot)
+        bus = self._bus()
+        stream = _Sender(bus.stream(keys.stt_audio(session)), session)
+        # The recogniser may refuse the session (too many open) or end it (idle): heard
+        # here before the start goes out, and told to the browser in words.
+        ended: asyncio.Future[SessionEnded] = asyncio.get_running_loop().create_future()
+
+        def on_ended(_key: str, message: SessionEnded) -> None:
+            if not ended.done():
+                ended.set_result(message)
+
+        unsubscribe = bus.subscribe(keys.stt_session(session), self._ended, on_ended)
+        receiving: asyncio.Future[MutableMapping[str, Any]] | None = None
         try:
             if not await stream.matched(MATCH_TIMEOUT):
                 await _refuse(websocket, UNAVAILABLE, "speech recognition is not running")
@@ -122,7 +138,14 @@ class AudioSocket:
             _LOGGER.info("audio session %s for %s opened", session, robot)
             seq = 0
             while True:
-                message = await websocket.receive()
+                receiving = asyncio.ensure_future(websocket.receive())
+                either: set[asyncio.Future[Any]] = {receiving, ended}
+                await asyncio.wait(either, return_when=asyncio.FIRST_COMPLETED)
+                if ended.done():
+                    told = ended.result()
+                    await _refuse(websocket, UNAVAILABLE if told.refused else NORMAL, told.reason)
+                    break
+                message = receiving.result()
                 if message["type"] == "websocket.disconnect":
                     break
                 pcm = message.get("bytes")
@@ -145,6 +168,9 @@ class AudioSocket:
         except WebSocketDisconnect:
             pass
         finally:
+            if receiving is not None and not receiving.done():
+                receiving.cancel()
+            unsubscribe()
             stream.send(AudioStop())
             stream.close()
             _LOGGER.info("audio session %s for %s closed", session, robot)

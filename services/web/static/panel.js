@@ -122,6 +122,17 @@ function showParts(parts) {
   }));
 }
 
+function showStt(status) {
+  // What the recogniser listens with, for the person at the microphone to see.
+  view.stt = status;
+  const parts = [status.engine, status.grammar_version && `grammar ${status.grammar_version.slice(0, 8)}`,
+    status.detail, status.sessions ? `${status.sessions} microphone(s) open` : ""];
+  $("stt-status").textContent = parts.filter(Boolean).join(" · ");
+  const deaf = status.unpronounceable || [];
+  $("stt-deaf").hidden = !deaf.length;
+  $("stt-deaf").textContent = deaf.length ? `Cannot hear (no pronunciation): ${deaf.join(", ")}` : "";
+}
+
 function showPose(pose) {
   const degrees = Math.round((pose.yaw * 180) / Math.PI);
   $("pose").textContent = `x ${pose.x.toFixed(2)}  y ${pose.y.toFixed(2)}  ${degrees}°`;
@@ -173,7 +184,7 @@ function handle(message) {
     case "parts": if (message.robot === view.robot) showParts(message.parts); break;
     case "robots": showRobots(message.robots); break;
     case "robotpose": showPose(message); break;
-    case "sttstatus": view.stt = message; break;
+    case "sttstatus": showStt(message); break;
     case "partialtranscript": if (mine) showHeard(message.text, "partial"); break;
     case "transcript":
       if (mine && message.rejected) {
