@@ -262,7 +262,7 @@ def test_bad_input_is_logged_and_dropped_and_sessions_go_on(
     log = processes.log(next(p for name, p, _ in processes.started if name == "stt"))
     assert "dropped undecodable message on voice/robot/stt/audio/junk" in log
     assert "pcm must be whole 640-byte frames" in log
-    assert "audio for session nostart, which was not started: dropped" in log
+    assert log.count("audio for session nostart, not started: dropped") == 1  # once
     assert "stop for session nostart, which was not started: ignored" in log
     assert "grammar empty not used: grammar empty: JSGF grammar has no public rule" in log
 
