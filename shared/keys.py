@@ -141,7 +141,7 @@ class RobotKeys:
 
     def label(self, label: str) -> str:
         """Liveliness token of one order label an executor of this robot serves."""
-        return f"{self.prefix}/labels/{check_chunk(label, 'label')}"
+        return f"{self.prefix}/labels/{check_chunk(label, 'label') if label != ANY else ANY}"
 
     def alive(self, service: str) -> str:
         """Liveliness token of one service serving this robot."""

@@ -421,3 +421,24 @@ def test_a_session_the_recogniser_cannot_serve_is_refused_in_words(
     log = processes.log(stt)
     assert log.count("refused: 1 sessions open already") == 1, log
     assert "not started: dropped" not in log, log
+
+
+def test_open_panels_learn_the_labels_the_executors_serve(
+    client: TestClient, router: str, processes: Processes
+) -> None:
+    """What the executors announce reaches the panel, which flags a staged order no
+    executor would take before it is sent."""
+    with client.stream("GET", "/api/events?robot=robot", headers=AUTH) as response:
+        processes.start("services.executor", "--robot", "robot", "--connect", router)
+        deadline = time.monotonic() + 30.0
+        labels: list[str] = []
+        for line in response.iter_lines():
+            if line.startswith("data: "):
+                frame = json.loads(line[6:])
+                if frame["type"] == "labels":
+                    assert frame["robot"] == "robot"
+                    labels = frame["labels"]
+            if "wait" in labels:
+                break
+            assert time.monotonic() < deadline, f"no labels frame with 'wait': {labels}"
+    assert {"drive", "mbgoal", "rotate", "wait"} <= set(labels)

@@ -47,6 +47,14 @@ class Robots(msgspec.Struct, tag="robots", tag_field="type"):
     robots: list[str]
 
 
+class Labels(msgspec.Struct, tag="labels", tag_field="type"):
+    """The labels the robot's executors serve (from their tokens): an order with any
+    other label would be refused, which a panel says before it is sent."""
+
+    robot: str
+    labels: list[str]
+
+
 Event = StateUpdate | Proposal | PartialTranscript | Transcript | SttStatus | RobotPose
 
 
@@ -63,6 +71,8 @@ class Hub:
         """Per robot, the services whose token is up."""
         self._converter = False
         self._posed: dict[str, float] = {}
+        self._labels: dict[str, set[str]] = {}
+        """Per robot, the labels its executors announce."""
         self._encoder = msgspec.json.Encoder()
 
     def start(self) -> None:
@@ -78,6 +88,7 @@ class Hub:
             self._bus.subscribe(key, json_decoder(kind), self._on_event, history=kind is SttStatus)
         self._bus.watch(ConverterKeys().alive, self._on_converter)
         self._bus.watch(every.alive(ANY), self._on_alive)
+        self._bus.watch(every.label(ANY), self._on_label)
 
     async def watch_poses(self) -> None:
         """Mark robots offline whose pose went stale; runs until cancelled."""
@@ -117,6 +128,7 @@ class Hub:
             queue.put_nowait(frame)
         queue.put_nowait(self._frame(self.parts(robot)))
         queue.put_nowait(self._frame(Robots(robots=self.robots)))
+        queue.put_nowait(self._frame(self.labels(robot)))
         self._listeners.setdefault(robot, set()).add(queue)
         try:
             yield queue
@@ -145,6 +157,18 @@ class Hub:
                 if fresh:
                     self._send_parts(robot)
         self._send(robot, frame)
+
+    def labels(self, robot: str) -> Labels:
+        return Labels(robot=robot, labels=sorted(self._labels.get(robot, ())))
+
+    def _on_label(self, key: str, alive: bool) -> None:
+        robot, label = robot_of(key), last_chunk(key)
+        labels = self._labels.setdefault(robot, set())
+        if alive:
+            labels.add(label)
+        else:
+            labels.discard(label)
+        self._send(robot, self._frame(self.labels(robot)))
 
     def _on_converter(self, _key: str, alive: bool) -> None:
         self._converter = alive

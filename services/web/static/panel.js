@@ -18,6 +18,7 @@ const view = {
   staged: [], // {order, said}
   batch: "", // the staged orders the request id below was made for
   batchId: null, // the request id of the staged batch, kept while Send is retried
+  labels: null, // the labels the robot's executors serve, once known
   state: null,
   historyOffset: 0,
   events: null, // AbortController of the event stream
@@ -183,6 +184,7 @@ function handle(message) {
     case "stateupdate": showState(message.state); break;
     case "parts": if (message.robot === view.robot) showParts(message.parts); break;
     case "robots": showRobots(message.robots); break;
+    case "labels": if (message.robot === view.robot) { view.labels = message.labels; showStaged(); } break;
     case "robotpose": showPose(message); break;
     case "sttstatus": showStt(message); break;
     case "partialtranscript": if (mine) showHeard(message.text, "partial"); break;
@@ -371,6 +373,10 @@ function showStaged() {
     row.draggable = true;
     row.dataset.index = String(index);
     row.append(el("span", item.order.description, "what"), el("span", item.said, "muted said"));
+    if (view.labels && !view.labels.includes(item.order.label)) {
+      // Said before it is sent: the executor would refuse it.
+      row.append(el("span", `no executor serves '${item.order.label}'`, "unserved"));
+    }
     row.append(button("↑", "small", () => move(index, index - 1), "earlier"));
     row.append(button("↓", "small", () => move(index, index + 1), "later"));
     row.append(button("✕", "small", () => remove(index), "remove"));
