@@ -6,7 +6,8 @@ import itertools
 
 import pytest
 
-from services.supervisor.queue import RobotQueue
+from services.supervisor import queue as queue_module
+from services.supervisor.queue import RequestConflict, RobotQueue
 from shared.messages import Order, OrderStatus, Progress
 
 
@@ -42,6 +43,22 @@ def test_resubmitting_a_request_id_is_a_no_op(queue: RobotQueue) -> None:
     again = queue.submit("req-1", [order("a")], "")
     assert first == again
     assert len(queue.queue) == 1
+
+
+def test_request_ids_are_remembered_for_retries_not_forever(
+    queue: RobotQueue, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(queue_module, "RECENT_REQUESTS", 3)
+    first = queue.submit("req-0", [order("a")], "")
+    with pytest.raises(RequestConflict):
+        queue.submit("req-0", [order("b")], "")
+    for n in range(1, 4):
+        queue.submit(f"req-{n}", [order("a")], "")
+    assert queue.submit("req-3", [order("a")], "") != first  # recent: a retry
+    assert len(queue.queue) == 4
+    # the oldest is forgotten: the same id is taken as new
+    assert queue.submit("req-0", [order("b")], "") != first
+    assert len(queue.queue) == 5
 
 
 def test_nothing_is_dispatched_while_the_executor_is_offline(queue: RobotQueue) -> None:

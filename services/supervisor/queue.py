@@ -32,6 +32,11 @@ SNAPSHOT_QUEUE = 20
 SNAPSHOT_HISTORY = 20
 
 
+RECENT_REQUESTS = 10_000
+"""Request ids remembered in memory to answer retries; older ones are forgotten, so that a
+long-running supervisor does not grow with every submit it ever took."""
+
+
 class RequestConflict(VoicectlError):
     """A submit whose request id was already used for other orders."""
 
@@ -138,6 +143,10 @@ class RobotQueue:
         ids = [r.id for r in records]
         self._requests[request_id] = ids
         self._new_requests.append((request_id, ids))
+        while len(self._requests) > RECENT_REQUESTS:  # a retry comes within seconds
+            oldest = next(iter(self._requests))
+            del self._requests[oldest]
+            self._digests.pop(oldest, None)
         return ids
 
     def withdraw(self, request_id: str) -> None:

@@ -63,6 +63,10 @@ class Durability(StrEnum):
     """Also survives power loss (synchronous=FULL): every commit waits for the disk."""
 
 
+KEPT_REQUESTS = 10_000
+"""Request ids kept on disk (the newest), to answer a retry after a restart."""
+
+
 @dataclass
 class SavedRobot:
     """What the store holds for one robot, as read at start-up."""
@@ -209,8 +213,14 @@ class OrderStore:
                 saved = robots.setdefault(robot, SavedRobot())
                 saved.history = self.history_page(robot, 0, history)(db)[0]
             ids_decoder = msgspec.json.Decoder(list[str])
+            # Only recent request ids answer retries: older ones are dropped from disk too,
+            # oldest first, so the table does not grow with every submit ever taken.
+            db.execute(
+                "DELETE FROM requests WHERE rowid <= (SELECT MAX(rowid) FROM requests) - ?",
+                (KEPT_REQUESTS,),
+            )
             for robot, request_id, ids in db.execute(
-                "SELECT robot, request_id, order_ids FROM requests"
+                "SELECT robot, request_id, order_ids FROM requests ORDER BY rowid"
             ):
                 saved = robots.setdefault(robot, SavedRobot())
                 saved.requests[request_id] = ids_decoder.decode(ids)
