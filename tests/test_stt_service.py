@@ -318,3 +318,47 @@ def test_speech_streamed_to_voicectl_up_moves_the_simulated_robot(
         subscriber.undeclare()
     assert abs(pose[-1].x - 3.0) < 0.1
     assert abs(pose[-1].y - 5.0) < 0.1
+
+
+def test_memory_goes_back_when_the_sessions_close(
+    router: str, processes: Processes, speech: Speak
+) -> None:
+    """Each open session holds a decoder of tens of megabytes; once they close, the
+    recogniser gives that memory back instead of staying at its peak."""
+    chunks = _chunks(read_wav(speech("turn left")))
+
+    def rss_mb(pid: int) -> float:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith("VmRSS"):
+                return int(line.split()[1]) / 1024
+        raise AssertionError("no VmRSS")
+
+    async def body(listener: Listener) -> None:
+        (_, stt, _) = next(p for p in processes.started if p[0] == "stt")
+        names = [f"m{n}" for n in range(4)]
+        senders = [listener.bus.stream(KEYS.stt_audio(name)) for name in names]
+        for sender in senders:
+            assert await sender.matched(WAIT)
+            sender.send(AudioStart())
+        for seq, pcm in enumerate(chunks):
+            for sender in senders:
+                sender.send(AudioChunk(seq=seq, pcm=pcm))
+            await asyncio.sleep(0.01)
+        for name in names:
+            await listener.final(name)
+        peak = rss_mb(stt.pid)
+        for sender in senders:
+            sender.send(AudioStop())
+        await async_wait_until(
+            lambda: (
+                "session m3 ended" in processes.log(stt)
+                and "session m0 ended" in processes.log(stt)
+            ),
+            WAIT,
+            "the sessions to end",
+        )
+        await async_wait_until(
+            lambda: rss_mb(stt.pid) < peak - 80, 10.0, f"RSS to fall from {peak:.0f} MB"
+        )
+
+    scenario(router, processes, body)

@@ -442,3 +442,36 @@ def test_open_panels_learn_the_labels_the_executors_serve(
                 break
             assert time.monotonic() < deadline, f"no labels frame with 'wait': {labels}"
     assert {"drive", "mbgoal", "rotate", "wait"} <= set(labels)
+
+
+def test_an_idle_session_ends_and_the_browser_is_told(
+    client: TestClient, router: str, processes: Processes
+) -> None:
+    """A microphone that goes quiet is ended by the recogniser, and the panel hears why;
+    the recogniser's status counts the sessions as they open and close."""
+    stt = processes.start("services.stt", "--robot", "robot", "--idle", "1", "--connect", router)
+    wait_until(lambda: "stt ready" in processes.log(stt), 60.0, "the recogniser")
+    counts: list[int] = []
+
+    def on_status(sample: zenoh.Sample) -> None:
+        counts.append(json.loads(sample.payload.to_bytes())["sessions"])
+
+    options = BusOptions(connect=[router]).zenoh_config()
+    with zenoh.open(options) as session:
+        session.declare_subscriber(RobotKeys("robot").stt_status, on_status)
+        with client.websocket_connect(
+            "/api/audio", headers={"origin": "http://testserver"}
+        ) as socket:
+            socket.send_text(json.dumps({"token": TOKEN, "robot": "robot"}))
+            assert socket.receive_json()["type"] == "session"
+            socket.send_bytes(bytes(640))
+            ended = socket.receive_json()  # after a second of silence on the socket
+            assert ended == {
+                "type": "error",
+                "error": "no audio for 1 s: the microphone closed",
+            }
+            with pytest.raises(WebSocketDisconnect) as closed:
+                socket.receive_text()
+            assert closed.value.code == 1000
+        wait_until(lambda: counts[-1:] == [0], 10.0, "the status to count no session")
+    assert 1 in counts, counts

@@ -64,6 +64,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         default=limits.max_sessions,
         help="audio sessions open at once (default %(default)s)",
     )
+    parser.add_argument(
+        "--idle",
+        type=float,
+        default=limits.idle_seconds,
+        metavar="SECONDS",
+        help="end a session that sends no audio for this long (default %(default)s)",
+    )
     add_bus_arguments(parser)
     return parser.parse_args(argv)
 
@@ -76,7 +83,11 @@ async def main(argv: list[str] | None = None) -> int:
     except EngineError as exc:
         print(f"voicectl stt: {exc}", file=sys.stderr)
         return 2
-    limits = Limits(max_utterance=args.max_utterance, max_sessions=args.max_sessions)
+    limits = Limits(
+        max_utterance=args.max_utterance,
+        max_sessions=args.max_sessions,
+        idle_seconds=args.idle,
+    )
     loop = asyncio.get_running_loop()
     with (
         Bus.open(bus_options(args), loop) as bus,
