@@ -191,6 +191,7 @@ def offline(
             continue
         engine.use_grammar(grammar)
         engine.recogniser(15.0).close()  # the first decoder is part of loading
+        loaded = time.perf_counter() - started
         outcomes: list[Outcome] = []
         cpu, audio = 0.0, 0.0
         for utterance in utterances:
@@ -213,7 +214,7 @@ def offline(
             outcomes.append(outcome)
         what = "with the second opinion" if second_opinion else "grammar alone (judge off)"
         report(
-            f"{options.name}, offline, {what}: loaded in {time.perf_counter() - started:.2f} s, "
+            f"{options.name}, offline, {what}: loaded in {loaded:.2f} s, "
             f"real-time factor {cpu / audio:.3f} ({audio:.0f} s of audio)",
             outcomes,
             parser,
