@@ -10,8 +10,9 @@ import sys
 from pathlib import Path
 
 from shared.bus import Bus, json_decoder
-from shared.keys import RobotKeys
+from shared.keys import BridgeKeys, RobotKeys
 from shared.messages import Failed, GetState, StateReply, SupervisorReply
+from shared.ros2 import Pose2D, Ros2Codec, RosDistro, new_goal_id
 
 from .conftest import REPO, Processes, voicectl, wait_until
 from .support import Client, client_wait_ready, on_bus
@@ -128,3 +129,37 @@ def test_web_on_a_busy_port_says_so_in_one_line(router: str, tmp_path: Path) -> 
     )
     assert "panel on" not in result.stderr + result.stdout
     assert "Traceback" not in result.stderr
+
+
+def test_a_stop_navigation_refuses_is_said_to_be_unconfirmed(
+    router: str, processes: Processes
+) -> None:
+    """`voicectl stop` never reports a stop nothing confirmed as done: exit status 4 and
+    one line saying what is in doubt."""
+    processes.start("services.sim", "--connect", router, "--fault", "cancel-rejected")
+    processes.start("services.supervisor", "--connect", router, "--robot", "r1")
+    processes.start("services.executor", "--connect", router, "--robot", "r1")
+
+    def executor_online() -> bool:
+        state = voicectl("state", "--robot", "r1", "--connect", router, timeout=30.0)
+        return state.returncode == 0 and json.loads(state.stdout)["executor_online"]
+
+    wait_until(executor_online, 60.0, "the executor")
+
+    async def navigate(bus: Bus) -> None:  # a goal of somebody else's, which the fault keeps
+        codec = Ros2Codec(RosDistro.JAZZY)
+        reply = await bus.request_bytes(
+            BridgeKeys().navigate("send_goal"),
+            codec.send_goal_request(new_goal_id(), "map", Pose2D(x=8.0, y=0.0, yaw=0.0)),
+            timeout=10.0,
+        )
+        assert codec.read_send_goal_response(reply)
+
+    on_bus(router, navigate)
+    stopped = voicectl("stop", "--robot", "r1", "--connect", router, timeout=30.0)
+    assert stopped.returncode == 4, stopped
+    answer = json.loads(stopped.stdout)
+    assert answer["type"] == "stopped"
+    assert answer["confirmed"] is False
+    assert "navigation refused to cancel every goal" in answer["detail"]
+    assert stopped.stderr.startswith("voicectl stop: sent, but not confirmed: sent zero velocity")

@@ -306,6 +306,7 @@ class RobotSupervisor:
         unsubscribe = self._bus.subscribe(
             stop.keys.navigate("feedback"), bytes, lambda _key, _raw: goals.set()
         )
+        said = ""
         try:
             while self._queue.stopped:
                 stop = self._robot_stop()
@@ -313,7 +314,9 @@ class RobotSupervisor:
                 if goals.is_set():  # navigation works on a goal: nobody may, now
                     goals.clear()
                     cancelled = await stop.cancel_goals(self._bus)
-                    _LOGGER.warning("%s: a goal during the stop: %s", self.robot, cancelled.detail)
+                    if cancelled.detail != said:  # once, not ten times a second
+                        said = cancelled.detail
+                        _LOGGER.warning("%s: a goal during the stop: %s", self.robot, said)
                 await asyncio.sleep(HOLD_EVERY)
         finally:
             unsubscribe()
