@@ -4,9 +4,11 @@ real Zenoh router: every refusal, and the audio bridge's messages on the bus."""
 from __future__ import annotations
 
 import json
+import socket
 import threading
 import time
 from collections.abc import Iterator
+from pathlib import Path
 from typing import Any
 
 import msgspec
@@ -22,7 +24,7 @@ from shared.bus import BusOptions
 from shared.keys import RobotKeys
 from shared.messages import AudioChunk, AudioMessage, AudioStart, AudioStop
 
-from .conftest import Processes, wait_until
+from .conftest import Processes, free_port, wait_until
 from .support import on_bus, until_heard
 
 TOKEN = "test-token-0123456789"
@@ -475,3 +477,30 @@ def test_an_idle_session_ends_and_the_browser_is_told(
             assert closed.value.code == 1000
         wait_until(lambda: counts[-1:] == [0], 10.0, "the status to count no session")
     assert 1 in counts, counts
+
+
+def test_a_client_gone_mid_body_leaves_no_traceback(
+    router: str, processes: Processes, tmp_path: Path
+) -> None:
+    port = free_port()
+    token_file = tmp_path / "token"
+    token_file.write_text(TOKEN)
+    web = processes.start(
+        "services.web", "--connect", router, "--port", str(port), "--token-file", str(token_file)
+    )
+    wait_until(lambda: "panel on" in processes.log(web), 30.0, "the panel")
+    for route in ("/api/parse", "/api/say", "/api/submit", "/api/cancel"):
+        with socket.create_connection(("127.0.0.1", port)) as raw:
+            raw.sendall(
+                f"POST {route} HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer {TOKEN}\r\n"
+                "Content-Type: application/json\r\nContent-Length: 1000\r\n\r\n"
+                '{"text": "turn'.encode()
+            )
+    # the panel goes on answering, and said nothing alarming
+    with socket.create_connection(("127.0.0.1", port)) as raw:
+        raw.sendall(b"GET /api/health HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n")
+        assert raw.recv(100).startswith(b"HTTP/1.1 200")
+    time.sleep(0.5)  # the server's side of the dropped connections has been handled
+    log = processes.log(web)
+    assert "Traceback" not in log, log
+    assert "ClientDisconnect" not in log, log
