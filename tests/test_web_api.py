@@ -504,3 +504,39 @@ def test_a_client_gone_mid_body_leaves_no_traceback(
     log = processes.log(web)
     assert "Traceback" not in log, log
     assert "ClientDisconnect" not in log, log
+
+
+class StuckStream:
+    """A fake of the bus's audio stream whose puts block, as a put under congestion
+    control BLOCK does when the link is congested: congestion cannot be made on loopback."""
+
+    def __init__(self) -> None:
+        self.flowing = threading.Event()
+        self.sent: list[object] = []
+        self.closed = threading.Event()
+
+    def send(self, message: object) -> None:
+        self.flowing.wait()
+        self.sent.append(message)
+
+    def close(self) -> None:
+        self.closed.set()
+
+
+def test_audio_never_blocks_the_loop_the_stop_is_served_on() -> None:
+    from services.web.audio import QUEUED, _Sender
+
+    stream = StuckStream()
+    sender = _Sender(stream, "s1")  # type: ignore[arg-type]
+    started = time.monotonic()
+    sender.send(AudioStart())
+    for seq in range(QUEUED * 3):
+        sender.send(AudioChunk(seq=seq, pcm=bytes(640)))
+    sender.send(AudioStop())
+    sender.close()
+    assert time.monotonic() - started < 0.5  # nothing waited for the congested bus
+    stream.flowing.set()
+    assert stream.closed.wait(5.0)
+    assert isinstance(stream.sent[0], AudioStart)
+    assert isinstance(stream.sent[-1], AudioStop)  # the ends are never dropped
+    assert len(stream.sent) <= QUEUED + 2  # new chunks were dropped, not queued for ever
