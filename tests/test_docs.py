@@ -201,7 +201,13 @@ def documented_keys() -> list[tuple[str, str]]:
 def voicectl_keys() -> list[str]:
     """Every key expression shared/keys.py builds, for any robot, session or label."""
     robot, converter = RobotKeys.any_robot(), ConverterKeys()
-    keys = [robot.stt_audio_any, robot.label("x").replace("/x", "/*"), robot.alive("*")]
+    keys = [
+        robot.stt_audio_any,
+        robot.label("*"),
+        robot.alive("*"),
+        robot.stt_session("x").replace("/x", "/*"),
+        robot.supervisor_owner("*"),
+    ]
     for keyset in (robot, converter):
         for name in dir(type(keyset)):
             if isinstance(getattr(type(keyset), name), property):
