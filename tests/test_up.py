@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-from voicectl.stack import port_in_use, wait_for_port
+from voicectl.stack import Child, port_in_use, wait_for_port
 
 from .conftest import REPO, Stack, free_port, voicectl, wait_until
 
@@ -187,3 +187,25 @@ def test_a_crashed_service_is_restarted_and_the_stack_stays_up(stack: Stack) -> 
     assert executor_pid() not in (None, first)
     assert stack.process.poll() is None
     assert wait_for_port("127.0.0.1", stack.port, timeout=5.0)  # the panel never left
+
+
+def test_children_start_without_code_between_fork_and_exec(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """A preexec_fn runs Python in the child of a threaded parent between fork and exec,
+    which Python documents as unsafe (the old one even spawned ldconfig there): the
+    child ties its life to `voicectl up` itself, told by VOICECTL_PARENT."""
+    seen: dict[str, object] = {}
+
+    class Recorder:
+        def __init__(self, argv: list[str], **kwargs: object) -> None:
+            seen.update(kwargs)
+            self.stdout = None
+
+    monkeypatch.setattr(subprocess, "Popen", Recorder)
+    Child("sim", ["services.sim"]).start()
+    assert "preexec_fn" not in seen
+    assert seen["start_new_session"] is True
+    env = seen["env"]
+    assert isinstance(env, dict)
+    assert env["VOICECTL_PARENT"] == str(os.getpid())
