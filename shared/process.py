@@ -138,7 +138,14 @@ def setup_logging(debug: bool) -> None:
         format="%(asctime)s %(levelname)s %(name)s: %(message)s",
     )
     zenoh.init_log_from_env_or("error")
+    # Until the service waits for its stop (wait_for_stop), SIGTERM unwinds like Ctrl-C:
+    # a service stopped while it starts still closes its session and files.
+    signal.signal(signal.SIGTERM, _stop_while_starting)
     _die_with_parent()
+
+
+def _stop_while_starting(signum: int, _frame: object) -> None:
+    raise SystemExit(0)
 
 
 PR_SET_PDEATHSIG = 1

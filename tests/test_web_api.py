@@ -431,7 +431,7 @@ def test_open_panels_learn_the_labels_the_executors_serve(
     """What the executors announce reaches the panel, which flags a staged order no
     executor would take before it is sent."""
     with client.stream("GET", "/api/events?robot=robot", headers=AUTH) as response:
-        processes.start("services.executor", "--robot", "robot", "--connect", router)
+        executor = processes.start("services.executor", "--robot", "robot", "--connect", router)
         deadline = time.monotonic() + 30.0
         labels: list[str] = []
         for line in response.iter_lines():
@@ -444,6 +444,8 @@ def test_open_panels_learn_the_labels_the_executors_serve(
                 break
             assert time.monotonic() < deadline, f"no labels frame with 'wait': {labels}"
     assert {"drive", "mbgoal", "rotate", "wait"} <= set(labels)
+    # Its labels go out before it is up: let it finish starting, so that it stops cleanly.
+    wait_until(lambda: "executor ready" in processes.log(executor), 30.0, "the executor")
 
 
 def test_an_idle_session_ends_and_the_browser_is_told(
