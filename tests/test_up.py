@@ -81,24 +81,18 @@ def test_a_second_stack_on_the_same_data_stops_at_once(stack: Stack) -> None:
     assert stack.voicectl("state", "--connect", stack.router).returncode == 0
 
 
+def pids(pattern: str) -> list[int]:
+    """The processes whose command line matches `pattern` (a regular expression)."""
+    found = subprocess.run(["pgrep", "-f", "--", pattern], capture_output=True, text=True)
+    return [int(pid) for pid in found.stdout.split()]
+
+
 def test_killing_up_leaves_no_service_behind(stack: Stack) -> None:
-    children = subprocess.run(
-        ["pgrep", "-f", "--", f"--connect {stack.router}"],
-        capture_output=True,
-        text=True,
-        check=False,
-    ).stdout.split()
-    assert len(children) >= 5
+    assert len(pids(f"--connect {stack.router}")) >= 5
     os.kill(stack.process.pid, signal.SIGKILL)
 
     def none_left() -> bool:
-        found = subprocess.run(
-            ["pgrep", "-f", "--", f"--connect {stack.router}"],
-            capture_output=True,
-            text=True,
-            check=False,
-        )
-        return not found.stdout.strip()
+        return not pids(f"--connect {stack.router}")
 
     wait_until(none_left, 20.0, "every service of the killed stack to exit")
 
@@ -162,13 +156,8 @@ def test_a_crashed_service_is_restarted_and_the_stack_stays_up(stack: Stack) -> 
     """One executor crash no longer takes the panel and the STOP path down with it."""
 
     def executor_pid() -> int | None:
-        found = subprocess.run(
-            ["pgrep", "-f", "--", f"services.executor .*--connect {stack.router}"],
-            capture_output=True,
-            text=True,
-            check=False,
-        ).stdout.split()
-        return int(found[0]) if len(found) == 1 else None
+        found = pids(f"services.executor .*--connect {stack.router}")
+        return found[0] if len(found) == 1 else None
 
     first = executor_pid()
     assert first is not None
