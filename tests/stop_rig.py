@@ -23,6 +23,7 @@ import asyncio
 import math
 import subprocess
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -30,7 +31,16 @@ from shared.bus import Bus
 from shared.client import VoicectlClient
 from shared.errors import BusError
 from shared.keys import BridgeKeys
-from shared.messages import GetState, Order, Release, StateReply, Stopped, Submit, TargetPose
+from shared.messages import (
+    GetState,
+    Order,
+    OrderRecord,
+    Release,
+    StateReply,
+    Stopped,
+    Submit,
+    TargetPose,
+)
 from shared.ros2 import Odometry, Ros2Codec
 
 from .conftest import Processes, async_wait_until
@@ -82,6 +92,22 @@ class Outcome:
     def latency(self) -> float:
         """STOP to the robot told to stop: the later of the two for a navigation."""
         return max(self.zero_velocity, self.cancelled or 0.0)
+
+
+async def ended(
+    client: VoicectlClient, matches: Callable[[OrderRecord], bool], what: str
+) -> OrderRecord:
+    """The first finished order in the robot's history that `matches`, once there is one."""
+    found: list[OrderRecord] = []
+
+    async def there() -> bool:
+        reply = await client.ask(ROBOT, GetState())
+        assert isinstance(reply, StateReply)
+        found[:] = [r for r in reply.state.history if matches(r)]
+        return bool(found)
+
+    await async_wait_until(there, 20.0, what)
+    return found[0]
 
 
 def order(label: str, **params: object) -> Order:

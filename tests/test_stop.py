@@ -15,14 +15,13 @@ from shared.messages import (
     EmergencyStop,
     Failed,
     GetState,
-    OrderRecord,
     OrderStatus,
     Release,
     StateReply,
 )
 
 from .conftest import Processes, async_wait_until
-from .stop_rig import CASES, ROBOT, StopRig, order
+from .stop_rig import CASES, ROBOT, StopRig, ended, order
 from .support import on_bus
 
 BOUND = 0.25
@@ -61,13 +60,8 @@ def test_stop_stops_the_robot_at_once_and_for_good(
         assert reply.state.queue_length == 0
         if case == "commanding-from-blocked-loop":
             # Its commands went on, and the robot handle refused every one after the stop.
-            async def ended() -> list[OrderRecord]:
-                reply = await client.ask(ROBOT, GetState())
-                assert isinstance(reply, StateReply)
-                return [r for r in reply.state.history if r.order.label == "blockdrive"]
-
-            await async_wait_until(ended, 20.0, "the blocked order to end")
-            (record,) = await ended()
+            blocked = "the blocked order to end"
+            record = await ended(client, lambda r: r.order.label == "blockdrive", blocked)
             assert record.status == OrderStatus.CANCELLED, record
             refused = int(record.message.split("drove; ")[1].split()[0])
             assert refused >= 3, record
@@ -101,14 +95,7 @@ def test_a_stalled_event_loop_is_noticed_and_the_robot_halted(
             moved = [o for at, o in rig.odometry if at > halted]
             assert all(o.linear_x == 0.0 for o in moved), "it moved again"
 
-            async def finished() -> OrderRecord | None:
-                reply = await client.ask(ROBOT, GetState())
-                assert isinstance(reply, StateReply)
-                return next((r for r in reply.state.history if r.id == order_id), None)
-
-            await async_wait_until(finished, 20.0, "the stalled order to end")
-            record = await finished()
-            assert record is not None
+            record = await ended(client, lambda r: r.id == order_id, "the stalled order to end")
             assert record.status == OrderStatus.FAILED, record
             assert "event loop stalled" in record.message, record
 
@@ -132,14 +119,7 @@ def test_an_executor_back_at_once_leaves_no_order_running(
             rig.kill(rig.executor)
             rig.start_executor()
 
-            async def ended() -> OrderRecord | None:
-                reply = await client.ask(ROBOT, GetState())
-                assert isinstance(reply, StateReply)
-                return next((r for r in reply.state.history if r.id == order_id), None)
-
-            await async_wait_until(ended, 20.0, "the order to end")
-            record = await ended()
-            assert record is not None
+            record = await ended(client, lambda r: r.id == order_id, "the order to end")
             assert record.status in (OrderStatus.FAILED, OrderStatus.INTERRUPTED), record
             await async_wait_until(
                 lambda: rig.odometry[-1][1].linear_x == 0.0, 5.0, "the robot to stand"
