@@ -341,14 +341,16 @@ def _pad(raw: Path, out: Path) -> float:
 
 
 def real_recordings(directory: Path) -> list[Utterance]:
-    """pocketsphinx's recordings of people, fetched with pip once."""
+    """pocketsphinx's recordings of people, fetched with pip once: its source archive
+    only (`--no-binary pocketsphinx`; with `:all:`, pip builds every build dependency
+    from source too, which takes minutes on a fresh machine)."""
     unpacked = directory / "pocketsphinx"
     if not unpacked.exists():
         with tempfile.TemporaryDirectory() as tmp:
             subprocess.run(
                 [
                     *(sys.executable, "-m", "pip", "download", "-q", "--no-deps"),
-                    *("--no-binary", ":all:", "-d", tmp, POCKETSPHINX_SDIST),
+                    *("--no-binary", "pocketsphinx", "-d", tmp, POCKETSPHINX_SDIST),
                 ],
                 check=True,
             )
