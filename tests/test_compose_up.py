@@ -1,0 +1,296 @@
+"""The repository's compose.yaml run for real with `docker compose` (profiles host and
+sim): healthy in time, orders from `voicectl say` carried out by the simulator, the panel
+behind its token, history kept across a restart of the supervisor, the robot stopped
+when its link to the host is cut, and nothing left behind by `docker compose down -v`.
+
+Needs a Docker engine, Compose v2 and the images' base (tests/containers.py); `.ci/run`
+prepares them on a machine that has none. Where Docker Hub cannot be reached, it sets
+COMPOSE_FILE=compose.yaml:compose.standin.yaml: voicectl's own router stands in for
+the eclipse/zenoh image (docs/deploy.md).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+import urllib.error
+import urllib.request
+import uuid
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+
+from shared.messages import OrderStatus
+
+from .conftest import REPO, free_port
+from .containers import base_image, skip_unless, stack_unavailable
+from .support import Client, client_wait_ready, on_bus
+
+pytestmark = skip_unless(stack_unavailable())
+
+READY_WITHIN = 30.0
+"""Seconds from `docker compose up` (images built) to every container healthy."""
+LEASE = 3.0
+"""The routers' lease (deploy/zenoh/*.json5): how long a cut link goes unnoticed."""
+TOKEN = "compose-test-token"
+
+WATCH = """
+import json, sys, time, zenoh
+from shared.keys import BridgeKeys
+from shared.ros2 import Ros2Codec
+codec, seen = Ros2Codec(), []
+if sys.argv[1].endswith(".json5"):  # a client configuration of the secured bus
+    config = zenoh.Config.from_file(sys.argv[1])
+else:
+    config = zenoh.Config()
+    config.insert_json5("mode", '"client"')
+    config.insert_json5("connect/endpoints", json.dumps([sys.argv[1]]))
+with zenoh.open(config) as session:
+    session.declare_subscriber(
+        BridgeKeys().odom, lambda s: seen.append(codec.read_odometry(s.payload.to_bytes()))
+    )
+    time.sleep(float(sys.argv[2]))
+odometry = seen[-1]
+print(json.dumps([odometry.pose.x, odometry.pose.y, odometry.linear_x, odometry.angular_z]))
+"""
+"""Run in the simulator's container, on the robot's side of the link: the robot's last
+odometry (x, y, linear and angular speed), as the robot's router relays it (or as the
+secured router does, with a client configuration)."""
+
+INTRUDE = """
+import json, time, zenoh
+from shared.keys import BridgeKeys, RobotKeys
+from shared.ros2 import Ros2Codec
+with zenoh.open(zenoh.Config.from_file("/etc/voicectl/bus/panel.json5")) as session:
+    for _ in range(20):
+        session.put(BridgeKeys().cmd_vel, Ros2Codec().twist(0.5, 0.0))
+        time.sleep(0.05)
+    asked = RobotKeys("robot").executor_execute
+    replies = list(session.get(asked, payload=b"{}", timeout=2.0))
+print(json.dumps(len(replies)))
+"""
+"""Run in the panel's container with the panel's credentials: drive the robot, and ask
+the executor to run something; how many answers came."""
+
+
+class Stack:
+    """One compose project of the repository's compose.yaml, on ports of its own, with a
+    fixed panel token; every command through `compose`."""
+
+    def __init__(self, tmp_path: Path, *extra: str) -> None:
+        self.project = f"voicectl-test-{uuid.uuid4().hex[:8]}"
+        files = os.environ.get("COMPOSE_FILE") or "compose.yaml"
+        self.router_port, self.panel_port = free_port(), free_port()
+        self.log = tmp_path / "compose.log"
+        self.env = {
+            **os.environ,
+            "COMPOSE_PROJECT_NAME": self.project,
+            "COMPOSE_PROFILES": "host,sim",
+            "VOICECTL_BASE_IMAGE": base_image(),
+            "VOICECTL_ROUTER_PUBLISH": f"127.0.0.1:{self.router_port}",
+            "VOICECTL_PANEL_PUBLISH": f"127.0.0.1:{self.panel_port}",
+            "VOICECTL_TOKEN": TOKEN,
+            "COMPOSE_FILE": ":".join([files, *extra]),
+        }
+
+    @property
+    def router(self) -> str:
+        return f"tcp/127.0.0.1:{self.router_port}"
+
+    def compose(self, *args: str, timeout: float = 300.0, stdin: str | None = None) -> str:
+        done = subprocess.run(
+            ["docker", "compose", *args],
+            input=stdin,
+            capture_output=True,
+            text=True,
+            cwd=REPO,
+            env=self.env,
+            timeout=timeout,
+        )
+        with self.log.open("a") as log:
+            log.write(f"$ docker compose {' '.join(args)}\n{done.stdout}{done.stderr}\n")
+        assert done.returncode == 0, f"docker compose {args[0]}: {done.stderr[-2000:]}"
+        return done.stdout
+
+    def docker(self, *args: str, stdin: str | None = None) -> str:
+        done = subprocess.run(
+            ["docker", *args], input=stdin, capture_output=True, text=True, timeout=60
+        )
+        assert done.returncode == 0, f"docker {args[0]}: {done.stderr[-2000:]}"
+        return done.stdout
+
+    def container(self, service: str) -> str:
+        return f"{self.project}-{service}-1"
+
+    def odometry(self, listen: float = 0.3, via: str = "tcp/sim-router:7447") -> list[float]:
+        """The simulator's last odometry, read beside it on the robot's network."""
+        out = self.docker(
+            *("exec", "-i", self.container("sim"), "python3", "-", via, str(listen)),
+            stdin=WATCH,
+        )
+        found: list[float] = json.loads(out)
+        return found
+
+    def panel(self, path: str, token: str | None = TOKEN) -> tuple[int, object]:
+        request = urllib.request.Request(f"http://127.0.0.1:{self.panel_port}{path}")
+        if token is not None:
+            request.add_header("Authorization", f"Bearer {token}")
+        try:
+            with urllib.request.urlopen(request, timeout=10) as answer:
+                return answer.status, json.loads(answer.read())
+        except urllib.error.HTTPError as error:
+            return error.code, json.loads(error.read())
+
+    def leftovers(self) -> list[str]:
+        """Containers, networks and volumes of this project still on the engine."""
+        label = f"label=com.docker.compose.project={self.project}"
+        found = []
+        for kind in ("container", "network", "volume"):
+            listed = ["ls", "--all"] if kind == "container" else ["ls"]
+            out = self.docker(kind, *listed, "--quiet", "--filter", label)
+            found += [f"{kind} {name}" for name in out.split()]
+        return found
+
+
+@pytest.fixture
+def stack(tmp_path: Path, request: pytest.FixtureRequest) -> Iterator[Stack]:
+    stack = Stack(tmp_path, *getattr(request, "param", ()))
+    stack.compose("build", "--quiet", timeout=900)
+    try:
+        yield stack
+    finally:
+        try:
+            stack.compose("down", "--volumes", "--remove-orphans", "--timeout", "10")
+        finally:
+            print(stack.log.read_text()[-6000:])
+    assert stack.leftovers() == []
+
+
+def say(stack: Stack, text: str) -> list[str]:
+    """`voicectl say TEXT` from this machine, through the published router port."""
+    done = subprocess.run(
+        [sys.executable, "-m", "voicectl", "say", text, "--connect", stack.router],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        cwd=REPO,
+    )
+    assert done.returncode == 0, done.stderr
+    ids: list[str] = json.loads(done.stdout)["order_ids"]
+    return ids
+
+
+def test_compose_up_runs_orders_keeps_history_and_stops_a_cut_off_robot(stack: Stack) -> None:
+    started = time.monotonic()
+    stack.compose("up", "--detach", "--wait", "--wait-timeout", "120", timeout=180)
+    took = time.monotonic() - started
+    print(f"docker compose up: every container healthy in {took:.1f} s")
+    assert took < READY_WITHIN
+    states = [json.loads(line) for line in stack.compose("ps", "--format", "json").splitlines()]
+    assert {s["Service"] for s in states} == {
+        *("router", "converter", "stt", "supervisor", "web", "sim-router", "sim", "executor")
+    }
+    # Containers run as voicectl's user, not root.
+    assert stack.docker("exec", stack.container("executor"), "id", "-u").strip() == "1000"
+
+    # Orders said on this machine run on the simulated robot.
+    turn, move = say(stack, "turn left then move forward 1 meter")
+
+    async def carried_out(client: Client) -> None:
+        await client_wait_ready(client)
+        for order_id in (turn, move):
+            record = await client.finished(order_id, timeout=30.0)
+            assert record.status == OrderStatus.SUCCEEDED, record
+
+    on_bus(stack.router, lambda bus: carried_out(Client(bus, "robot")))
+    x, y, *_ = stack.odometry()
+    # A quarter turn left, then 1 m.
+    assert abs(x) < 0.2, (x, y)
+    assert abs(y - 1.0) < 0.2, (x, y)
+
+    # The panel answers with its token only.
+    assert stack.panel("/api/state", token=None)[0] == 401
+    status, state = stack.panel("/api/state")
+    assert status == 200, state
+    assert isinstance(state, dict), state
+
+    # History survives the supervisor's container.
+    stack.compose("restart", "supervisor")
+    stack.compose("up", "--detach", "--wait", "--wait-timeout", "60", "supervisor")
+
+    async def remembered(client: Client) -> None:
+        await client_wait_ready(client)
+        ids = {record.id for record in (await client.history()).records}
+        assert {turn, move} <= ids
+
+    on_bus(stack.router, lambda bus: remembered(Client(bus, "robot")))
+
+    # The robot's link to the host cut while it drives: its own router still joins the
+    # executor and the simulator, and the executor, alone with the robot, stops it.
+    (going,) = say(stack, "reach the bathroom")
+    deadline = time.monotonic() + 20.0
+    while stack.odometry()[2] < 0.2:
+        assert time.monotonic() < deadline, "the robot never drove"
+    site = f"{stack.project}_site"
+    stack.docker("network", "disconnect", site, stack.container("sim-router"))
+    cut = time.monotonic()
+    try:
+        while (odometry := stack.odometry())[2:] != [0.0, 0.0]:
+            assert time.monotonic() - cut < LEASE + 5.0, f"still driving: {odometry}"
+        print(f"link cut to a standing robot: {time.monotonic() - cut:.1f} s")
+        stood = odometry[:2]
+        time.sleep(1.0)  # then it stays where it stopped, short of the bathroom (5, 2)
+        assert stack.odometry(listen=0.5)[:2] == stood
+        assert stood[0] < 4.5
+        log = stack.compose("logs", "executor")
+        assert f"supervisor lost while order {going} commanded the robot" in log
+    finally:
+        stack.docker("network", "connect", site, stack.container("sim-router"))
+
+    async def failed(client: Client) -> None:
+        await client_wait_ready(client)
+        record = await client.finished(going)
+        assert record.status != OrderStatus.SUCCEEDED, record
+
+    on_bus(stack.router, lambda bus: failed(Client(bus, "robot")))
+
+
+@pytest.mark.parametrize("stack", [("compose.secure.yaml",)], indirect=True, ids=["secured"])
+def test_compose_on_the_secured_bus_runs_orders_and_keeps_the_panel_off_the_robot(
+    stack: Stack,
+) -> None:
+    stack.compose("run", "--rm", "bus-secrets")
+    stack.compose("up", "--detach", "--wait", "--wait-timeout", "120", timeout=180)
+    observer = "/etc/voicectl/bus/observer.json5"
+    # The operator's credentials: `voicectl say` runs its order on the robot.
+    said = stack.compose(
+        *("exec", "-T", "web", "voicectl", "say"),
+        *("--config", "/etc/voicectl/bus/operator.json5", "turn left"),
+    )
+    assert len(json.loads(said)["order_ids"]) == 1
+    deadline = time.monotonic() + 30.0
+    while abs(stack.odometry(via=observer)[3]) < 0.1:  # turning
+        assert time.monotonic() < deadline, "the robot never turned"
+    # The panel's credentials: no velocity reaches the robot, no executor answers.
+    while stack.odometry(via=observer)[3] != 0.0:
+        assert time.monotonic() < deadline, "the turn never ended"
+    replies = stack.compose("exec", "-T", "web", "python3", "-", stdin=INTRUDE)
+    assert json.loads(replies) == 0
+    x, y, linear, angular = stack.odometry(via=observer, listen=1.0)
+    assert (linear, angular) == (0.0, 0.0)
+    assert abs(x) < 0.05
+    assert abs(y) < 0.05
+    # Without credentials nothing connects: the published port speaks TLS only.
+    refused = subprocess.run(
+        [sys.executable, "-m", "voicectl", "state", "--connect", stack.router],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        cwd=REPO,
+    )
+    assert refused.returncode != 0
+    assert "cannot reach the router" in refused.stderr
