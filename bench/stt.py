@@ -13,8 +13,9 @@ Two passes per engine:
    decoding per second of audio) and accuracy, beside pocketsphinx with its own JSGF
    compiler on the same files (the baseline this engine replaces).
 2. Through the service, over Zenoh on loopback: a router, the converter and `voicectl stt`
-   as processes; each file is streamed as a session in 20 ms chunks, the last half second
-   of speech and the silence after it at real-time pace. Measured: commands that became
+   as processes; each file is streamed as a session in 20 ms chunks at real-time pace, as
+   a microphone sends it (`--paced S`: only the last S seconds of speech and the silence
+   after it). Measured: commands that became
    exactly the right orders, doubts, wrong orders, non-commands rejected, end of speech
    to final transcript and to the converter's proposal, the service's CPU per second of
    audio, its start-up time and peak RSS, and a raw Zenoh put/subscribe beside them.
@@ -67,8 +68,10 @@ BASELINE_EVERY = 8
 """The baseline is slow (its hypothesis alone can take seconds): it decodes every 8th file."""
 CHUNK_FRAMES = 1
 """One 20 ms frame per message, as the panel's web service forwards them."""
-PACED = 0.5
-"""Seconds of speech before its end that are streamed at real-time pace, with the tail."""
+PACED = math.inf
+"""Seconds of speech before its end that are streamed at real-time pace, with the tail:
+by default all of it, as a microphone sends it (`--paced` sends the rest at once, for a
+quicker run whose latencies include the recogniser catching up)."""
 
 
 @dataclass
@@ -345,7 +348,9 @@ async def through_service(
                 session = f"u{number}"
                 pcm = read_wav(directory / utterance.file)
                 audio += len(pcm) / 32000
-                spoken_end = await stream(bus, session, pcm, utterance.speech_end, finals)
+                spoken_end = await stream(
+                    bus, session, pcm, utterance.speech_end, finals, args.paced
+                )
                 with contextlib.suppress(TimeoutError):
                     event = arrived.setdefault(session, asyncio.Event())
                     await asyncio.wait_for(event.wait(), 15)
@@ -389,13 +394,18 @@ async def through_service(
 
 
 async def stream(
-    bus: Bus, session: str, pcm: bytes, speech_end: float, finals: dict[str, object]
+    bus: Bus,
+    session: str,
+    pcm: bytes,
+    speech_end: float,
+    finals: dict[str, object],
+    paced: float = PACED,
 ) -> float:
     """Send one utterance; returns the wall time at which its speech ended."""
     split = frames(pcm)
     chunks = [b"".join(split[i : i + CHUNK_FRAMES]) for i in range(0, len(split), CHUNK_FRAMES)]
     seconds_per_chunk = CHUNK_FRAMES * 0.02
-    paced_from = max(0, int((speech_end - PACED) / seconds_per_chunk))
+    paced_from = max(0, int((speech_end - min(paced, speech_end)) / seconds_per_chunk))
     sender = bus.stream(KEYS.stt_audio(session))
     await sender.matched(10)
     sender.send(AudioStart())
@@ -453,6 +463,12 @@ def main() -> None:
     parser.add_argument("--service-only", action="store_true")
     parser.add_argument("--threads", action="store_true", help="CPU of each service thread")
     parser.add_argument("--every", type=int, default=1, help="only every Nth utterance")
+    parser.add_argument(
+        "--paced",
+        type=float,
+        default=PACED,
+        help="seconds before the end of speech streamed at real-time pace (default: all)",
+    )
     parser.add_argument(
         "--split",
         choices=["dev", "test"],

@@ -615,6 +615,8 @@ def test_the_docs_commands_name_what_exists() -> None:
 # --- with a Docker engine -----------------------------------------------------------------------
 
 needs_images = skip_unless(images_unavailable())
+BUILD_TIMEOUT = pytest.mark.timeout(900)
+"""A first build downloads and installs every dependency: minutes on a slow machine."""
 
 
 def build(*services: str) -> None:
@@ -648,6 +650,7 @@ def output(image: str, *command: str) -> str:
 
 
 @needs_images
+@BUILD_TIMEOUT
 def test_host_image_builds_and_parses() -> None:
     build("converter")
     # The orders packaged in the wheel: no source tree in the image.
@@ -655,6 +658,7 @@ def test_host_image_builds_and_parses() -> None:
 
 
 @needs_images
+@BUILD_TIMEOUT
 def test_robot_image_builds_and_runs_the_executor() -> None:
     build("robot-executor")
     assert "usage: voicectl health" in output("voicectl-robot:latest", "health", "--help")

@@ -30,7 +30,8 @@ from .conftest import REPO, free_port
 from .containers import base_image, skip_unless, stack_unavailable
 from .support import Client, client_wait_ready, on_bus
 
-pytestmark = skip_unless(stack_unavailable())
+pytestmark = [skip_unless(stack_unavailable()), pytest.mark.timeout(900)]
+"""A first build of the images takes minutes on a slow machine."""
 
 READY_WITHIN = 30.0
 """Seconds from `docker compose up` (images built) to every container healthy."""
