@@ -68,7 +68,9 @@ class _Index:
 
     A command is filed under its rarest mandatory word (one in every phrase of its alias,
     such as "box" in "(please )?fetch (the )?box"), or else under every first word of its
-    phrases: a segment without that word cannot match it.
+    phrases: a segment without that word cannot match it. A segment that lacks any other
+    of its mandatory words cannot match it either: it is not tried (most tries failed,
+    and each costs a regex search with a time limit).
     """
 
     def __init__(
@@ -81,6 +83,11 @@ class _Index:
         self._by_word: dict[str, list[int]] = {}
         self._always: list[int] = []
         keys = [_keys(m) if enabled else ([], False) for m in self.matchers]
+        self._needs = [
+            frozenset(w.casefold() for w in words) if mandatory else frozenset()
+            for words, mandatory in keys
+        ]
+        """Per matcher, every word a segment must hold for it to match."""
         frequency = Counter(k for words, mandatory in keys if mandatory for k in words)
         for position, (words, mandatory) in enumerate(keys):
             if not words:
@@ -95,11 +102,13 @@ class _Index:
     def candidates(self, words: list[str]) -> list[_Matcher]:
         """The matchers worth trying on a segment of `words`, in file order."""
         positions = set(self._always)
+        present = {word.casefold() for word in words}
         for word in words:
             positions.update(self._by_word.get(word.casefold(), ()))
             if word in _NUMBER_STARTS or _NUMERIC.match(word):
                 positions.update(self._by_word.get(_NUMBER, ()))
-        return [self.matchers[p] for p in sorted(positions)]
+                present.add(_NUMBER)
+        return [self.matchers[p] for p in sorted(positions) if self._needs[p] <= present]
 
 
 def _keys(matcher: _Matcher) -> tuple[list[str], bool]:
