@@ -49,7 +49,7 @@ sys.path.insert(0, str(REPO))
 
 import httpx  # noqa: E402
 import websockets  # noqa: E402
-from soak import free_port  # noqa: E402
+from soak import children, free_port  # noqa: E402
 from speech_set import Utterance, Voice, speak  # noqa: E402
 from stt import raw_latency  # noqa: E402
 
@@ -129,6 +129,14 @@ class Events:
     def __init__(self) -> None:
         self.finals: dict[str, tuple[float, dict[str, object]]] = {}
         self.proposals: dict[str, tuple[float, dict[str, object]]] = {}
+        self.idle = asyncio.Event()
+        """Set while the recogniser's last status said no audio session is open."""
+        self.idle.set()
+
+    async def quiet(self, timeout: float = 10.0) -> None:
+        """Until the recogniser has closed every session (each holds a decoder)."""
+        with contextlib.suppress(TimeoutError):
+            await asyncio.wait_for(self.idle.wait(), timeout)
 
     async def read(self, client: httpx.AsyncClient) -> None:
         async with client.stream("GET", "/api/events", timeout=None) as response:
@@ -141,6 +149,11 @@ class Events:
                     self.finals[session] = (time.monotonic(), message)
                 elif message.get("type") == "proposal" and session:
                     self.proposals[session] = (time.monotonic(), message)
+                elif message.get("type") == "sttstatus":
+                    if message.get("sessions"):
+                        self.idle.clear()
+                    else:
+                        self.idle.set()
 
 
 async def stream(
@@ -255,6 +268,56 @@ def normalised(text: str) -> str:
     return " ".join(w for w in text.lower().split() if w not in ("the", "to"))
 
 
+async def speakers(
+    port: int, token: str, directory: Path, stt: int, counts: list[int], rounds: int
+) -> list[tuple[int, list[float], float]]:
+    """People speaking at once to one recogniser, each over a microphone socket of their
+    own: per count, end of speech to final for every utterance, and the recogniser's CPU
+    seconds per second of audio streamed (from /proc, over the rounds)."""
+    recordings = [speak(text, voice, directory) for text in COMMANDS for voice in VOICES]
+    found = []
+    async with httpx.AsyncClient(
+        base_url=f"http://127.0.0.1:{port}",
+        headers={"Authorization": f"Bearer {token}"},
+        timeout=30.0,
+    ) as client:
+        events = Events()
+        reader = asyncio.create_task(events.read(client))
+        try:
+            for count in counts:
+                latencies: list[float] = []
+                speech = 0.0
+                cpu = cpu_seconds(stt)
+                for round_ in range(rounds):
+                    await events.quiet()
+                    chosen = [
+                        recordings[(round_ * count + i) % len(recordings)] for i in range(count)
+                    ]
+                    spoken = await asyncio.gather(
+                        *(
+                            stream(port, token, read_wav(directory / r.file), r.speech_end, events)
+                            for r in chosen
+                        )
+                    )
+                    speech += sum(len(read_wav(directory / r.file)) / 32000 for r in chosen)
+                    for session, ended in spoken:
+                        if session in events.finals:
+                            latencies.append(events.finals[session][0] - ended)
+                used = cpu_seconds(stt) - cpu
+                found.append((count, latencies, used / speech))
+        finally:
+            reader.cancel()
+            with contextlib.suppress(asyncio.CancelledError, httpx.HTTPError):
+                await reader
+    return found
+
+
+def cpu_seconds(pid: int) -> float:
+    """User and system CPU time of process `pid` so far."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
 def api_load(
     port: int, token: str, clients: int, requests: int
 ) -> tuple[dict[str, list[float]], list[str]]:
@@ -303,11 +366,18 @@ def main() -> None:
     parser.add_argument("--utterances", type=int, default=200)
     parser.add_argument("--clients", type=int, default=20)
     parser.add_argument("--requests", type=int, default=50)
+    parser.add_argument(
+        "--speakers",
+        default="1,2,4,6",
+        help="how many people speak at once, in turn (comma-separated counts)",
+    )
+    parser.add_argument("--rounds", type=int, default=5, help="utterances per speaker per count")
     parser.add_argument("--quick", action="store_true", help="a one-minute run")
     parser.add_argument("--speech", type=Path, default=Path(tempfile.gettempdir()) / "voicectl-e2e")
     args = parser.parse_args()
     if args.quick:
         args.utterances, args.clients, args.requests = 10, 5, 10
+        args.speakers, args.rounds = "1,2", 1
     data = Path(tempfile.mkdtemp(prefix="voicectl-e2e-"))
     port, router = free_port(), f"tcp/127.0.0.1:{free_port()}"
     env = {**os.environ, "VOICECTL_DATA": str(data), "PYTHONUNBUFFERED": "1"}
@@ -338,6 +408,9 @@ def main() -> None:
         figures, raw = asyncio.run(
             voice_to_motion(port, token, router, args.utterances, args.speech)
         )
+        stt = children(up.pid)["stt"]
+        counts = [int(n) for n in args.speakers.split(",")]
+        crowd = asyncio.run(speakers(port, token, args.speech, stt, counts, args.rounds))
         load, errors = api_load(port, token, args.clients, args.requests)
     finally:
         up.send_signal(signal.SIGINT)
@@ -360,6 +433,10 @@ def main() -> None:
         f"{'baseline: raw Zenoh put -> subscriber':<44} p50 {1e6 * percentile(raw, 0.5):7.0f}  "
         f"p99 {1e6 * percentile(raw, 0.99):7.0f} µs  (n={len(raw)})"
     )
+    print(f"speakers at once, {args.rounds} utterances each (target: 4 with p95 under 1 s)")
+    for count, latencies, cpu in crowd:
+        print(line(f"  {count} speaking: end of speech -> final", latencies))
+        print(f"{'':<46}recogniser CPU per second of audio, per speaker: {cpu:.3f} s")
     total = sum(len(t) for t in load.values())
     print(
         f"panel API: {args.clients} clients x {args.requests} requests: {total} answered, "

@@ -27,6 +27,7 @@ def test_e2e_runs_voice_to_motion_and_the_panel_api_quickly(tmp_path: Path) -> N
         "Send (POST /api/submit) -> first motion",
         "STOP (POST /api/stop) -> zero velocity",
         "baseline: raw Zenoh put -> subscriber",
+        "2 speaking: end of speech -> final",
         "panel API: 5 clients x 10 requests: 50 answered, 0 errors",
     ):
         assert figure in done.stdout, done.stdout
