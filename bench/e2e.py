@@ -32,7 +32,6 @@ import os
 import platform
 import random
 import signal
-import subprocess
 import sys
 import tempfile
 import threading
@@ -49,7 +48,7 @@ sys.path.insert(0, str(REPO))
 
 import httpx  # noqa: E402
 import websockets  # noqa: E402
-from soak import children, free_port  # noqa: E402
+from soak import children, start_up  # noqa: E402
 from speech_set import Utterance, Voice, speak  # noqa: E402
 from stt import raw_latency  # noqa: E402
 
@@ -378,32 +377,8 @@ def main() -> None:
     if args.quick:
         args.utterances, args.clients, args.requests = 10, 5, 10
         args.speakers, args.rounds = "1,2", 1
-    data = Path(tempfile.mkdtemp(prefix="voicectl-e2e-"))
-    port, router = free_port(), f"tcp/127.0.0.1:{free_port()}"
-    env = {**os.environ, "VOICECTL_DATA": str(data), "PYTHONUNBUFFERED": "1"}
-    env.pop("VOICECTL_TOKEN", None)
-    up = subprocess.Popen(
-        [sys.executable, "-m", "voicectl", "up", "--router", router, "--port", str(port)],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-        env=env,
-        cwd=REPO,
-    )
-    lines: list[str] = []
-    ready = threading.Event()
-
-    def pump() -> None:
-        assert up.stdout is not None
-        for text in up.stdout:
-            lines.append(text.rstrip())
-            if "voicectl up: ready" in text:
-                ready.set()
-
-    threading.Thread(target=pump, daemon=True).start()
+    up, _lines, data, port, router = start_up("voicectl-e2e-")
     try:
-        if not ready.wait(120):
-            sys.exit("the stack did not come up:\n" + "\n".join(lines[-30:]))
         token = (data / "token").read_text().strip()
         figures, raw = asyncio.run(
             voice_to_motion(port, token, router, args.utterances, args.speech)

@@ -78,28 +78,16 @@ def rss_mb(pid: int) -> float:
     return float("nan")
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--minutes", type=float, default=10.0)
-    parser.add_argument("--rate", type=float, default=3.0, help="requests a second")
-    args = parser.parse_args()
-    data = Path(tempfile.mkdtemp(prefix="voicectl-soak-"))
+def start_up(prefix: str, *flags: str) -> tuple[subprocess.Popen[str], list[str], Path, int, str]:
+    """`voicectl up` with a data directory and free ports of its own, once it says it is
+    ready: the process, its output lines (kept as they come), the data directory, the
+    panel's port and the router's endpoint. Exits saying why when it does not come up."""
+    data = Path(tempfile.mkdtemp(prefix=prefix))
     port, router = free_port(), f"tcp/127.0.0.1:{free_port()}"
     env = {**os.environ, "VOICECTL_DATA": str(data), "PYTHONUNBUFFERED": "1"}
     env.pop("VOICECTL_TOKEN", None)
     up = subprocess.Popen(
-        [
-            sys.executable,
-            "-m",
-            "voicectl",
-            "up",
-            "--router",
-            router,
-            "--port",
-            str(port),
-            "--time-scale",
-            "10",
-        ],
+        [sys.executable, "-m", "voicectl", "up", "--router", router, "--port", str(port), *flags],
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
         text=True,
@@ -117,9 +105,20 @@ def main() -> None:
                 ready.set()
 
     threading.Thread(target=pump, daemon=True).start()
+    if not ready.wait(120):
+        up.send_signal(signal.SIGINT)
+        up.wait(60)
+        sys.exit("the stack did not come up:\n" + "\n".join(lines[-30:]))
+    return up, lines, data, port, router
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--minutes", type=float, default=10.0)
+    parser.add_argument("--rate", type=float, default=3.0, help="requests a second")
+    args = parser.parse_args()
+    up, lines, data, port, _router = start_up("voicectl-soak-", "--time-scale", "10")
     try:
-        if not ready.wait(120):
-            sys.exit("the stack did not come up:\n" + "\n".join(lines[-30:]))
         token = (data / "token").read_text().strip()
         base = f"http://127.0.0.1:{port}"
         answers: collections.Counter[str] = collections.Counter()
