@@ -31,3 +31,24 @@ def test_e2e_runs_voice_to_motion_and_the_panel_api_quickly(tmp_path: Path) -> N
         "panel API: 5 clients x 10 requests: 50 answered, 0 errors",
     ):
         assert figure in done.stdout, done.stdout
+
+
+@pytest.mark.timeout(300)
+def test_fleet_runs_robots_beside_each_other_quickly() -> None:
+    done = subprocess.run(
+        [sys.executable, "bench/fleet.py", "--quick"],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        timeout=280,
+    )
+    assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
+    for figure in (
+        "3 robots",
+        "Send -> first motion, every robot",
+        "STOP -> zero velocity (one robot)",
+        "baseline: raw Zenoh put -> subscriber",
+        "supervisor RSS MB",
+        "(0 problems;",
+    ):
+        assert figure in done.stdout, done.stdout

@@ -1,0 +1,298 @@
+"""One site, many robots: one router, one converter and one supervisor serving N robots,
+each with its own simulator and executor as processes, every robot given an order every
+few seconds while one person presses STOP on one of them.
+
+    .venv/bin/python bench/fleet.py [--robots 50] [--seconds 60] [--period 3] [--quick]
+
+Each robot's cycle: submit a turn (as the panel's Send does) and time it to the first
+motion command at that robot's simulator (its navigation goal accepted, or a non-zero
+cmd_vel); then cancel it, except on the first robot, which gets STOP instead, timed to
+zero velocity on its cmd_vel, then a release. Reported: Send -> first motion over every
+robot (p50/p99, and the worst robot's p99), STOP -> zero velocity, and the CPU share and
+resident memory of the supervisor and the router over the measured window, beside the
+raw Zenoh put -> subscriber time through the same router. --quick: 3 robots for 8 s.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import os
+import platform
+import random
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+import uuid
+from collections import defaultdict
+from dataclasses import dataclass, field
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from e2e import line, percentile  # noqa: E402
+from soak import free_port  # noqa: E402
+from stt import raw_latency  # noqa: E402
+
+from shared.bus import Bus, BusOptions  # noqa: E402
+from shared.client import VoicectlClient  # noqa: E402
+from shared.errors import BusError  # noqa: E402
+from shared.keys import BridgeKeys  # noqa: E402
+from shared.messages import (  # noqa: E402
+    CancelAll,
+    GetState,
+    Order,
+    Release,
+    StateReply,
+    Submit,
+    Submitted,
+)
+from shared.ros2 import Ros2Codec  # noqa: E402
+
+MOTION_WAIT = 5.0
+
+
+def cpu_seconds(pid: int) -> float:
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def memory_mb(pid: int, field: str = "VmRSS") -> float:
+    for text in Path(f"/proc/{pid}/status").read_text().splitlines():
+        if text.startswith(field):
+            return int(text.split()[1]) / 1024
+    return float("nan")
+
+
+class Fleet:
+    """The site's processes: a router, a converter, a supervisor, and per robot a
+    simulator and an executor; logs in a directory of their own."""
+
+    def __init__(self, robots: int, logs: Path) -> None:
+        self.names = [f"bot{k}" for k in range(robots)]
+        self.router = f"tcp/127.0.0.1:{free_port()}"
+        self.logs = logs
+        self.data = Path(tempfile.mkdtemp(prefix="voicectl-fleet-"))
+        self.processes: dict[str, subprocess.Popen[bytes]] = {}
+
+    def start(self, name: str, *args: str) -> None:
+        log = (self.logs / f"{name}.log").open("wb")
+        self.processes[name] = subprocess.Popen(
+            [sys.executable, "-m", "voicectl", *args],
+            stdout=log,
+            stderr=subprocess.STDOUT,
+            cwd=REPO,
+            env={
+                **os.environ,
+                "VOICECTL_DATA": str(self.data),
+                "PYTHONUNBUFFERED": "1",
+                # Each service ends when this process does, however it ends.
+                "VOICECTL_PARENT": str(os.getpid()),
+            },
+        )
+
+    def up(self) -> None:
+        connect = ("--connect", self.router)
+        self.start("router", "router", "--listen", self.router)
+        time.sleep(1.0)
+        self.start("converter", "converter", *connect)
+        self.start("supervisor", "supervisor", *connect)
+        for name in self.names:
+            self.start(f"sim-{name}", "sim", "--namespace", name, *connect)
+        for name in self.names:
+            self.start(
+                f"executor-{name}", "executor", "--robot", name, "--namespace", name, *connect
+            )
+
+    def stop(self) -> None:
+        for process in self.processes.values():
+            if process.poll() is None:
+                process.send_signal(signal.SIGINT)
+        deadline = time.monotonic() + 60
+        for process in self.processes.values():
+            try:
+                process.wait(max(0.1, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                process.kill()
+                process.wait()
+
+
+@dataclass
+class Results:
+    to_motion: dict[str, list[float]] = field(default_factory=lambda: defaultdict(list))
+    """Send -> first motion, by robot."""
+    to_zero: list[float] = field(default_factory=list)
+    problems: list[str] = field(default_factory=list)
+
+
+class Motion:
+    """When each robot's simulator was told to move, or to stop (Zenoh's thread)."""
+
+    def __init__(self, bus: Bus, names: list[str]) -> None:
+        self.moved: dict[str, list[float]] = defaultdict(list)
+        self.zero: dict[str, list[float]] = defaultdict(list)
+        codec = Ros2Codec()
+        for name in names:
+            keys = BridgeKeys(name)
+
+            def on_twist(_key: str, twist: tuple[float, float], name: str = name) -> None:
+                (self.zero if twist == (0.0, 0.0) else self.moved)[name].append(time.monotonic())
+
+            def on_status(_key: str, _raw: bytes, name: str = name) -> None:
+                self.moved[name].append(time.monotonic())
+
+            bus.subscribe(keys.cmd_vel, codec.read_twist, on_twist, on_loop=False)
+            bus.subscribe(keys.navigate("status"), bytes, on_status, on_loop=False)
+
+    @staticmethod
+    async def first(times: list[float], after: float) -> float | None:
+        deadline = time.monotonic() + MOTION_WAIT
+        while time.monotonic() < deadline:
+            found = [t for t in times if t > after]
+            if found:
+                return min(found)
+            await asyncio.sleep(0.002)
+        return None
+
+
+async def measure(
+    fleet: Fleet, seconds: float, period: float
+) -> tuple[Results, list[float], dict[str, float]]:
+    loop = asyncio.get_running_loop()
+    options = BusOptions(connect=[fleet.router])
+    # The robots are watched from a session of their own, as a simulator is: the STOP's
+    # zero velocity, sent from the client's session, is timed across the router.
+    with Bus.open(options, loop) as bus, Bus.open(options, loop) as watching:
+        client = VoicectlClient(bus)
+        motion = Motion(watching, fleet.names)
+        await ready(client, fleet.names)
+        (turn,) = (await client.parse("turn left")).orders
+        raw = await raw_latency(bus)
+        results = Results()
+        pids = {n: fleet.processes[n].pid for n in ("supervisor", "router")}
+        cpu = {n: cpu_seconds(p) for n, p in pids.items()}
+        robots = [p.pid for n, p in fleet.processes.items() if n.startswith(("sim-", "executor-"))]
+        robots_cpu = sum(cpu_seconds(p) for p in robots)
+        began = time.monotonic()
+        end = began + seconds
+        await asyncio.gather(
+            *(
+                cycle(client, motion, name, turn, (end, period), index == 0, results)
+                for index, name in enumerate(fleet.names)
+            )
+        )
+        elapsed = time.monotonic() - began
+        usage = {f"{n} CPU %": 100 * (cpu_seconds(p) - cpu[n]) / elapsed for n, p in pids.items()}
+        usage["simulators and executors CPU %"] = (
+            100 * (sum(cpu_seconds(p) for p in robots) - robots_cpu) / elapsed
+        )
+        usage |= {f"{n} RSS MB": memory_mb(p) for n, p in pids.items()}
+        usage |= {f"{n} peak RSS MB": memory_mb(p, "VmHWM") for n, p in pids.items()}
+    return results, raw, usage
+
+
+async def ready(client: VoicectlClient, names: list[str], timeout: float = 600.0) -> None:
+    """Until the supervisor sees every robot's executor."""
+    deadline = time.monotonic() + timeout
+    waiting = set(names)
+    while waiting:
+        for name in sorted(waiting):
+            try:
+                reply = await client.request(name, GetState())
+            except BusError:
+                continue
+            if isinstance(reply, StateReply) and reply.state.executor_online:
+                waiting.discard(name)
+        if time.monotonic() > deadline:
+            sys.exit(f"executors not online after {timeout:g} s: {sorted(waiting)[:10]}")
+        await asyncio.sleep(0.5)
+
+
+async def cycle(
+    client: VoicectlClient,
+    motion: Motion,
+    name: str,
+    turn: Order,
+    timing: tuple[float, float],
+    stopping: bool,
+    results: Results,
+) -> None:
+    """One robot's orders until the end of `timing` (end, period): submit, first motion,
+    then cancel (or STOP)."""
+    end, period = timing
+    problems = results.problems
+    await asyncio.sleep(random.uniform(0, period))
+    while time.monotonic() < end:
+        started = time.monotonic()
+        sent = time.monotonic()
+        reply = await client.request(name, Submit(request_id=uuid.uuid4().hex, orders=[turn]))
+        if not isinstance(reply, Submitted):
+            problems.append(f"{name}: submit answered {reply}")
+        else:
+            moved = await motion.first(motion.moved[name], sent)
+            if moved is None:
+                problems.append(f"{name}: no motion within {MOTION_WAIT:g} s")
+            else:
+                results.to_motion[name].append(moved - sent)
+        if stopping:
+            asked = time.monotonic()
+            await client.stop(name)
+            zero = await motion.first(motion.zero[name], asked)
+            if zero is None:
+                problems.append(f"{name}: no zero velocity after STOP")
+            else:
+                results.to_zero.append(zero - asked)
+            await client.request(name, Release())
+        else:
+            await client.request(name, CancelAll())
+        await asyncio.sleep(max(0.0, started + period - time.monotonic()))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--robots", type=int, default=50)
+    parser.add_argument("--seconds", type=float, default=60.0)
+    parser.add_argument("--period", type=float, default=3.0, help="seconds between orders")
+    parser.add_argument("--quick", action="store_true", help="3 robots for 8 s")
+    args = parser.parse_args()
+    if args.quick:
+        args.robots, args.seconds = 3, 8.0
+    logs = Path(tempfile.mkdtemp(prefix="voicectl-fleet-logs-"))
+    fleet = Fleet(args.robots, logs)
+    started = time.monotonic()
+    try:
+        fleet.up()
+        results, raw, usage = asyncio.run(measure(fleet, args.seconds, args.period))
+    finally:
+        fleet.stop()
+    every = [t for times in results.to_motion.values() for t in times]
+    worst = max(
+        (percentile(t, 0.99) for t in results.to_motion.values() if t), default=float("nan")
+    )
+    print(
+        f"fleet: {time.strftime('%Y-%m-%d')}, {platform.processor() or platform.machine()}, "
+        f"{os.cpu_count()} cores; {args.robots} robots (a simulator and an executor each, as "
+        f"processes), one router, converter and supervisor; an order per robot every "
+        f"{args.period:g} s for {args.seconds:g} s (whole run {time.monotonic() - started:.0f} s)"
+    )
+    print(line("Send -> first motion, every robot", every, "p99 100 ms"))
+    print(f"{'':<46}worst robot's p99 {1e3 * worst:.1f} ms")
+    print(line("STOP -> zero velocity (one robot)", results.to_zero, "p99 50 ms"))
+    print(
+        f"{'baseline: raw Zenoh put -> subscriber':<44} p50 {1e6 * percentile(raw, 0.5):7.0f}  "
+        f"p99 {1e6 * percentile(raw, 0.99):7.0f} µs"
+    )
+    for name, value in usage.items():
+        print(f"  {name:<32} {value:8.1f}")
+    for problem in results.problems[:20]:
+        print(f"  ! {problem}")
+    print(f"  ({len(results.problems)} problems; logs in {logs})")
+    if results.problems:
+        sys.exit(1)
+
+
+if __name__ == "__main__":
+    main()
