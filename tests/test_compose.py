@@ -552,6 +552,8 @@ def test_the_secured_router_runs_the_shipped_secure_configuration() -> None:
     assert f"bus-secrets:{CONTAINER_DIR}:ro" in router["volumes"]
     maker = SECURED["bus-secrets"]
     assert maker["profiles"] == ["secrets"]  # run once, by hand, never by `up`
+    # The first command of the docs on a machine without images: it builds its own.
+    assert maker["build"] == SERVICES_COMPOSED["converter"]["build"]
     assert maker["command"][:2] == ["bus-secrets", CONTAINER_DIR]
     assert flag(maker["command"], "--host") == "router"
     assert f"bus-secrets:{CONTAINER_DIR}" in maker["volumes"]
