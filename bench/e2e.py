@@ -97,8 +97,9 @@ class Robot:
     zero: list[float] = field(default_factory=list)
     """Zero cmd_vel."""
 
-    def listen(self, bus: Bus) -> None:
-        codec, keys = Ros2Codec(), BridgeKeys()
+    def listen(self, bus: Bus, keys: BridgeKeys | None = None) -> None:
+        """Watch the robot of `keys` (the bridge's default namespace when none)."""
+        codec, keys = Ros2Codec(), keys or BridgeKeys()
 
         def on_twist(_key: str, twist: tuple[float, float]) -> None:
             (self.zero if twist == (0.0, 0.0) else self.moved).append(time.monotonic())
@@ -112,7 +113,8 @@ class Robot:
         )
 
     @staticmethod
-    async def first(times: list[float], after: float, timeout: float) -> float | None:
+    async def first(times: list[float], after: float, timeout: float = MOTION_WAIT) -> float | None:
+        """The first of `times` after `after`, waiting up to `timeout` for one."""
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             found = [t for t in times if t > after]
@@ -247,14 +249,14 @@ async def one(
     sent = time.monotonic()
     answer = await client.post("/api/submit", json={"orders": orders, "transcript": text})
     answer.raise_for_status()
-    moved = await robot.first(robot.moved, sent, MOTION_WAIT)
+    moved = await robot.first(robot.moved, sent)
     if moved is None:
         figures.lost.append(f"{text!r}: no motion within {MOTION_WAIT:g} s")
     else:
         figures.to_motion.append(moved - sent)
     asked = time.monotonic()
     (await client.post("/api/stop", json={})).raise_for_status()
-    zero = await robot.first(robot.zero, asked, MOTION_WAIT)
+    zero = await robot.first(robot.zero, asked)
     if zero is None:
         figures.lost.append(f"{text!r}: no zero velocity after STOP")
     else:

@@ -33,8 +33,8 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from e2e import line, percentile  # noqa: E402
-from soak import free_port  # noqa: E402
+from e2e import MOTION_WAIT, Robot, cpu_seconds, line, percentile  # noqa: E402
+from soak import free_port, rss_mb  # noqa: E402
 from stt import raw_latency  # noqa: E402
 
 from shared.bus import Bus, BusOptions  # noqa: E402
@@ -50,21 +50,6 @@ from shared.messages import (  # noqa: E402
     Submit,
     Submitted,
 )
-from shared.ros2 import Ros2Codec  # noqa: E402
-
-MOTION_WAIT = 5.0
-
-
-def cpu_seconds(pid: int) -> float:
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-
-
-def memory_mb(pid: int, field: str = "VmRSS") -> float:
-    for text in Path(f"/proc/{pid}/status").read_text().splitlines():
-        if text.startswith(field):
-            return int(text.split()[1]) / 1024
-    return float("nan")
 
 
 class Fleet:
@@ -128,36 +113,6 @@ class Results:
     problems: list[str] = field(default_factory=list)
 
 
-class Motion:
-    """When each robot's simulator was told to move, or to stop (Zenoh's thread)."""
-
-    def __init__(self, bus: Bus, names: list[str]) -> None:
-        self.moved: dict[str, list[float]] = defaultdict(list)
-        self.zero: dict[str, list[float]] = defaultdict(list)
-        codec = Ros2Codec()
-        for name in names:
-            keys = BridgeKeys(name)
-
-            def on_twist(_key: str, twist: tuple[float, float], name: str = name) -> None:
-                (self.zero if twist == (0.0, 0.0) else self.moved)[name].append(time.monotonic())
-
-            def on_status(_key: str, _raw: bytes, name: str = name) -> None:
-                self.moved[name].append(time.monotonic())
-
-            bus.subscribe(keys.cmd_vel, codec.read_twist, on_twist, on_loop=False)
-            bus.subscribe(keys.navigate("status"), bytes, on_status, on_loop=False)
-
-    @staticmethod
-    async def first(times: list[float], after: float) -> float | None:
-        deadline = time.monotonic() + MOTION_WAIT
-        while time.monotonic() < deadline:
-            found = [t for t in times if t > after]
-            if found:
-                return min(found)
-            await asyncio.sleep(0.002)
-        return None
-
-
 async def measure(
     fleet: Fleet, seconds: float, period: float
 ) -> tuple[Results, list[float], dict[str, float]]:
@@ -167,30 +122,34 @@ async def measure(
     # zero velocity, sent from the client's session, is timed across the router.
     with Bus.open(options, loop) as bus, Bus.open(options, loop) as watching:
         client = VoicectlClient(bus)
-        motion = Motion(watching, fleet.names)
+        watched = {name: Robot() for name in fleet.names}
+        for name, robot in watched.items():
+            robot.listen(watching, BridgeKeys(name))
         await ready(client, fleet.names)
         (turn,) = (await client.parse("turn left")).orders
         raw = await raw_latency(bus)
         results = Results()
         pids = {n: fleet.processes[n].pid for n in ("supervisor", "router")}
         cpu = {n: cpu_seconds(p) for n, p in pids.items()}
-        robots = [p.pid for n, p in fleet.processes.items() if n.startswith(("sim-", "executor-"))]
-        robots_cpu = sum(cpu_seconds(p) for p in robots)
+        robot_side = [
+            p.pid for n, p in fleet.processes.items() if n.startswith(("sim-", "executor-"))
+        ]
+        robots_cpu = sum(cpu_seconds(p) for p in robot_side)
         began = time.monotonic()
         end = began + seconds
         await asyncio.gather(
             *(
-                cycle(client, motion, name, turn, (end, period), index == 0, results)
+                cycle(client, watched[name], name, turn, (end, period), index == 0, results)
                 for index, name in enumerate(fleet.names)
             )
         )
         elapsed = time.monotonic() - began
         usage = {f"{n} CPU %": 100 * (cpu_seconds(p) - cpu[n]) / elapsed for n, p in pids.items()}
         usage["simulators and executors CPU %"] = (
-            100 * (sum(cpu_seconds(p) for p in robots) - robots_cpu) / elapsed
+            100 * (sum(cpu_seconds(p) for p in robot_side) - robots_cpu) / elapsed
         )
-        usage |= {f"{n} RSS MB": memory_mb(p) for n, p in pids.items()}
-        usage |= {f"{n} peak RSS MB": memory_mb(p, "VmHWM") for n, p in pids.items()}
+        usage |= {f"{n} RSS MB": rss_mb(p) for n, p in pids.items()}
+        usage |= {f"{n} peak RSS MB": rss_mb(p, "VmHWM") for n, p in pids.items()}
     return results, raw, usage
 
 
@@ -213,7 +172,7 @@ async def ready(client: VoicectlClient, names: list[str], timeout: float = 600.0
 
 async def cycle(
     client: VoicectlClient,
-    motion: Motion,
+    robot: Robot,
     name: str,
     turn: Order,
     timing: tuple[float, float],
@@ -232,7 +191,7 @@ async def cycle(
         if not isinstance(reply, Submitted):
             problems.append(f"{name}: submit answered {reply}")
         else:
-            moved = await motion.first(motion.moved[name], sent)
+            moved = await robot.first(robot.moved, sent)
             if moved is None:
                 problems.append(f"{name}: no motion within {MOTION_WAIT:g} s")
             else:
@@ -240,7 +199,7 @@ async def cycle(
         if stopping:
             asked = time.monotonic()
             await client.stop(name)
-            zero = await motion.first(motion.zero[name], asked)
+            zero = await robot.first(robot.zero, asked)
             if zero is None:
                 problems.append(f"{name}: no zero velocity after STOP")
             else:
