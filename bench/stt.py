@@ -48,7 +48,7 @@ from services.converter.orders import OrderSet  # noqa: E402
 from services.converter.parser import Parser  # noqa: E402
 from services.stt.audio import NoiseFloor, frames, read_wav  # noqa: E402
 from services.stt.engine import EngineOptions, Final, load_engine  # noqa: E402
-from services.stt.judge import Thresholds  # noqa: E402
+from services.stt.judge import OFF  # noqa: E402
 from services.stt.sphinx import PocketsphinxEngine  # noqa: E402
 from shared.bus import Bus, BusOptions, json_decoder  # noqa: E402
 from shared.keys import RobotKeys  # noqa: E402
@@ -189,7 +189,7 @@ def offline(
         started = time.perf_counter()
         engine = load_engine(options)
         if not second_opinion and isinstance(engine, PocketsphinxEngine):
-            engine.thresholds = Thresholds(max_foreign=math.inf, min_support=0.0)
+            engine.thresholds = OFF
         elif not second_opinion:
             continue
         engine.use_grammar(grammar)
@@ -386,6 +386,15 @@ async def through_service(
         f"{'':<46} end of speech -> proposal p50 {1e3 * percentile(to_proposal, 0.5):4.0f} ms"
         f"   p95 {1e3 * percentile(to_proposal, 0.95):4.0f} ms"
     )
+    for condition in sorted({o.utterance.condition for o in outcomes}):
+        some = [o.to_final for o in outcomes if o.utterance.condition == condition]
+        heard = [t for t in some if t is not None]
+        if heard:
+            print(
+                f"{'':<46}   {condition:<8} end of speech -> final p50 "
+                f"{1e3 * percentile(heard, 0.5):4.0f} ms   p95 {1e3 * percentile(heard, 0.95):4.0f}"
+                f" ms   (n={len(heard)})"
+            )
     print(
         f"{'':<46} baseline: raw Zenoh put -> subscriber p50 {1e6 * statistics.median(raw):.0f} us"
     )
@@ -463,6 +472,7 @@ def main() -> None:
     parser.add_argument("--service-only", action="store_true")
     parser.add_argument("--threads", action="store_true", help="CPU of each service thread")
     parser.add_argument("--every", type=int, default=1, help="only every Nth utterance")
+    parser.add_argument("--quick", action="store_true", help="every 20th utterance")
     parser.add_argument(
         "--paced",
         type=float,
@@ -476,6 +486,8 @@ def main() -> None:
         help="test (reported) or dev (where the thresholds were tuned)",
     )
     args = parser.parse_args()
+    if args.quick:
+        args.every = 20
     utterances = [u for u in generate(args.set) if u.split == args.split][:: args.every]
     orders = OrderSet.load(args.orders)
     machine = platform.processor() or platform.machine()

@@ -132,3 +132,29 @@ def test_the_judge_rejects_conversation_with_what_it_heard() -> None:
         Thresholds(),
     )
     assert verdict.rejection == "I heard 'could you please pass me the salt': not a command"
+
+
+def test_the_judge_rejects_a_command_word_the_grammar_was_unsure_of() -> None:
+    # "drive back one meter" in a reverberant room: the grammar's lattice gave "ahead" 0.58.
+    grammar = words("move forward ten meters")
+    grammar[1] = Word("forward", grammar[1].start, grammar[1].end, 0.58)
+    verdict = judge(grammar, words("move ten meters"), VOCABULARY, Thresholds())
+    assert verdict.rejection == "not sure I heard 'forward': say it again"
+    # The open decode hearing the word too is enough.
+    verdict = judge(grammar, words("move forward ten meters"), VOCABULARY, Thresholds())
+    assert verdict.rejection == ""
+    assert verdict.confidences[1] == 0.9
+
+
+def test_the_judge_doubts_a_value_the_grammar_was_unsure_of() -> None:
+    grammar = words("go forward ten meters")
+    grammar[2] = Word("ten", grammar[2].start, grammar[2].end, 0.6)
+    verdict = judge(grammar, words("go forward ten meters"), VOCABULARY, Thresholds())
+    assert verdict.rejection == ""
+    [doubt] = verdict.doubts
+    assert (doubt.position, doubt.words, doubt.alternatives, doubt.confidence) == (
+        2,
+        "ten",
+        [],
+        0.6,
+    )

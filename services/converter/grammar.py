@@ -6,8 +6,13 @@ The phrase list spells everything out, up to `MAX_PHRASES` per command; a comman
 more, or whose alias cannot be expanded at all, is listed in `unexpandable` and gives its
 words instead. In the JSGF such an alias becomes "one or more of its words".
 
-Skip words are optional wherever the parser lets them stand: between the words of a
-command and around it (`<skip>` is at most two of them), never inside a spoken number.
+Skip words stand where people put them, which is narrower than where the parser lets them
+(the parser reads typed text; the grammar constrains a search that will explain any sound
+as some phrase it allows). Between two words of a command at most one (`<skip>`: "reach
+the kitchen"), never inside a spoken number; before and after a whole command only the
+courtesy words of `EDGE_WORDS` (`<edge>`: "please turn left now"). With two skip words
+anywhere, the search explained "can you hear me" as "turn the the right" and "turn on the
+lights" as "to turn back" (bench/stt.py, dev split).
 """
 
 from __future__ import annotations
@@ -24,6 +29,8 @@ from .orders import Command, OrderSet
 from .slots import say_number
 from .text import normalise
 
+EDGE_WORDS = ("please", "now")
+"""Skip words that may also open or close a command; the others stand only inside one."""
 MAX_PHRASES = 5000
 """Per command; beyond this the phrase list gives the command's words instead."""
 GRAMMAR_NAME = "voicectl"
@@ -111,18 +118,18 @@ class _Builder:
         return self.gap.join(words)
 
     def jsgf(self, separator_rule: str) -> str:
-        order = "<skip> <order> <skip>" if self.skip_words else "<order>"
+        edges = [w for w in self.skip_words if w in EDGE_WORDS]
+        order = "<edge> <order> <edge>" if edges else "<order>"
         lines = [
             "#JSGF V1.0;",
             f"grammar {GRAMMAR_NAME};",
             f"public <command> = {order} ( <separator> {order} )*;",
             f"<separator> = {separator_rule};",
         ]
+        if edges:
+            lines.append(f"<edge> = [ {' | '.join(edges)} ];")
         if self.skip_words:
-            # At most two skip words stand together: an unbounded run let the search explain
-            # a whole stretch of conversation as "the to a to" between two command words.
-            words = " | ".join(self.skip_words)
-            lines.append(f"<skip> = [ ( {words} ) [ {words} ] ];")
+            lines.append(f"<skip> = [ {' | '.join(self.skip_words)} ];")
         names = " | ".join(f"<{name}>" for name, _, _ in self.rules)
         lines.append(f"<order> = {names or '<VOID>'};")
         lines.extend(f"<{name}> = {body}; // {command}" for name, body, command in self.rules)
