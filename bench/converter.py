@@ -146,7 +146,10 @@ def main() -> int:
     args = argparse.ArgumentParser(description=__doc__)
     args.add_argument("--orders-count", type=int, default=200)
     args.add_argument("--rounds", type=int, default=5)
+    args.add_argument("--quick", action="store_true", help="one round")
     options = args.parse_args()
+    if options.quick:
+        options.rounds = 1
     rng = random.Random(1)
     print(f"machine: {machine()}")
 

@@ -293,7 +293,10 @@ def main() -> int:
     parser.add_argument("--loss", type=float, default=5.0, metavar="PERCENT", help="each way")
     parser.add_argument("--json", action="store_true", help="also print the figures as JSON")
     parser.add_argument("--echo", metavar="ENDPOINT", help=argparse.SUPPRESS)  # the robot's echo
+    parser.add_argument("--quick", action="store_true", help="5 stops, 50 pings")
     args = parser.parse_args()
+    if args.quick:
+        args.stops, args.pings = 5, 50
     if args.echo:
         echo(args.echo)
         return 0

@@ -117,7 +117,10 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--minutes", type=float, default=10.0)
     parser.add_argument("--rate", type=float, default=3.0, help="requests a second")
+    parser.add_argument("--quick", action="store_true", help="half a minute")
     args = parser.parse_args()
+    if args.quick:
+        args.minutes = 0.5
     up, lines, data, port, _router = start_up("voicectl-soak-", "--time-scale", "10")
     try:
         token = (data / "token").read_text().strip()

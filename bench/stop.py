@@ -90,7 +90,10 @@ async def bench(rig: StopRig, router: str, rounds: int) -> dict[str, list[Outcom
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--rounds", type=int, default=20)
+    parser.add_argument("--quick", action="store_true", help="3 rounds per case")
     args = parser.parse_args()
+    if args.quick:
+        args.rounds = 3
     # SIGTERM unwinds like Ctrl-C, so that the processes started are stopped too.
     signal.signal(signal.SIGTERM, lambda *_: sys.exit(1))
     print(

@@ -1,7 +1,7 @@
 """Supervisor overhead: submit round trip, submit-to-dispatch latency and orders accepted
 per second with durability on, beside a raw Zenoh request/reply measured in the same run.
 
-    .venv/bin/python bench/supervisor.py [--orders 10000] [--durability process|power]
+    .venv/bin/python bench/supervisor.py [--orders 10000] [--durability process|power] [--quick]
 
 Everything runs on loopback: a router and the supervisor as their own processes, a raw
 echo queryable as its own process (the baseline), and this process as client and as the
@@ -166,10 +166,22 @@ async def measure(router: str, orders: int, round_trips: int) -> None:
             dispatch_times.append(executor.arrivals[order_id] - start)
             await asyncio.sleep(0.001)  # let the order finish before the next submit
 
-        # Throughput: a robot without an executor, so every order stays queued (and stored).
+        # Throughput: a robot without an executor, so every order stays queued (and stored);
+        # beside it, the same number of raw requests to the echo, as many in flight.
         burst = RobotKeys("burst")
         in_flight = 64
         accepted = 0
+        echoed = 0
+
+        async def echo_worker(first: int) -> None:
+            nonlocal echoed
+            for _ in range(first, orders, in_flight):
+                await bus.request_bytes("bench/echo", b"x" * 200, 10.0)
+                echoed += 1
+
+        start = time.perf_counter()
+        await asyncio.gather(*(echo_worker(k) for k in range(in_flight)))
+        raw_rate = echoed / (time.perf_counter() - start)
 
         async def worker(first: int) -> None:
             nonlocal accepted
@@ -188,7 +200,9 @@ async def measure(router: str, orders: int, round_trips: int) -> None:
     raw50, _ = describe("raw Zenoh request/reply (baseline)", raw)
     sub50, _ = describe("supervisor submit round trip", submit_times)
     dis50, _ = describe("submit to dispatch (order at the executor)", dispatch_times)
+    print(f"{'raw Zenoh requests per second (64 in flight)':<42} {raw_rate:9.0f} /s  (baseline)")
     print(f"{'orders accepted per second (64 in flight)':<42} {accepted / elapsed:9.0f} /s")
+    print(f"{'orders accepted / raw requests per second':<42} {accepted / elapsed / raw_rate:9.2f}")
     print(f"{'submit / raw round trip (p50)':<42} {sub50 / raw50:9.2f} x")
     print(f"{'submit-to-dispatch / raw round trip (p50)':<42} {dis50 / raw50:9.2f} x")
 
@@ -198,7 +212,10 @@ def main() -> None:
     parser.add_argument("--orders", type=int, default=10_000, help="orders in the burst")
     parser.add_argument("--round-trips", type=int, default=1000)
     parser.add_argument("--durability", choices=["process", "power"], default="process")
+    parser.add_argument("--quick", action="store_true", help="2,000 orders, 200 round trips")
     args = parser.parse_args()
+    if args.quick:
+        args.orders, args.round_trips = 2000, 200
     router = f"tcp/127.0.0.1:{free_port()}"
     with tempfile.TemporaryDirectory() as tmp:
         python = sys.executable
