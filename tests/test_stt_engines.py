@@ -5,9 +5,11 @@ from __future__ import annotations
 
 import itertools
 import json
+import multiprocessing
 import re
 import subprocess
 import wave
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import msgspec
@@ -18,7 +20,7 @@ from hypothesis import strategies as st
 from services.converter.grammar import build_grammar
 from services.converter.orders import OrderSet
 from services.stt.audio import AudioError, frames, read_wav
-from services.stt.engine import EngineError, EngineOptions, Final, Heard, load_engine
+from services.stt.engine import Engine, EngineError, EngineOptions, Final, Heard, load_engine
 from services.stt.lexicon import (
     espeak_pronunciations,
     ipa_to_arpabet,
@@ -289,6 +291,39 @@ def test_the_recogniser_switches_grammars_between_utterances(speech: Speak) -> N
     assert texts[0] == [("turn left", "")]
     assert texts[1][0][0] != "turn left"
     assert texts[1][0][1] != ""  # forced towards "reach kitchen" or nothing: either way rejected
+
+
+def _finals(engine: Engine, pcm: bytes) -> list[Final]:
+    recogniser = engine.recogniser(15.0)
+    try:
+        events = [e for frame in frames(pcm) for e in recogniser.accept(frame)]
+        events += recogniser.finish()
+    finally:
+        recogniser.close()
+    return [e for e in events if isinstance(e, Final)]
+
+
+def test_worker_processes_decode_sessions_at_once_as_one_process_does(speech: Speak) -> None:
+    pcm = read_wav(speech("turn left then reach the kitchen", "flite:slt"))
+    grammar = build_grammar(OrderSet.load(ORDERS))
+    local = load_engine(EngineOptions())
+    local.use_grammar(grammar)
+    [expected] = _finals(local, pcm)
+    assert expected.text == "turn left then reach the kitchen"
+    engine = load_engine(EngineOptions(workers=2))
+    try:
+        with pytest.raises(EngineError, match="no grammar yet"):
+            engine.recogniser(15.0)
+        engine.use_grammar(grammar)
+        with ThreadPoolExecutor(3) as pool:
+            assert list(pool.map(lambda _: _finals(engine, pcm), range(3))) == [[expected]] * 3
+        broken = msgspec.structs.replace(grammar, jsgf="#JSGF V1.0;\ngrammar x;\n", version="x")
+        with pytest.raises(EngineError, match="grammar x"):
+            engine.use_grammar(broken)
+        assert _finals(engine, pcm) == [expected]  # the previous grammar stays in use
+    finally:
+        engine.close()
+    assert not [p for p in multiprocessing.active_children() if p.name.startswith("stt-worker")]
 
 
 # --- Vosk ------------------------------------------------------------------------------------

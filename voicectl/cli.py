@@ -275,6 +275,7 @@ def _up(args: argparse.Namespace) -> int:
     ]
     if not args.no_stt:
         engine = ["--engine", args.engine, "--min-confidence", str(args.min_confidence)]
+        engine += ["--workers", str(args.workers)]
         if args.vosk_model is not None:
             engine += ["--vosk-model", str(args.vosk_model)]
         children.insert(3, Child("stt", ["services.stt", *robot, *engine, *connect]))
@@ -374,14 +375,20 @@ def _transcribe(args: argparse.Namespace) -> int:
     try:
         orders = OrderSet.load(args.orders)
         engine = load_engine(engine_options(args))
-        engine.use_grammar(build_grammar(orders))
     except (OrdersFileError, EngineError) as exc:
         print(f"voicectl transcribe: {exc}", file=sys.stderr)
         return 2
     unreadable = 0
-    for line in transcribe(engine, Parser(orders).parse, args.audio):
-        unreadable += isinstance(line, Unreadable)
-        print(_ENCODER.encode(line).decode(), flush=True)
+    try:
+        engine.use_grammar(build_grammar(orders))
+        for line in transcribe(engine, Parser(orders).parse, args.audio):
+            unreadable += isinstance(line, Unreadable)
+            print(_ENCODER.encode(line).decode(), flush=True)
+    except EngineError as exc:
+        print(f"voicectl transcribe: {exc}", file=sys.stderr)
+        return 2
+    finally:
+        engine.close()
     return 1 if unreadable else 0
 
 

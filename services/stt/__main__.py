@@ -38,11 +38,32 @@ def add_engine_arguments(parser: argparse.ArgumentParser) -> None:
         metavar="C",
         help="reject utterances recognised with less confidence, 0 to 1 (default %(default)s)",
     )
+    parser.add_argument(
+        "--workers",
+        type=_count,
+        default=0,
+        metavar="N",
+        help="decode in N worker processes, one engine each, for several people speaking "
+        "at once on several cores (default 0: in this process)",
+    )
+
+
+def _count(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number of 0 or more")
+    return value
 
 
 def engine_options(args: argparse.Namespace) -> EngineOptions:
     return EngineOptions(
-        name=args.engine, vosk_model=args.vosk_model, min_confidence=args.min_confidence
+        name=args.engine,
+        vosk_model=args.vosk_model,
+        min_confidence=args.min_confidence,
+        workers=args.workers,
     )
 
 
@@ -89,12 +110,15 @@ async def main(argv: list[str] | None = None) -> int:
         idle_seconds=args.idle,
     )
     loop = asyncio.get_running_loop()
-    with (
-        Bus.open(bus_options(args), loop) as bus,
-        SttService(bus, args.robot, engine, limits) as service,
-    ):
-        _LOGGER.info("stt ready for robot %s with %s", args.robot, engine.name)
-        await wait_for_stop(service.run())
+    try:
+        with (
+            Bus.open(bus_options(args), loop) as bus,
+            SttService(bus, args.robot, engine, limits) as service,
+        ):
+            _LOGGER.info("stt ready for robot %s with %s", args.robot, engine.name)
+            await wait_for_stop(service.run())
+    finally:
+        engine.close()
     return 0
 
 

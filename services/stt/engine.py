@@ -87,6 +87,9 @@ class Engine(Protocol):
         than `max_utterance` seconds are cut; with `segment` False the whole stream is one
         utterance (offline transcription). Raises EngineError before any grammar."""
 
+    def close(self) -> None:
+        """Give back what the engine holds beyond this process's memory (its workers)."""
+
 
 @dataclass(frozen=True)
 class EngineOptions:
@@ -94,10 +97,16 @@ class EngineOptions:
     vosk_model: Path | None = None
     min_confidence: float = 0.5
     """Utterances whose confidence is lower are rejected."""
+    workers: int = 0
+    """Decode in this many worker processes (workers.py); 0: in the calling process."""
 
 
 def load_engine(options: EngineOptions) -> Engine:
     """The engine `options` names, imported now; EngineError with an install hint."""
+    if options.workers > 0:
+        from .workers import ProcessEngine
+
+        return ProcessEngine(options, options.workers)
     match options.name:
         case "pocketsphinx":
             _require("pocketsphinx", "stt")

@@ -250,6 +250,9 @@ class PocketsphinxEngine:
             if len(self._pool) < POOL_SIZE:
                 self._pool.append(decoder)
 
+    def close(self) -> None:
+        """Nothing beyond this process's memory."""
+
     def compiled(self) -> _Compiled:
         assert self._compiled is not None
         return self._compiled

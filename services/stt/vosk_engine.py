@@ -62,6 +62,9 @@ class VoskEngine:
         """Idle recognisers, each with the version of the grammar it was built with."""
         self._lock = threading.Lock()
 
+    def close(self) -> None:
+        """Nothing beyond this process's memory."""
+
     def use_grammar(self, grammar: Grammar) -> list[str]:
         words = set(grammar.words)
         missing = sorted(w for w in words if self._model.vosk_model_find_word(w) == -1)
