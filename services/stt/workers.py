@@ -120,9 +120,13 @@ class _Worker:
         self.sessions = 0
 
     def wait_ready(self) -> None:
-        if not self._connection.poll(START_TIMEOUT):
-            raise EngineError(f"a decoding worker did not start within {START_TIMEOUT:.0f} s")
-        self._answer(self._connection.recv())
+        try:
+            if not self._connection.poll(START_TIMEOUT):
+                raise EngineError(f"a decoding worker did not start within {START_TIMEOUT:.0f} s")
+            self._answer(self._connection.recv())
+        except (EOFError, OSError) as exc:
+            code = self._process.exitcode
+            raise EngineError(f"a decoding worker exited as it started (exit code {code})") from exc
 
     def call(self, call: _Call) -> Any:
         with self._lock:
