@@ -28,6 +28,12 @@ QUICK = {
         "supervisor RSS MB",
         "(0 problems;",
     ),
+    "supervisor": (
+        "raw Zenoh request/reply (baseline)",
+        "submit to dispatch (order at the executor)",
+        "raw Zenoh requests per second (64 in flight)",
+        "orders accepted per second (64 in flight)",
+    ),
 }
 """Each benchmark with --quick, and what its report must hold."""
 
