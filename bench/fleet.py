@@ -2,7 +2,8 @@
 each with its own simulator and executor as processes, every robot given an order every
 few seconds while one person presses STOP on one of them.
 
-    .venv/bin/python bench/fleet.py [--robots 50] [--seconds 60] [--period 3] [--quick]
+    .venv/bin/python bench/fleet.py [--robots 50] [--seconds 60] [--period 3] [--per-process K]
+                                    [--quick]
 
 Each robot's cycle: submit a turn (as the panel's Send does) and time it to the first
 motion command at that robot's simulator (its navigation goal accepted, or a non-zero
@@ -56,17 +57,19 @@ class Fleet:
     """The site's processes: a router, a converter, a supervisor, and per robot a
     simulator and an executor; logs in a directory of their own."""
 
-    def __init__(self, robots: int, logs: Path) -> None:
+    def __init__(self, robots: int, logs: Path, per_process: int = 0) -> None:
         self.names = [f"bot{k}" for k in range(robots)]
+        self.per_process = per_process
+        """Robots per bench/robots.py process; 0: two processes per robot, as on a site."""
         self.router = f"tcp/127.0.0.1:{free_port()}"
         self.logs = logs
         self.data = Path(tempfile.mkdtemp(prefix="voicectl-fleet-"))
         self.processes: dict[str, subprocess.Popen[bytes]] = {}
 
-    def start(self, name: str, *args: str) -> None:
+    def start(self, name: str, *args: str, program: tuple[str, ...] = ("-m", "voicectl")) -> None:
         log = (self.logs / f"{name}.log").open("wb")
         self.processes[name] = subprocess.Popen(
-            [sys.executable, "-m", "voicectl", *args],
+            [sys.executable, *program, *args],
             stdout=log,
             stderr=subprocess.STDOUT,
             cwd=REPO,
@@ -85,6 +88,12 @@ class Fleet:
         time.sleep(1.0)
         self.start("converter", "converter", *connect)
         self.start("supervisor", "supervisor", *connect)
+        if self.per_process:
+            for first in range(0, len(self.names), self.per_process):
+                group = self.names[first : first + self.per_process]
+                robots = ("bench/robots.py",)
+                self.start(f"robots-{first}", *connect, *group, program=robots)
+            return
         for name in self.names:
             self.start(f"sim-{name}", "sim", "--namespace", name, *connect)
         for name in self.names:
@@ -132,7 +141,9 @@ async def measure(
         pids = {n: fleet.processes[n].pid for n in ("supervisor", "router")}
         cpu = {n: cpu_seconds(p) for n, p in pids.items()}
         robot_side = [
-            p.pid for n, p in fleet.processes.items() if n.startswith(("sim-", "executor-"))
+            p.pid
+            for n, p in fleet.processes.items()
+            if n.startswith(("sim-", "executor-", "robots-"))
         ]
         robots_cpu = sum(cpu_seconds(p) for p in robot_side)
         began = time.monotonic()
@@ -215,12 +226,19 @@ def main() -> None:
     parser.add_argument("--robots", type=int, default=50)
     parser.add_argument("--seconds", type=float, default=60.0)
     parser.add_argument("--period", type=float, default=3.0, help="seconds between orders")
+    parser.add_argument(
+        "--per-process",
+        type=int,
+        default=0,
+        metavar="K",
+        help="K simulated robots per process (bench/robots.py) instead of two processes each",
+    )
     parser.add_argument("--quick", action="store_true", help="3 robots for 8 s")
     args = parser.parse_args()
     if args.quick:
         args.robots, args.seconds = 3, 8.0
     logs = Path(tempfile.mkdtemp(prefix="voicectl-fleet-logs-"))
-    fleet = Fleet(args.robots, logs)
+    fleet = Fleet(args.robots, logs, args.per_process)
     started = time.monotonic()
     try:
         fleet.up()
@@ -233,8 +251,9 @@ def main() -> None:
     )
     print(
         f"fleet: {time.strftime('%Y-%m-%d')}, {platform.processor() or platform.machine()}, "
-        f"{os.cpu_count()} cores; {args.robots} robots (a simulator and an executor each, as "
-        f"processes), one router, converter and supervisor; an order per robot every "
+        f"{os.cpu_count()} cores; {args.robots} robots (a simulator and an executor each, "
+        + (f"{args.per_process} robots per process" if args.per_process else "as processes")
+        + f"), one router, converter and supervisor; an order per robot every "
         f"{args.period:g} s for {args.seconds:g} s (whole run {time.monotonic() - started:.0f} s)"
     )
     print(line("Send -> first motion, every robot", every, "p99 100 ms"))

@@ -78,40 +78,48 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
-async def main(argv: list[str] | None = None) -> int:
-    args = parse_args(argv)
-    setup_logging(args.debug)
+def executor_service(bus: Bus, args: argparse.Namespace) -> ExecutorService:
+    """The executor `args` describe, on `bus`, not started; BindingError when a binding
+    cannot be loaded (bench/robots.py hosts several)."""
     bindings = Bindings()
     for executor in builtin_executors(args.photo_dir or data_dir() / "photos"):
         bindings.bind(executor, executor.labels)
-    try:
-        for path in args.executors:
-            for executor, labels in load_bindings_file(path):
-                bindings.bind(executor, labels)
-        for spec in args.executor:
-            bindings.bind(*load_binding(spec))
-    except BindingError as exc:
-        print(f"voicectl executor: {exc}", file=sys.stderr)
-        return 2
+    for path in args.executors:
+        for executor, labels in load_bindings_file(path):
+            bindings.bind(executor, labels)
+    for spec in args.executor:
+        bindings.bind(*load_binding(spec))
+    robot = RobotLink(
+        bus,
+        robot_options(args),
+        RobotKeys(args.robot).pose,
+        on_change=lambda: service.publish_info(),
+        result_grace=args.result_grace,
+    )
+    service = ExecutorService(
+        bus,
+        RobotKeys(args.robot),
+        robot,
+        bindings,
+        cancel_deadline=args.cancel_deadline,
+        stall_limit=args.stall_limit,
+    )
+    return service
+
+
+async def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    setup_logging(args.debug)
     loop = asyncio.get_running_loop()
     with Bus.open(bus_options(args), loop) as bus:
-        robot = RobotLink(
-            bus,
-            robot_options(args),
-            RobotKeys(args.robot).pose,
-            on_change=lambda: service.publish_info(),
-            result_grace=args.result_grace,
-        )
-        service = ExecutorService(
-            bus,
-            RobotKeys(args.robot),
-            robot,
-            bindings,
-            cancel_deadline=args.cancel_deadline,
-            stall_limit=args.stall_limit,
-        )
+        try:
+            service = executor_service(bus, args)
+        except BindingError as exc:
+            print(f"voicectl executor: {exc}", file=sys.stderr)
+            return 2
         service.start()
-        _LOGGER.info("executor ready for %s; labels: %s", args.robot, ", ".join(bindings.labels))
+        labels = ", ".join(service.labels)
+        _LOGGER.info("executor ready for %s; labels: %s", args.robot, labels)
         try:
             # Inside the wait, so that a stop signal during the halt is still a clean stop.
             await wait_for_stop(service.end_stray_motion(), keep_running=True)

@@ -86,6 +86,8 @@ class ExecutorService:
         self._keys = keys
         self._robot = robot
         self._bindings = bindings
+        self.labels = bindings.labels
+        """The labels this executor serves."""
         self._cancel_deadline = cancel_deadline
         self._running: _Execution | None = None
         self._withdraw: Callable[[], None] = lambda: None

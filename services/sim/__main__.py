@@ -80,9 +80,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return build_parser().parse_args(argv)
 
 
-async def main(argv: list[str] | None = None) -> int:
-    args = parse_args(argv)
-    setup_logging(args.debug)
+def sim_node(bus: Bus, args: argparse.Namespace) -> SimNode:
+    """The simulated robot `args` describe, on `bus` (bench/robots.py hosts several)."""
     robot = robot_options(args)
     config = SimConfig(
         keys=robot.keys,
@@ -93,12 +92,18 @@ async def main(argv: list[str] | None = None) -> int:
         bounds=args.bounds,
         limits=Limits(max_linear=args.max_linear, max_angular=args.max_angular),
     )
-    codec = Ros2Codec(robot.distro or RosDistro.JAZZY)
+    node = SimNode(bus, Ros2Codec(robot.distro or RosDistro.JAZZY), config)
+    node.declare()
+    bus.announce(robot.keys.simulator)
+    return node
+
+
+async def main(argv: list[str] | None = None) -> int:
+    args = parse_args(argv)
+    setup_logging(args.debug)
     loop = asyncio.get_running_loop()
     with Bus.open(bus_options(args), loop) as bus:
-        node = SimNode(bus, codec, config)
-        node.declare()
-        bus.announce(robot.keys.simulator)
+        node = sim_node(bus, args)
         ticking = asyncio.create_task(node.run())
         try:
             await wait_for_stop()

@@ -1,0 +1,63 @@
+"""Several simulated robots in one process, for bench/fleet.py --per-process.
+
+    .venv/bin/python bench/robots.py --connect ENDPOINT NAME [NAME ...]
+
+Per robot a simulator and an executor, built as `voicectl sim --namespace NAME` and
+`voicectl executor --robot NAME --namespace NAME` build them, on one event loop and one
+Zenoh session: the same keys and messages as the processes of their own that a real site
+has (one per robot, on the robot), at a fraction of the cost on a machine with fewer cores
+than robots. What it does not reproduce: a robot's own process and Zenoh session, so the
+router serves fewer sessions than a real fleet would give it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import contextlib
+import sys
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from services.executor.__main__ import executor_service  # noqa: E402
+from services.executor.__main__ import parse_args as executor_args  # noqa: E402
+from services.sim.__main__ import parse_args as sim_args  # noqa: E402
+from services.sim.__main__ import sim_node  # noqa: E402
+from shared.bus import Bus  # noqa: E402
+from shared.process import bus_options, setup_logging, wait_for_stop  # noqa: E402
+
+
+async def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--connect", required=True)
+    parser.add_argument("names", nargs="+")
+    args = parser.parse_args()
+    setup_logging(False)
+    connect = ["--connect", args.connect]
+    options = bus_options(sim_args(connect))
+    with Bus.open(options, asyncio.get_running_loop()) as bus:
+        nodes = [sim_node(bus, sim_args(["--namespace", n, *connect])) for n in args.names]
+        services = [
+            executor_service(bus, executor_args(["--robot", n, "--namespace", n, *connect]))
+            for n in args.names
+        ]
+        ticking = [asyncio.create_task(node.run()) for node in nodes]
+        for service in services:
+            service.start()
+        try:
+            await wait_for_stop(*(s.end_stray_motion() for s in services), keep_running=True)
+        finally:
+            for service in services:
+                await service.shutdown()
+            for task in ticking:
+                task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await asyncio.gather(*ticking)
+            for node in nodes:
+                await node.shutdown()
+
+
+if __name__ == "__main__":
+    asyncio.run(main())
