@@ -76,6 +76,13 @@ class BusOptions:
             conf = zenoh.Config()
             # Endpoints are always explicit: nothing joins by multicast.
             conf.insert_json5("scouting/multicast/enabled", "false")
+            # No shared-memory transport: with it every process lazily makes a 16 MB pool
+            # for messages over 3 KB, and each process on the host maps the pools of those
+            # it talks to. A router serving 20 simulated robots' processes held 371 MB of
+            # them (10 MB a session, docs/benchmarks.md) against 57 MB without, for the
+            # same latency; a container's /dev/shm is 64 MB. `--cfg
+            # transport/shared_memory/enabled:true` or a config file brings it back.
+            conf.insert_json5("transport/shared_memory/enabled", "false")
         if self.mode is not None:
             conf.insert_json5("mode", json.dumps(self.mode))
         # Publishers that keep their last value for late subscribers need timestamps.

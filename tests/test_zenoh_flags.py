@@ -73,6 +73,10 @@ def test_defaults_are_a_client_of_the_local_router() -> None:
     options = bus_options(parsed(), environ={})
     assert (options.mode, options.connect, options.listen) == ("client", [DEFAULT_ROUTER], [])
     assert setting(options, "scouting/multicast/enabled") is False
+    # No shared-memory pools mapped between every process of the host (docs/benchmarks.md).
+    assert setting(options, "transport/shared_memory/enabled") is False
+    shared = parsed("--cfg", "transport/shared_memory/enabled:true")
+    assert setting(bus_options(shared, environ={}), "transport/shared_memory/enabled") is True
     router = bus_options(parsed(router=True), router=True, environ={})
     assert (router.mode, router.connect, router.listen) == ("router", [], [DEFAULT_ROUTER])
 
