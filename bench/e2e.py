@@ -323,8 +323,8 @@ def tree_cpu_seconds(pid: int) -> float:
     """CPU time of process `pid` and of its children (the recogniser's decoding workers)."""
     total = cpu_seconds(pid)
     for task in Path(f"/proc/{pid}/task").iterdir():
-        for child in (task / "children").read_text().split():
-            with contextlib.suppress(FileNotFoundError):
+        with contextlib.suppress(FileNotFoundError):  # a thread or a child that just ended
+            for child in (task / "children").read_text().split():
                 total += cpu_seconds(int(child))
     return total
 

@@ -21,7 +21,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from services.executor.__main__ import executor_service  # noqa: E402
+from services.executor.__main__ import executor_service, load_bindings  # noqa: E402
 from services.executor.__main__ import parse_args as executor_args  # noqa: E402
 from services.sim.__main__ import parse_args as sim_args  # noqa: E402
 from services.sim.__main__ import sim_node  # noqa: E402
@@ -39,10 +39,10 @@ async def main() -> None:
     options = bus_options(sim_args(connect))
     with Bus.open(options, asyncio.get_running_loop()) as bus:
         nodes = [sim_node(bus, sim_args(["--namespace", n, *connect])) for n in args.names]
-        services = [
-            executor_service(bus, executor_args(["--robot", n, "--namespace", n, *connect]))
-            for n in args.names
-        ]
+        services = []
+        for name in args.names:
+            flags = executor_args(["--robot", name, "--namespace", name, *connect])
+            services.append(executor_service(bus, flags, load_bindings(flags)))
         ticking = [asyncio.create_task(node.run()) for node in nodes]
         for service in services:
             service.start()

@@ -78,9 +78,9 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
-def executor_service(bus: Bus, args: argparse.Namespace) -> ExecutorService:
-    """The executor `args` describe, on `bus`, not started; BindingError when a binding
-    cannot be loaded (bench/robots.py hosts several)."""
+def load_bindings(args: argparse.Namespace) -> Bindings:
+    """The built-in executors and those `args` bind; BindingError when one cannot be
+    loaded. Before the bus opens: a mistake is told at once, router or not."""
     bindings = Bindings()
     for executor in builtin_executors(args.photo_dir or data_dir() / "photos"):
         bindings.bind(executor, executor.labels)
@@ -89,6 +89,11 @@ def executor_service(bus: Bus, args: argparse.Namespace) -> ExecutorService:
             bindings.bind(executor, labels)
     for spec in args.executor:
         bindings.bind(*load_binding(spec))
+    return bindings
+
+
+def executor_service(bus: Bus, args: argparse.Namespace, bindings: Bindings) -> ExecutorService:
+    """The executor `args` describe, on `bus`, not started (bench/robots.py hosts several)."""
     robot = RobotLink(
         bus,
         robot_options(args),
@@ -110,13 +115,14 @@ def executor_service(bus: Bus, args: argparse.Namespace) -> ExecutorService:
 async def main(argv: list[str] | None = None) -> int:
     args = parse_args(argv)
     setup_logging(args.debug)
+    try:
+        bindings = load_bindings(args)
+    except BindingError as exc:
+        print(f"voicectl executor: {exc}", file=sys.stderr)
+        return 2
     loop = asyncio.get_running_loop()
     with Bus.open(bus_options(args), loop) as bus:
-        try:
-            service = executor_service(bus, args)
-        except BindingError as exc:
-            print(f"voicectl executor: {exc}", file=sys.stderr)
-            return 2
+        service = executor_service(bus, args, bindings)
         service.start()
         labels = ", ".join(service.labels)
         _LOGGER.info("executor ready for %s; labels: %s", args.robot, labels)
