@@ -163,7 +163,8 @@ class Transcript(Message):
     heard: str = ""
     """An unconstrained transcript of the same speech: what the person seems to have said."""
     word_confidences: list[float] = msgspec.field(default_factory=list)
-    """Per word of `text`, 0 to 1: how surely an unconstrained decode heard it too."""
+    """Per word of `text`, 0 to 1: how surely the recogniser heard it (for pocketsphinx,
+    the word's posterior in the grammar's lattice, or the open decode's when higher)."""
     doubts: list[Doubt] = msgspec.field(default_factory=list)
     """Values to ask the person about; a transcript with doubts is never sent by itself."""
 

@@ -57,7 +57,7 @@ class Final:
     heard: str = ""
     """What an unconstrained decode heard: the person's words, command or not."""
     confidences: list[float] = field(default_factory=list)
-    """Per word of `text`: how surely the unconstrained decode heard it too."""
+    """Per word of `text`, 0..1: how surely the engine heard it (judge.py's Verdict)."""
     doubts: list[Doubt] = field(default_factory=list)
 
 
