@@ -50,7 +50,7 @@ import httpx  # noqa: E402
 import websockets  # noqa: E402
 from soak import children, start_up  # noqa: E402
 from speech_set import Utterance, Voice, speak  # noqa: E402
-from stt import raw_latency  # noqa: E402
+from stt import cpu_seconds, raw_latency  # noqa: E402
 
 from services.stt.audio import frames, read_wav  # noqa: E402
 from shared.bus import Bus, BusOptions  # noqa: E402
@@ -311,12 +311,6 @@ async def speakers(
             with contextlib.suppress(asyncio.CancelledError, httpx.HTTPError):
                 await reader
     return found
-
-
-def cpu_seconds(pid: int) -> float:
-    """User and system CPU time of process `pid` so far."""
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
 def tree_cpu_seconds(pid: int) -> float:

@@ -34,9 +34,9 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from e2e import MOTION_WAIT, Robot, cpu_seconds, line, percentile  # noqa: E402
+from e2e import MOTION_WAIT, Robot, line, percentile  # noqa: E402
 from soak import free_port, rss_mb  # noqa: E402
-from stt import raw_latency  # noqa: E402
+from stt import cpu_seconds, raw_latency  # noqa: E402
 
 from shared.bus import Bus, BusOptions  # noqa: E402
 from shared.client import VoicectlClient  # noqa: E402

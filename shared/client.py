@@ -13,13 +13,12 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import uuid
-from typing import Any
 
 import msgspec
 
 from .bus import Bus, json_decoder
 from .errors import BusError, VoicectlError
-from .halting import RobotStop, prepare
+from .halting import Cancelled, RobotStop, prepare
 from .keys import ConverterKeys, RobotKeys, robot_of
 from .messages import (
     Done,
@@ -88,7 +87,7 @@ class VoicectlClient:
         """What each robot's executor last said about reaching it: how to stop it
         without any other voicectl process."""
         self._announced = asyncio.Event()
-        self._pending: set[asyncio.Future[Any]] = set()
+        self._pending: set[asyncio.Future[Cancelled]] = set()
         bus.subscribe(
             RobotKeys.any_robot().executor_info,
             json_decoder(ExecutorInfo),
@@ -96,15 +95,10 @@ class VoicectlClient:
             history=True,
         )
 
-    def _keep(self, future: asyncio.Future[Any]) -> None:
-        """Hold `future` until it is done: the loop keeps only weak references."""
-        self._pending.add(future)
-        future.add_done_callback(self._pending.discard)
-
     def _on_info(self, key: str, info: ExecutorInfo) -> None:
         self._robots[robot_of(key)] = info
         self._announced.set()
-        self._keep(prepare(info))
+        prepare(info)
 
     async def _robot_stop(self, robot: str) -> RobotStop | None:
         """How to stop `robot`, once its executor's announcement is in (waiting at most
@@ -131,7 +125,8 @@ class VoicectlClient:
         if direct is not None:
             sent = direct.zero_velocity(self.bus)
             cancelling = asyncio.ensure_future(direct.cancel_goals(self.bus))
-            self._keep(cancelling)
+            self._pending.add(cancelling)  # the loop keeps only weak references
+            cancelling.add_done_callback(self._pending.discard)
         try:
             reply = await asyncio.wait_for(asyncio.shield(asked), STOP_ANSWER)
         except (TimeoutError, Unreachable) as exc:

@@ -44,15 +44,23 @@ def stop_codec(distro: RosDistro) -> Ros2Codec:
     return codec
 
 
-def prepare(info: ExecutorInfo) -> asyncio.Future[object]:
+_BUILDING: set[asyncio.Future[None]] = set()
+"""Builds under way: the loop keeps only weak references to them."""
+
+
+def prepare(info: ExecutorInfo) -> asyncio.Future[None]:
     """Build the codec that will stop the robot `info` announces, off the event loop, as
-    soon as its executor announces it: not when someone presses STOP."""
+    soon as its executor announces it: not when someone presses STOP. Nobody has to
+    keep or await the future."""
 
     def build() -> None:
         with contextlib.suppress(ValueError):  # RobotStop.of says what was wrong, later
             stop_codec(RosDistro(info.distro))
 
-    return asyncio.ensure_future(asyncio.to_thread(build))
+    building = asyncio.ensure_future(asyncio.to_thread(build))
+    _BUILDING.add(building)
+    building.add_done_callback(_BUILDING.discard)
+    return building
 
 
 @dataclass(frozen=True)

@@ -503,7 +503,6 @@ class SupervisorService:
         self.conflict: asyncio.Future[str] = asyncio.get_running_loop().create_future()
         """Set, saying why, when a supervisor that started earlier serves one of this
         one's robots: a robot has one supervisor, and this one must stop."""
-        self._preparing: set[asyncio.Future[object]] = set()
 
     async def start(self, robots: list[str]) -> None:
         saved = await self._store.call(self._store.load(self._history))
@@ -600,9 +599,7 @@ class SupervisorService:
 
     def _on_info(self, key: str, info: ExecutorInfo) -> None:
         self.robot(robot_of(key)).executor_info = info
-        preparing = prepare(info)  # so that its first STOP does not build the codec
-        self._preparing.add(preparing)
-        preparing.add_done_callback(self._preparing.discard)
+        prepare(info)  # so that its first STOP does not build the codec
 
 
 def _order(tag: str) -> tuple[int, str]:
