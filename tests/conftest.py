@@ -4,6 +4,7 @@ always stopped, and a Bus on the test's own event loop."""
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import inspect
 import os
 import signal
@@ -25,11 +26,20 @@ from shared.bus import BusOptions
 REPO = Path(__file__).resolve().parents[1]
 
 
+def free_ports(count: int) -> list[int]:
+    """`count` different free ports: each socket stays bound until all are chosen, or two
+    calls in a row may be given the same port (a stack's router and panel once were)."""
+    with contextlib.ExitStack() as held:
+        ports = []
+        for _ in range(count):
+            sock = held.enter_context(socket.socket())
+            sock.bind(("127.0.0.1", 0))
+            ports.append(sock.getsockname()[1])
+        return ports
+
+
 def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        port: int = sock.getsockname()[1]
-        return port
+    return free_ports(1)[0]
 
 
 Speak = Callable[..., Path]
@@ -199,8 +209,8 @@ class Stack:
 
 @pytest.fixture
 def stack(tmp_path: Path) -> Iterator[Stack]:
-    router = f"tcp/127.0.0.1:{free_port()}"
-    port = free_port()
+    router_port, port = free_ports(2)
+    router = f"tcp/127.0.0.1:{router_port}"
     env = {**os.environ, "VOICECTL_DATA": str(tmp_path / "data"), "PYTHONUNBUFFERED": "1"}
     env.pop("VOICECTL_TOKEN", None)
     process = subprocess.Popen(

@@ -26,7 +26,7 @@ import pytest
 
 from shared.messages import OrderStatus
 
-from .conftest import REPO, free_port
+from .conftest import REPO, free_ports
 from .containers import base_image, skip_unless, stack_unavailable
 from .support import Client, client_wait_ready, on_bus
 
@@ -85,7 +85,7 @@ class Stack:
     def __init__(self, tmp_path: Path, *extra: str) -> None:
         self.project = f"voicectl-test-{uuid.uuid4().hex[:8]}"
         files = os.environ.get("COMPOSE_FILE") or "compose.yaml"
-        self.router_port, self.panel_port = free_port(), free_port()
+        self.router_port, self.panel_port = free_ports(2)
         self.log = tmp_path / "compose.log"
         self.env = {
             **os.environ,

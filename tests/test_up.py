@@ -17,7 +17,7 @@ import pytest
 
 from voicectl.stack import Child, port_in_use, wait_for_port
 
-from .conftest import REPO, Stack, free_port, voicectl, wait_until
+from .conftest import REPO, Stack, free_port, free_ports, voicectl, wait_until
 
 pytestmark = pytest.mark.e2e
 
@@ -68,9 +68,10 @@ def test_a_second_stack_refuses_to_start_on_a_busy_port(stack: Stack) -> None:
 
 def test_a_second_stack_on_the_same_data_stops_at_once(stack: Stack) -> None:
     started = time.monotonic()
+    router_port, port = free_ports(2)
     second = stack.voicectl(
         "up",
-        *("--router", f"tcp/127.0.0.1:{free_port()}", "--port", str(free_port())),
+        *("--router", f"tcp/127.0.0.1:{router_port}", "--port", str(port)),
         "--no-stt",
     )
     assert time.monotonic() - started < 40.0
