@@ -497,6 +497,22 @@ class Bus:
         )
         self._closers.callback(subscriber.undeclare)
 
+    def watch_served(self, key: str, handler: Callable[[bool], None]) -> None:
+        """Call `handler(served)` on the loop as a service answering queries on `key`
+        becomes reachable through the router, and as it goes. A token says a process is
+        up; this says its queries would arrive: after a link comes back the two are
+        declared apart, and a query sent between them reaches nobody."""
+        querier = self._session.declare_querier(key)
+
+        def on_status(status: zenoh.MatchingStatus) -> None:
+            self._call_soon(handler, status.matching)
+
+        listener = querier.declare_matching_listener(_direct(on_status))
+        self._closers.callback(querier.undeclare)
+        self._closers.callback(listener.undeclare)
+        now: Any = querier.matching_status  # a MatchingStatus, whatever the stubs say
+        self._call_soon(handler, now.matching)
+
 
 class Stream:
     """Many messages on one key through one declared publisher, in order and reliably.

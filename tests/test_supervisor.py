@@ -14,20 +14,25 @@ from typing import Any
 import pytest
 
 from services.executor.runner import SUPERVISOR_LOST
-from shared.bus import Bus
+from shared.bus import Bus, json_decoder
 from shared.errors import BusError
-from shared.keys import BridgeKeys
+from shared.keys import BridgeKeys, RobotKeys
 from shared.messages import (
+    Accepted,
     Cancel,
+    ControlRequest,
     Done,
     EmergencyStop,
+    Execute,
     Failed,
     GetHistory,
     GetState,
+    Message,
     Order,
     OrderStatus,
     Reorder,
     Resume,
+    Running,
     Stopped,
     Submit,
     Submitted,
@@ -148,6 +153,39 @@ def test_running_order_is_interrupted_when_no_executor_runs_it(site: Site) -> No
         site.start_executor()
         assert isinstance(await client.ask(Resume()), Done)
         assert (await client.finished(other)).message == "5 x 5 = 25"
+
+    site.run(body)
+
+
+def test_an_order_waits_until_the_executor_can_be_reached_not_only_heard(site: Site) -> None:
+    """After a link comes back, an executor's token can arrive before its services are
+    reachable: an order dispatched in between reached nobody, and failed."""
+    site.start_supervisor()
+
+    async def body(bus: Bus) -> None:
+        client = Client(bus, "r1")
+        await client_wait_ready(client, executor=False)
+        keys = RobotKeys("r1")
+        bus.announce(keys.alive("executor"))  # the token, and no service yet
+        (waiting,) = await client.submit(order("mul", first=2, second=3))
+        await asyncio.sleep(0.5)  # a dispatch now fails at once; none must be tried
+        state = await client.state()
+        assert not state.executor_online
+        assert [r.id for r in state.queue] == [waiting]
+
+        taken: asyncio.Queue[Execute] = asyncio.Queue()
+
+        async def execute(request: Execute) -> Message:
+            await taken.put(request)
+            return Accepted(order_id=request.order_id)
+
+        async def control(request: ControlRequest) -> Message:
+            return Running()
+
+        bus.serve(keys.executor_execute, json_decoder(Execute), execute)
+        bus.serve(keys.executor_control, json_decoder(ControlRequest), control)
+        assert (await asyncio.wait_for(taken.get(), 10.0)).order_id == waiting
+        await client.wait_state(lambda s: s.executor_online, "the executor to be online")
 
     site.run(body)
 

@@ -9,6 +9,7 @@ request, event or executor token names it.
 from __future__ import annotations
 
 import asyncio
+import functools
 import logging
 import sqlite3
 import time
@@ -89,6 +90,11 @@ class RobotSupervisor:
         self._holding: asyncio.Future[None] | None = None
         self._lost_pending = False
         """The executor's token went while an order ran, and the grace has not run out."""
+        self._token = False
+        """The executor's liveliness token is alive."""
+        self._served: dict[str, bool] = {}
+        """Which of its services (execute, control) are reachable: a request sent to one
+        now would arrive."""
         self.executor_info = ExecutorInfo()
         """How to reach the robot without its executor: the executor's last word on it."""
 
@@ -98,6 +104,9 @@ class RobotSupervisor:
 
     def start(self) -> None:
         loop = asyncio.get_running_loop()
+        for key in (self._keys.executor_execute, self._keys.executor_control):
+            self._served[key] = False
+            self._bus.watch_served(key, functools.partial(self.on_served, key))
         self._tasks.append(loop.create_task(self._dispatch_loop()))
         if not self._queue.current_verified:
             self._tasks.append(loop.create_task(self._expire_unverified()))
@@ -381,6 +390,21 @@ class RobotSupervisor:
                 self._finish(order_id, status, message)  # a final status: the type says so
 
     def on_executor(self, alive: bool) -> None:
+        """The executor's token came or went."""
+        self._token = alive
+        self._online(self._token and all(self._served.values()))
+
+    def on_served(self, key: str, served: bool) -> None:
+        """One of the executor's services became reachable, or stopped being so."""
+        self._served[key] = served
+        self._online(self._token and all(self._served.values()))
+
+    def _online(self, alive: bool) -> None:
+        """The executor is online when its token and its services are all heard: after a
+        link comes back the token can arrive first, and an order dispatched then would
+        reach nobody and fail."""
+        if alive == self._queue.executor_online:
+            return
         _LOGGER.info("%s: executor %s", self.robot, "online" if alive else "lost")
         self._queue.executor_online = alive
         current = self._queue.current
