@@ -372,6 +372,10 @@ class RobotSupervisor:
         match reply:
             case Accepted():
                 _LOGGER.debug("%s: %s started", self.robot, order_id)
+            case Rejected() if self._queue.stopped:
+                # STOP reached the executor before this order did: it never ran, and it
+                # ends as every other order the stop caught, not as a refusal.
+                self._finish(order_id, OrderStatus.CANCELLED, "emergency stop")
             case Rejected(reason=reason):
                 self._finish(order_id, OrderStatus.REJECTED, reason)
             case Failed(reason=reason):
