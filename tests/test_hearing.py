@@ -10,19 +10,10 @@ import json
 from pathlib import Path
 
 import pocketsphinx
-import pytest
 
-from bench.speech_set import Utterance, real_recordings
 from services.stt.judge import Thresholds, Vocabulary, Word, judge
 
 from .conftest import Speak, voicectl
-
-
-@pytest.fixture(scope="module")
-def people(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    directory = tmp_path_factory.mktemp("real") / "test"
-    found: list[Utterance] = real_recordings(directory)
-    return {Path(u.file).stem: directory.parent / u.file for u in found}
 
 
 def transcribe(*files: Path) -> list[dict[str, object]]:
@@ -132,6 +123,38 @@ def test_the_judge_rejects_conversation_with_what_it_heard() -> None:
         Thresholds(),
     )
     assert verdict.rejection == "I heard 'could you please pass me the salt': not a command"
+
+
+def test_foreign_words_that_sound_like_the_command_weigh_little() -> None:
+    # Flite's "reach the dumpster": the open decode spelled it "reach the dumps there".
+    vocabulary = Vocabulary(
+        frozenset(["reach", "the", "dumpster", "turn", "left"]),
+        frozenset({"the", "a"}),
+        frozenset(),
+        _sounds,
+    )
+    grammar = words("reach the dumpster")
+    heard = [
+        Word("reach", 0, 29, 1.0),
+        Word("the", 30, 59, 1.0),
+        Word("dumps", 60, 79, 1.0),
+        Word("there", 80, 89, 1.0),
+    ]
+    verdict = judge(grammar, heard, vocabulary, Thresholds())
+    assert verdict.rejection == ""
+    assert verdict.foreign < 0.5
+    # "turn on the lights" is not "turn a left": its foreign words sound unlike "a left".
+    grammar = words("turn a left")
+    heard = [
+        Word("turn", 0, 29, 1.0),
+        Word("on", 30, 44, 1.0),
+        Word("the", 45, 59, 1.0),
+        Word("lights", 60, 89, 1.0),
+        Word("[NOISE]", 90, 99, 1.0),
+    ]
+    verdict = judge(grammar, heard, vocabulary, Thresholds(max_foreign=1.0))
+    assert verdict.rejection == "I heard 'turn on the lights': not a command"
+    assert verdict.heard == "turn on the lights"  # markers are no words
 
 
 def test_the_judge_rejects_a_command_word_the_grammar_was_unsure_of() -> None:

@@ -6,9 +6,11 @@ that, one from outside the grammar and one from inside it:
 
 - **Foreign words.** An unconstrained decode of the same audio (pocketsphinx's general
   English language model) transcribes ordinary speech nearly word for word; the posterior
-  mass of the words it hears that no command contains says "this was not a command".
-  Synthetic voices it cannot transcribe give it junk with low posteriors, which weighs
-  little.
+  mass of the words it hears that no command contains says "this was not a command". A
+  foreign word weighs only as much as it sounds unlike the grammar's words at the same
+  time: "reach the dumps there" is the open decode's spelling of "reach the dumpster",
+  "turn on the lights" is not "turn a left". Synthetic voices it cannot transcribe give it
+  junk with low posteriors, which weighs little.
 - **The grammar's own doubt.** Each word of the grammar's result carries its posterior in
   the grammar search's lattice: how much of the probability of every path the grammar
   allows went through that word at that time. "drive ahead one meter" said as "drive back
@@ -41,7 +43,12 @@ ALIKE = 0.75
 """Words at least this alike sound like each other to the judge ("crimes"/"primes")."""
 SUPPORTS = 0.6
 """An open word at least this alike to a command word at the same time supports it."""
-FILLERS = frozenset({"<s>", "</s>", "<sil>", "[noise]", "<unk>", "[unk]", "[breath]"})
+
+
+def filler(text: str) -> bool:
+    """Not a word: a decoder's marker of silence, noise or unknown speech ("<sil>",
+    "[NOISE]", "[SPEECH]", Vosk's "[unk]")."""
+    return text[:1] in ("[", "<")
 
 
 @dataclass(frozen=True)
@@ -56,8 +63,9 @@ class Word:
 
 @dataclass(frozen=True)
 class Thresholds:
-    max_foreign: float = 1.4
-    """Posterior mass of non-command words above which the utterance is not a command."""
+    max_foreign: float = 1.6
+    """Posterior mass of non-command words, each weighed by how unlike the grammar's words
+    at its time it sounds, above which the utterance is not a command."""
     min_word_posterior: float = 0.75
     """A command word less sure than this in the grammar's lattice, and not heard by the open
     decode too, makes the utterance a rejection."""
@@ -117,7 +125,8 @@ class Verdict:
     the two, and 0 when the open decode heard another number."""
     doubts: list[Doubt] = field(default_factory=list)
     foreign: float = 0.0
-    """The posterior mass of words the open decode heard that no command has."""
+    """The posterior mass of words the open decode heard that no command has, each weighed
+    by how unlike the grammar's words at the same time it sounds."""
     support: float = 0.0
     """The share of command words the open decode heard too (reported, not required)."""
 
@@ -148,10 +157,10 @@ def judge(
 ) -> Verdict:
     """Accept, doubt or reject what the grammar heard (its words carry their lattice
     posteriors), given what the open decode heard."""
-    heard = [w for w in heard if w.text not in FILLERS]
+    heard = [w for w in heard if not filler(w.text)]
     said = " ".join(w.text for w in heard)
     confidences = [round(w.posterior, 3) for w in grammar]
-    foreign = round(sum(w.posterior for w in heard if not vocabulary.known(w.text)), 3)
+    foreign = round(_unexplained(grammar, heard, vocabulary), 3)
     tokens = list(_tokens(grammar, vocabulary))
     commands = [t for t in tokens if not t.value]
     supported = 0
@@ -202,6 +211,43 @@ def judge(
 
 def _not_a_command(said: str) -> str:
     return f"I heard '{said}': not a command" if said else "not a command"
+
+
+def _unexplained(grammar: list[Word], heard: list[Word], vocabulary: Vocabulary) -> float:
+    """The posterior mass of the open decode's foreign words, each stretch of it weighed by
+    how unlike the grammar's words of the same stretch of audio it sounds (all of it where
+    the grammar heard nothing)."""
+    mass = 0.0
+    for said, heard_there in _stretches(grammar, heard):
+        foreign = sum(w.posterior for w in heard_there if not vocabulary.known(w.text))
+        if foreign:
+            run = " ".join(w.text for w in heard_there)
+            alike = vocabulary.alike(" ".join(w.text for w in said), run) if said else 0.0
+            mass += foreign * (1.0 - alike)
+    return mass
+
+
+def _stretches(grammar: list[Word], heard: list[Word]) -> list[tuple[list[Word], list[Word]]]:
+    """The two decodes cut where neither has a word across the cut: (grammar's words,
+    open decode's words) of each stretch, in time order. A word belongs with another of
+    the other decode that it overlaps by at least half of the shorter one."""
+    words = sorted(
+        [(w, True) for w in grammar] + [(w, False) for w in heard], key=lambda item: item[0].start
+    )
+    stretches: list[tuple[list[Word], list[Word]]] = []
+    for word, from_grammar in words:
+        joined = stretches and any(
+            _together(word, other) for other in [*stretches[-1][0], *stretches[-1][1]]
+        )
+        if not joined:
+            stretches.append(([], []))
+        stretches[-1][0 if from_grammar else 1].append(word)
+    return stretches
+
+
+def _together(a: Word, b: Word) -> bool:
+    overlap = min(a.end, b.end) - max(a.start, b.start) + 1
+    return overlap > 0 and 2 * overlap >= min(a.end - a.start, b.end - b.start) + 1
 
 
 def _tokens(grammar: list[Word], vocabulary: Vocabulary) -> Iterable[_Token]:

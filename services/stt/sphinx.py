@@ -46,7 +46,7 @@ from shared.messages import Grammar
 
 from .audio import NoiseFloor, seconds, whole
 from .engine import EngineError, Event, Final, Heard, SpeechStarted, logistic, rejection
-from .judge import FILLERS, Thresholds, Verdict, Vocabulary, Word, judge
+from .judge import Thresholds, Verdict, Vocabulary, Word, filler, judge
 from .lexicon import pronunciations
 from .wordgraph import GrammarError, WordGraph, compile_jsgf
 
@@ -462,7 +462,7 @@ class SphinxRecogniser:
             utterance.heard += [
                 Word(s.word.split("(")[0], s.start_frame + offset, s.end_frame + offset, s.prob)
                 for s in decoder.seg() or ()
-                if s.word not in FILLERS
+                if not filler(s.word)
             ]
             utterance.open_from = len(utterance.audio)
             utterance.live = False
@@ -484,7 +484,7 @@ class SphinxRecogniser:
         grammar = [
             Word(s.word.split("(")[0], s.start_frame, s.end_frame, s.prob)
             for s in segments
-            if s.word not in FILLERS
+            if not filler(s.word)
         ]
         vocabulary = Vocabulary(
             words=frozenset(compiled.graph.words),
