@@ -20,7 +20,7 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from bench.speech_set import Voice, speak
+from bench.speech_set import Voice, real_recordings, speak
 from shared.bus import BusOptions
 
 REPO = Path(__file__).resolve().parents[1]
@@ -59,6 +59,14 @@ def speech(tmp_path_factory: pytest.TempPathFactory) -> Speak:
         return directory / speak(text, Voice(source, name, speed), directory).file
 
     return make
+
+
+@pytest.fixture(scope="session")
+def people(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    """People's recordings from pocketsphinx's source distribution, by name ("real-goforward":
+    a man saying "go forward ten meters"), fetched from PyPI once per test run."""
+    directory = tmp_path_factory.mktemp("real") / "test"
+    return {Path(u.file).stem: directory.parent / u.file for u in real_recordings(directory)}
 
 
 @pytest.fixture
