@@ -328,12 +328,14 @@ async def through_service(
 
             bus.subscribe(KEYS.transcript, json_decoder(Transcript), on_final)
             bus.subscribe(KEYS.proposal, json_decoder(Proposal), on_proposal)
-            bus.subscribe(
-                KEYS.stt_status,
-                json_decoder(SttStatus),
-                lambda _k, s: ready.set() if s.ready else None,
-                history=True,
-            )
+            idle = asyncio.Event()
+
+            def on_status(_key: str, status: SttStatus) -> None:
+                if status.ready:
+                    ready.set()
+                (idle.set if status.sessions == 0 else idle.clear)()
+
+            bus.subscribe(KEYS.stt_status, json_decoder(SttStatus), on_status, history=True)
             launched = time.monotonic()
             stt = start("services.stt", "--connect", router, *engine)
             await asyncio.wait_for(ready.wait(), 120)
@@ -365,6 +367,11 @@ async def through_service(
                     if not transcript.rejected:
                         outcome.orders = parser.parse(transcript.text).orders
                 outcomes.append(outcome)
+                # One person speaking: the next utterance starts once this session has
+                # closed, as a panel's next press of Listen would (else two decoders are
+                # alive for a moment and the peak memory measures that).
+                with contextlib.suppress(TimeoutError):
+                    await asyncio.wait_for(idle.wait(), 5)
             cpu = cpu_seconds(stt.pid) - cpu_before
             rss = peak_rss_mb(stt.pid)
             if args.threads:
