@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import math
 import multiprocessing
 import re
 import subprocess
@@ -382,6 +383,9 @@ def test_vosk_streams_partials_and_finals_and_switches_grammars(
     [final] = [e for e in events if isinstance(e, Final)]
     assert final.text == "사진 찍어"
     assert final.rejection == ""
+    # Per word, the share of Kaldi's alternative paths that heard it there.
+    assert len(final.confidences) == 2
+    assert all(0.0 < c <= 1.0 for c in final.confidences)
     # Without that command in the grammar the same speech is not heard as it.
     korean.use_grammar(build_grammar(OrderSet.from_yaml(KOREAN.replace("    photo:", "    #"))))
     recogniser = korean.recogniser(15.0)
@@ -409,3 +413,33 @@ def test_vosk_pool_lends_only_recognisers_of_the_current_grammar(
     events = [e for frame in frames(photo) for e in recogniser.accept(frame)] + recogniser.finish()
     recogniser.close()
     assert all(e.text != "사진 찍어" for e in events if isinstance(e, Final))
+
+
+def test_vosk_alternatives_give_each_word_a_confidence_and_a_number_its_choices() -> None:
+    from services.stt.vosk_engine import best_words
+
+    def path(*words: tuple[str, float, float]) -> list[dict[str, object]]:
+        return [{"word": w, "start": a, "end": b} for w, a, b in words]
+
+    # The shape of Vosk's result with SetMaxAlternatives (scores are log-probabilities).
+    result = {
+        "alternatives": [
+            {
+                "confidence": 10.0,
+                "result": path(("go", 0.0, 0.3), ("two", 0.3, 0.6), ("meters", 0.6, 1.0)),
+            },
+            {
+                "confidence": 9.5,
+                "result": path(("go", 0.0, 0.3), ("ten", 0.3, 0.6), ("meters", 0.6, 1.0)),
+            },
+            {"confidence": 0.0, "result": path(("no", 0.0, 0.5), ("meters", 0.6, 1.0))},
+        ]
+    }
+    go, two, meters = best_words(result)
+    assert meters["conf"] == pytest.approx(1.0)
+    assert go["conf"] == pytest.approx(1.0, abs=1e-4)  # the third path weighs e^-10
+    assert two["conf"] == pytest.approx(1 / (1 + math.exp(-0.5)), abs=1e-4)
+    assert two["others"] == ["ten", "no"]  # a doubt offers only the numbers among them
+    # A result without alternatives keeps its own confidences.
+    plain = {"result": [{"word": "go", "start": 0.0, "end": 0.3, "conf": 0.8}]}
+    assert best_words(plain) == plain["result"]

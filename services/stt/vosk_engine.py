@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import logging
+import math
 import threading
 from pathlib import Path
 from typing import Any
@@ -36,6 +37,11 @@ CHUNK_BYTES = 3200
 MIN_VALUE_CONFIDENCE = 0.9
 """A number word Kaldi heard less surely than this is a doubt (not tuned: no English model
 is installable here to tune it on)."""
+MAX_ALTERNATIVES = 5
+"""Kaldi's best paths per result. A word's confidence is the share of their probability
+that has the same word at the same time, and a doubtful number offers the numbers the
+others heard there: Vosk gives either per-word confidences (`SetWords`) or alternatives
+(`SetMaxAlternatives`), not both, and only the alternatives can say "ten or two"."""
 
 
 class VoskEngine:
@@ -102,6 +108,7 @@ class VoskEngine:
         assert grammar is not None
         recogniser = vosk.KaldiRecognizer(self._model, 16000, grammar)
         recogniser.SetWords(True)
+        recogniser.SetMaxAlternatives(MAX_ALTERNATIVES)
         return version, recogniser
 
     def give_back(self, version: str, recogniser: Any) -> None:
@@ -112,9 +119,15 @@ class VoskEngine:
                 self._pool.append((version, recogniser))
 
     def doubts(self, words: list[dict[str, Any]]) -> list[Doubt]:
-        """Number words Kaldi was not sure of: asked, never guessed."""
+        """Number words Kaldi was not sure of, with the numbers its other paths heard there:
+        asked, never guessed."""
         return [
-            Doubt(position=i, words=str(w["word"]), confidence=round(float(w["conf"]), 3))
+            Doubt(
+                position=i,
+                words=str(w["word"]),
+                alternatives=[a for a in w.get("others", []) if a in self._numbers],
+                confidence=round(float(w["conf"]), 3),
+            )
             for i, w in enumerate(words)
             if w.get("word") in self._numbers and float(w.get("conf", 0.0)) < MIN_VALUE_CONFIDENCE
         ]
@@ -189,7 +202,7 @@ class VoskRecogniser:
             self._offset = self._clock
 
     def _result(self, result: dict[str, Any], events: list[Event], force: bool = False) -> None:
-        words = [w for w in result.get("result", []) if isinstance(w, dict)]
+        words = best_words(result)
         if not self._segment:
             self._words.extend(words)
             if not force:
@@ -216,3 +229,35 @@ class VoskRecogniser:
         self._count += 1
         self._started = None
         self._partial = ""
+
+
+def best_words(result: dict[str, Any]) -> list[dict[str, Any]]:
+    """The words of Kaldi's best path (`word`, `start`, `end`), each with its `conf`: the
+    share of the alternatives' probability that heard the same word at the same time, and
+    `others`: what the other alternatives heard there instead. A result without
+    alternatives keeps the confidences it has."""
+    alternatives = [a for a in result.get("alternatives", []) if isinstance(a, dict)]
+    if not alternatives:
+        return [w for w in result.get("result", []) if isinstance(w, dict)]
+    scores = [float(a.get("confidence", 0.0)) for a in alternatives]
+    top = max(scores)
+    weights = [math.exp(score - top) for score in scores]
+    total = sum(weights)
+    paths = [[w for w in a.get("result", []) if isinstance(w, dict)] for a in alternatives]
+    best = []
+    for word in paths[0]:
+        share, others = 0.0, []
+        for weight, path in zip(weights, paths, strict=True):
+            there = [w for w in path if _overlap(word, w)]
+            if any(w.get("word") == word.get("word") for w in there):
+                share += weight
+            others += [str(w["word"]) for w in there if w.get("word") != word.get("word")]
+        best.append({**word, "conf": share / total, "others": list(dict.fromkeys(others))})
+    return best
+
+
+def _overlap(a: dict[str, Any], b: dict[str, Any]) -> bool:
+    """Whether two timed words share at least half of the shorter one."""
+    start, end = max(float(a["start"]), float(b["start"])), min(float(a["end"]), float(b["end"]))
+    shorter = min(float(a["end"]) - float(a["start"]), float(b["end"]) - float(b["start"]))
+    return end > start and 2 * (end - start) >= shorter
