@@ -46,7 +46,7 @@ from bench.netns import (  # noqa: E402
 )
 from shared.bus import Bus, BusOptions, json_decoder  # noqa: E402
 from shared.errors import BusError  # noqa: E402
-from shared.keys import BridgeKeys, RobotKeys  # noqa: E402
+from shared.keys import RobotKeys, RobotNames  # noqa: E402
 from shared.messages import (  # noqa: E402
     Done,
     EmergencyStop,
@@ -90,7 +90,7 @@ class RobotWatch:
 
     def __init__(self, bus: Bus) -> None:
         self.odometry: list[tuple[float, Odometry]] = []
-        bus.subscribe(BridgeKeys().odom, Ros2Codec().read_odometry, self._on_odometry)
+        bus.subscribe(RobotNames().odom, Ros2Codec().read_odometry, self._on_odometry)
 
     def _on_odometry(self, _key: str, odometry: Odometry) -> None:
         self.odometry.append((time.monotonic(), odometry))

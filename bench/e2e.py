@@ -54,7 +54,7 @@ from stt import cpu_seconds, raw_latency  # noqa: E402
 
 from services.stt.audio import frames, read_wav  # noqa: E402
 from shared.bus import Bus, BusOptions  # noqa: E402
-from shared.keys import BridgeKeys  # noqa: E402
+from shared.keys import RobotNames  # noqa: E402
 from shared.ros2 import Ros2Codec  # noqa: E402
 
 COMMANDS = (
@@ -97,9 +97,9 @@ class Robot:
     zero: list[float] = field(default_factory=list)
     """Zero cmd_vel."""
 
-    def listen(self, bus: Bus, keys: BridgeKeys | None = None) -> None:
+    def listen(self, bus: Bus, keys: RobotNames | None = None) -> None:
         """Watch the robot of `keys` (the bridge's default namespace when none)."""
-        codec, keys = Ros2Codec(), keys or BridgeKeys()
+        codec, keys = Ros2Codec(), keys or RobotNames()
 
         def on_twist(_key: str, twist: tuple[float, float]) -> None:
             (self.zero if twist == (0.0, 0.0) else self.moved).append(time.monotonic())

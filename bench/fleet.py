@@ -41,7 +41,7 @@ from stt import cpu_seconds, raw_latency  # noqa: E402
 from shared.bus import Bus, BusOptions  # noqa: E402
 from shared.client import VoicectlClient  # noqa: E402
 from shared.errors import BusError  # noqa: E402
-from shared.keys import BridgeKeys  # noqa: E402
+from shared.keys import RobotNames  # noqa: E402
 from shared.messages import (  # noqa: E402
     CancelAll,
     GetState,
@@ -133,7 +133,7 @@ async def measure(
         client = VoicectlClient(bus)
         watched = {name: Robot() for name in fleet.names}
         for name, robot in watched.items():
-            robot.listen(watching, BridgeKeys(name))
+            robot.listen(watching, RobotNames(name))
         await ready(client, fleet.names)
         (turn,) = (await client.parse("turn left")).orders
         raw = await raw_latency(bus)

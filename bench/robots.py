@@ -27,6 +27,7 @@ from services.sim.__main__ import parse_args as sim_args  # noqa: E402
 from services.sim.__main__ import sim_node  # noqa: E402
 from shared.bus import Bus  # noqa: E402
 from shared.process import bus_options, setup_logging, wait_for_stop  # noqa: E402
+from shared.robot import TransportKind  # noqa: E402
 
 
 async def main() -> None:
@@ -42,7 +43,8 @@ async def main() -> None:
         services = []
         for name in args.names:
             flags = executor_args(["--robot", name, "--namespace", name, *connect])
-            services.append(executor_service(bus, flags, load_bindings(flags)))
+            bindings = load_bindings(flags)
+            services.append(executor_service(bus, flags, bindings, TransportKind.BRIDGE))
         ticking = [asyncio.create_task(node.run()) for node in nodes]
         for service in services:
             service.start()

@@ -217,21 +217,28 @@ class Bus:
         return latest
 
     def publish_bytes(
-        self, key: str, payload: bytes, encoding: zenoh.Encoding = CDR, urgent: bool = False
+        self,
+        key: str,
+        payload: bytes,
+        encoding: zenoh.Encoding = CDR,
+        urgent: bool = False,
+        attachment: bytes | None = None,
     ) -> None:
-        """Publish raw bytes (CDR for ROS topics). An `urgent` one (zero velocity, a stop)
-        waits for room instead of being dropped, and goes first and at once."""
+        """Publish raw bytes (CDR for ROS topics), with an `attachment` if given (what
+        rmw_zenoh's subscribers require). An `urgent` one (zero velocity, a stop) waits for
+        room instead of being dropped, and goes first and at once."""
         if urgent:
             self._session.put(
                 key,
                 payload,
                 encoding=encoding,
+                attachment=attachment,
                 congestion_control=zenoh.CongestionControl.BLOCK,
                 priority=zenoh.Priority.REAL_TIME,
                 express=True,
             )
         else:
-            self._session.put(key, payload, encoding=encoding)
+            self._session.put(key, payload, encoding=encoding, attachment=attachment)
 
     def subscribe(
         self,
@@ -289,10 +296,16 @@ class Bus:
     # --- request / reply ----------------------------------------------------------------
 
     async def request_bytes(
-        self, key: str, payload: bytes, timeout: float, urgent: bool = False
+        self,
+        key: str,
+        payload: bytes,
+        timeout: float,
+        urgent: bool = False,
+        attachment: bytes | None = None,
     ) -> bytes:
-        """Send one query and return the first good reply's payload. An `urgent` one (a
-        stop, a cancel) waits for room instead of being dropped, and goes first."""
+        """Send one query (with an `attachment` if given) and return the first good reply's
+        payload. An `urgent` one (a stop, a cancel) waits for room instead of being
+        dropped, and goes first."""
         future: asyncio.Future[bytes] = self._loop.create_future()
 
         def settle(result: bytes | BaseException) -> None:
@@ -331,18 +344,22 @@ class Bus:
             key,
             zenoh.handlers.Callback(on_reply, on_done, indirect=False),
             payload=payload,
+            attachment=attachment,
             timeout=timeout,
             **qos,
         )
         return await future
 
-    def query_and_forget(self, key: str, payload: bytes, timeout: float) -> None:
+    def query_and_forget(
+        self, key: str, payload: bytes, timeout: float, attachment: bytes | None = None
+    ) -> None:
         """Send an urgent query whose answer nobody waits for, from any thread: a cancel
         sent by a thread whose event loop cannot wait for it (the executor's watchdog)."""
         self._session.get(
             key,
             _direct(_ignore_reply),
             payload=payload,
+            attachment=attachment,
             timeout=timeout,
             congestion_control=zenoh.CongestionControl.BLOCK,
             priority=zenoh.Priority.REAL_TIME,
@@ -426,21 +443,32 @@ class Bus:
         queryable = self._session.declare_queryable(key, _direct(on_query))
         self._closers.callback(queryable.undeclare)
 
-    def serve_bytes(self, key: str, handler: Callable[[bytes], Awaitable[bytes | None]]) -> None:
+    def serve_bytes(
+        self,
+        key: str,
+        handler: Callable[[bytes], Awaitable[bytes | None]],
+        complete: bool = False,
+        reply_attachment: Callable[[bytes | None], bytes | None] | None = None,
+    ) -> None:
         """Answer queries whose payloads are raw bytes (CDR), for ROS-side services; a
         handler that raises is answered with a Zenoh error reply, one that returns None is
-        not answered at all (the query ends with no reply, as when a route is lost)."""
+        not answered at all (the query ends with no reply, as when a route is lost).
+
+        A `complete` queryable answers for the whole key (rmw_zenoh's clients ask only
+        those); `reply_attachment` makes each reply's attachment from its query's."""
 
         async def respond(_query_key: str, raw: bytes) -> tuple[bytes, zenoh.Encoding] | None:
             answer = await handler(raw)
             return None if answer is None else (answer, CDR)
 
-        self._answer_queries(key, respond)
+        self._answer_queries(key, respond, complete, reply_attachment)
 
     def _answer_queries(
         self,
         key: str,
         respond: Callable[[str, bytes], Awaitable[tuple[bytes, zenoh.Encoding] | None]],
+        complete: bool = False,
+        reply_attachment: Callable[[bytes | None], bytes | None] | None = None,
     ) -> None:
         """Declare a queryable on `key` whose answers `respond(query_key, payload)` makes,
         run as a task on the loop; the reply leaves from the loop when the task ends."""
@@ -456,7 +484,15 @@ class Bus:
                 if error is None:
                     answer = done.result()
                     if answer is not None:
-                        query.reply(query.key_expr, answer[0], encoding=answer[1])
+                        attachment = None
+                        if reply_attachment is not None:
+                            asked = query.attachment
+                            attachment = reply_attachment(
+                                asked.to_bytes() if asked is not None else None
+                            )
+                        query.reply(
+                            query.key_expr, answer[0], encoding=answer[1], attachment=attachment
+                        )
                 else:
                     _LOGGER.warning("query on %s failed: %s", key, error)
                     query.reply_err(str(error))
@@ -475,7 +511,7 @@ class Bus:
             except RuntimeError:  # loop closed: the process is stopping
                 query.drop()
 
-        queryable = self._session.declare_queryable(key, _direct(on_query))
+        queryable = self._session.declare_queryable(key, _direct(on_query), complete=complete)
         self._closers.callback(queryable.undeclare)
 
     # --- liveliness ------------------------------------------------------------------------
@@ -485,8 +521,9 @@ class Bus:
         function withdraws it (a service going away says so before it stops serving)."""
         return self._undeclare_once(self._session.liveliness().declare_token(key))
 
-    def watch(self, key: str, handler: Callable[[str, bool], None]) -> None:
-        """Call `handler(token_key, alive)` on the loop as tokens under `key` come and go."""
+    def watch(self, key: str, handler: Callable[[str, bool], None]) -> Callable[[], None]:
+        """Call `handler(token_key, alive)` on the loop as tokens under `key` come and go,
+        until the bus closes or the returned function ends the watch."""
 
         def on_sample(sample: zenoh.Sample) -> None:
             alive = sample.kind == zenoh.SampleKind.PUT
@@ -495,7 +532,7 @@ class Bus:
         subscriber = self._session.liveliness().declare_subscriber(
             key, _direct(on_sample), history=True
         )
-        self._closers.callback(subscriber.undeclare)
+        return self._undeclare_once(subscriber)
 
     def watch_served(self, key: str, handler: Callable[[bool], None]) -> None:
         """Call `handler(served)` on the loop as a service answering queries on `key`

@@ -18,7 +18,6 @@ import msgspec
 
 from .bus import Bus, json_decoder
 from .errors import BusError, VoicectlError
-from .halting import Cancelled, RobotStop, prepare
 from .keys import ConverterKeys, RobotKeys, robot_of
 from .messages import (
     Done,
@@ -37,6 +36,7 @@ from .messages import (
     Submitted,
     SupervisorReply,
 )
+from .robot.stop import Cancelled, RobotStop, prepare
 
 TIMEOUT = 10.0
 """Seconds a service has to answer. Each answers at once (a submit once it is stored);
@@ -110,7 +110,7 @@ class VoicectlClient:
             with contextlib.suppress(TimeoutError):
                 await asyncio.wait_for(self._announced.wait(), deadline - loop.time())
         info = self._robots.get(robot)
-        return None if info is None else RobotStop.of(info, robot)
+        return None if info is None else RobotStop.of(info, self.bus)
 
     async def stop(self, robot: str) -> Stopped:
         """Emergency stop that waits on no other process. Zero velocity and a cancel of
@@ -123,8 +123,8 @@ class VoicectlClient:
         direct = await self._robot_stop(robot)
         sent, cancelling = "", None
         if direct is not None:
-            sent = direct.zero_velocity(self.bus)
-            cancelling = asyncio.ensure_future(direct.cancel_goals(self.bus))
+            sent = direct.zero_velocity()
+            cancelling = asyncio.ensure_future(direct.cancel_goals())
             self._pending.add(cancelling)  # the loop keeps only weak references
             cancelling.add_done_callback(self._pending.discard)
         try:

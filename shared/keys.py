@@ -2,8 +2,9 @@
 
 voicectl's own traffic lives under ``voice/<robot>/...`` so that one router can carry
 several robots and ``voice/**`` shows the whole order stream in any Zenoh tool. ROS 2
-traffic follows zenoh-bridge-ros2dds' layout: ``<namespace>/<topic>`` without the
-leading slash.
+traffic follows the robot's middleware: zenoh-bridge-ros2dds' ``<namespace>/<topic>``
+without the leading slash, or rmw_zenoh's ``<domain>/<namespace>/<topic>/<type>/<hash>``
+(shared/robot/ chooses).
 """
 
 from __future__ import annotations
@@ -178,6 +179,17 @@ class ConverterKeys:
         return f"{ROOT}/*/stt/transcript"
 
 
+ACTION_MEMBERS = ("send_goal", "cancel_goal", "get_result", "feedback", "status")
+"""The services and topics ROS 2 makes of every action, under ``<action>/_action/``."""
+
+
+def action_member(action: str, member: str) -> str:
+    """The name of one of an action's services or topics ('navigate_to_pose/_action/status')."""
+    if member not in ACTION_MEMBERS:
+        raise ValueError(f"unknown action member {member!r}")
+    return f"{action.strip('/')}/_action/{member}"
+
+
 _ROS_TOKEN = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
 
@@ -195,11 +207,13 @@ def check_ros_name(name: str, what: str) -> str:
 
 
 @dataclass(frozen=True)
-class BridgeKeys:
-    """Keys of a ROS 2 graph as zenoh-bridge-ros2dds exposes it under `namespace`.
+class RobotNames:
+    """The ROS names of one robot's topics and action, under its `namespace`, fully
+    qualified without the leading '/' ('bot1/cmd_vel'): what zenoh-bridge-ros2dds uses as
+    keys as they are, and rmw_zenoh inside its keys.
 
-    The robot's topic and action names can be remapped ('diff_drive_controller/cmd_vel'):
-    the bridge turns ROS name ``/a/b`` under namespace ``/ns`` into key ``ns/a/b``.
+    The names can be remapped ('diff_drive_controller/cmd_vel'): ROS name ``/a/b`` under
+    namespace ``/ns`` is ``ns/a/b``.
     """
 
     namespace: str = ""
@@ -218,7 +232,7 @@ class BridgeKeys:
             object.__setattr__(self, field, name)
 
     def topic(self, name: str) -> str:
-        """The key of a ROS topic, service or action member `name` ('/cmd_vel' or 'cmd_vel')."""
+        """The full name of a topic, service or action member `name` ('/cmd_vel' or 'cmd_vel')."""
         name = name.strip("/")
         return f"{self.namespace}/{name}" if self.namespace else name
 
@@ -246,9 +260,7 @@ class BridgeKeys:
 
     def action(self, action: str, member: str) -> str:
         """One of an action's five routes: send_goal, get_result, cancel_goal, feedback, status."""
-        if member not in {"send_goal", "get_result", "cancel_goal", "feedback", "status"}:
-            raise ValueError(f"unknown action member {member!r}")
-        return self.topic(f"{action.strip('/')}/_action/{member}")
+        return self.topic(action_member(action, member))
 
     def navigate(self, member: str) -> str:
         """A route of the robot's NavigateToPose action."""
@@ -306,4 +318,131 @@ class BridgeToken:
             return None
         return BridgeToken(
             kind, parts[4].replace(_BRIDGE_SLASH, "/"), parts[5].replace(_BRIDGE_SLASH, "/")
+        )
+
+
+# --- what rmw_zenoh uses -------------------------------------------------------------------
+# Read in ros2/rmw_zenoh's docs/design.md and rmw_zenoh_cpp/src/detail/liveliness_utils.cpp
+# as released for Humble (0.1.9), Jazzy (0.2.10) and Kilted (0.6.7); the three agree on
+# everything below but the type hash, which Humble does not have.
+#
+# Data:   ``<domain>/<name>/<DDS type>/<type hash>``, the name fully qualified without its
+#         leading '/' ('bot1/cmd_vel'), the type as DDS writes it
+#         ('geometry_msgs::msg::dds_::Twist_'), the hash 'RIHS01_<sha256>' or, on Humble,
+#         'TypeHashNotSupported'. A service's key names the service type.
+# Tokens: ``@ros2_lv/<domain>/<zid>/<node id>/<entity id>/<kind>/<enclave>/<namespace>/
+#         <node>[/<name>/<DDS type>/<type hash>/<qos>]``, every '/' inside a name written
+#         '%' (namespace '/' is '%', '/bot1' is '%bot1').
+
+RMW_LIVELINESS = "@ros2_lv"
+RMW_NO_NAMESPACE = "%"
+"""The root namespace '/', and the default enclave, as rmw_zenoh's tokens write them."""
+RMW_QOS_DEFAULT = "::,10:,:,:,,"
+"""QoS chunk of a token: reliable, volatile, keep last 10 (rclcpp's default profile and
+every service's); an empty field is rmw_zenoh's own default."""
+RMW_QOS_LATCHED = ":1:,1:,:,:,,"
+"""Reliable, transient local, keep last 1: an action's status topic."""
+
+
+class RmwKind(StrEnum):
+    """What an rmw_zenoh liveliness token stands for (there is no action kind: an action is
+    three services and two topics)."""
+
+    NODE = "NN"
+    PUBLISHER = "MP"
+    SUBSCRIBER = "MS"
+    SERVICE_SERVER = "SS"
+    SERVICE_CLIENT = "SC"
+
+
+def rmw_mangle(name: str) -> str:
+    """A ROS name as one key chunk: every '/' written '%' ('' is the root, '%')."""
+    return "%" + name.strip("/").replace("/", "%") if name.strip("/") else RMW_NO_NAMESPACE
+
+
+@dataclass(frozen=True)
+class RmwToken:
+    """One entity of a ROS 2 graph as rmw_zenoh announces it."""
+
+    zid: str
+    """The Zenoh session of the process holding it."""
+    node_id: int
+    entity_id: int
+    kind: RmwKind
+    namespace: str
+    """The node's namespace, '' or 'bot1'."""
+    node: str
+    name: str = ""
+    """The topic's or service's full name, 'bot1/cmd_vel'; '' for a node."""
+    dds_type: str = ""
+    type_hash: str = ""
+    qos: str = RMW_QOS_DEFAULT
+
+
+@dataclass(frozen=True)
+class RmwZenohKeys:
+    """Keys of a ROS 2 graph whose nodes speak rmw_zenoh, in one ROS domain."""
+
+    domain_id: int = 0
+
+    def __post_init__(self) -> None:
+        if not 0 <= self.domain_id <= 232:  # what ROS 2 allows (rcl's ROS_DOMAIN_ID check)
+            raise ValueError(f"ROS domain id {self.domain_id} is not in 0..232")
+
+    def data(self, name: str, dds_type: str, type_hash: str) -> str:
+        """The key of a topic's samples or of a service's queries."""
+        return f"{self.domain_id}/{name.strip('/')}/{dds_type}/{type_hash}"
+
+    def data_any_hash(self, name: str, dds_type: str) -> str:
+        """The same for whatever type hash the robot's side has: what is heard or asked."""
+        return self.data(name, dds_type, ANY)
+
+    @property
+    def tokens(self) -> str:
+        """Every liveliness token of the domain."""
+        return f"{RMW_LIVELINESS}/{self.domain_id}/**"
+
+    def token(self, token: RmwToken) -> str:
+        """The key of `token`, as rmw_zenoh declares it."""
+        parts = [
+            RMW_LIVELINESS,
+            str(self.domain_id),
+            token.zid,
+            str(token.node_id),
+            str(token.entity_id),
+            token.kind.value,
+            RMW_NO_NAMESPACE,  # the enclave: rcl's default
+            rmw_mangle(token.namespace),
+            token.node,
+        ]
+        if token.kind is not RmwKind.NODE:
+            parts += [rmw_mangle(token.name), token.dds_type, token.type_hash, token.qos]
+        return "/".join(parts)
+
+    def parse_token(self, key: str) -> RmwToken | None:
+        """The entity behind a token's key, or None for another key or another domain."""
+        parts = key.split("/")
+        if len(parts) < 9 or parts[0] != RMW_LIVELINESS or parts[1] != str(self.domain_id):
+            return None
+        try:
+            kind = RmwKind(parts[5])
+            node_id, entity_id = int(parts[3]), int(parts[4])
+        except ValueError:
+            return None
+        namespace = parts[7].replace("%", "/").strip("/")
+        if kind is RmwKind.NODE:
+            return RmwToken(parts[2], node_id, entity_id, kind, namespace, parts[8])
+        if len(parts) < 13:
+            return None
+        return RmwToken(
+            parts[2],
+            node_id,
+            entity_id,
+            kind,
+            namespace,
+            parts[8],
+            parts[9].replace("%", "/").strip("/"),
+            parts[10],
+            parts[11],
+            parts[12],
         )

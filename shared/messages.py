@@ -14,6 +14,8 @@ from typing import Annotated, Literal
 
 import msgspec
 
+from .robot.kinds import CmdVelType, RosDistro, TransportKind
+
 ParamValue = str | int | float | bool
 LOGGED_TEXT = 120
 """Characters of a person's text that a log line shows."""
@@ -258,16 +260,18 @@ class OrdersStatus(Message):
 
 
 class ExecutorInfo(Message):
-    """How the executor reaches its robot: what the supervisor needs to stop the robot
-    itself when the executor is gone."""
+    """How the executor reaches its robot: what the supervisor and the clients need to
+    stop the robot themselves when the executor is gone."""
 
+    transport: TransportKind = TransportKind.BRIDGE
+    domain_id: int = 0
+    """The ROS domain, on rmw_zenoh."""
     namespace: str = ""
-    """The bridge namespace ('' or 'bot1')."""
-    distro: str = "jazzy"
+    """The robot's namespace ('' or 'bot1')."""
+    distro: RosDistro = RosDistro.JAZZY
     cmd_vel: str = "cmd_vel"
     """The velocity topic's name."""
-    cmd_vel_type: str = "twist"
-    """What it takes: 'twist' or 'stamped'."""
+    cmd_vel_type: CmdVelType = CmdVelType.TWIST
     navigate: str = "navigate_to_pose"
     """The NavigateToPose action's name."""
 

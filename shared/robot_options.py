@@ -1,29 +1,34 @@
-"""How to reach one robot through zenoh-bridge-ros2dds: its namespace, the names of its
-topics and action, and the message types they take.
+"""How to reach one robot: through zenoh-bridge-ros2dds or on rmw_zenoh, its namespace (and
+ROS domain), the names of its topics and action, and the message types they take.
 
 `voicectl executor` and `voicectl sim` take the same flags, so that a simulator plays
-exactly the robot an executor is configured for. An executor may leave a type to be
-detected ('auto'): from the bridge's liveliness tokens for topics, from a harmless
-get_result query for the ROS distribution.
+exactly the robot an executor is configured for. An executor may leave these to be
+detected ('auto'): the transport and the types of its topics from what the robot's graph
+announces, the ROS distribution from a harmless get_result query.
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TypeVar
 
-from .keys import BridgeKeys, check_ros_name
-from .ros2 import CameraType, CmdVelType, RosDistro
+from .keys import RmwZenohKeys, RobotNames, check_ros_name
+from .robot.kinds import CameraType, CmdVelType, RosDistro, TransportKind
 
 AUTO = "auto"
-_Kind = TypeVar("_Kind", RosDistro, CmdVelType, CameraType)
+_Kind = TypeVar("_Kind", RosDistro, CmdVelType, CameraType, TransportKind)
 
 
 @dataclass(frozen=True)
 class RobotOptions:
-    keys: BridgeKeys = field(default_factory=BridgeKeys)
+    names: RobotNames = field(default_factory=RobotNames)
+    transport: TransportKind | None = TransportKind.BRIDGE
+    """None: detect it."""
+    domain_id: int = 0
+    """The ROS domain, on rmw_zenoh."""
     distro: RosDistro | None = None
     """None: detect it."""
     cmd_vel_type: CmdVelType | None = None
@@ -45,15 +50,29 @@ def _ros_name(what: str, allow_empty: bool = False) -> Callable[[str], str]:
 
 
 def add_robot_arguments(parser: argparse.ArgumentParser, detect: bool) -> None:
-    """The robot's flags; with `detect`, types default to 'auto'."""
-    group = parser.add_argument_group("the robot through zenoh-bridge-ros2dds")
+    """The robot's flags; with `detect`, the transport and types default to 'auto'."""
+    group = parser.add_argument_group("the robot: its ROS 2 graph over Zenoh")
+    group.add_argument(
+        "--transport",
+        choices=[AUTO, *TransportKind] if detect else list(TransportKind),
+        default=AUTO if detect else TransportKind.BRIDGE.value,
+        help="how the robot's ROS 2 graph is reached: zenoh-bridge-ros2dds ('bridge') or "
+        f"ROS 2 nodes on rmw_zenoh (default: {AUTO if detect else 'bridge'})",
+    )
+    group.add_argument(
+        "--domain-id",
+        type=_domain_id,
+        default=os.environ.get("ROS_DOMAIN_ID") or "0",  # argparse converts (and checks) it
+        metavar="N",
+        help="the ROS domain, on rmw_zenoh (default: $ROS_DOMAIN_ID, else 0)",
+    )
     group.add_argument(
         "--namespace",
         type=_ros_name("ROS namespace", allow_empty=True),
         default="",
-        help="the bridge's namespace for this robot (default: none)",
+        help="the robot's namespace (default: none)",
     )
-    names = BridgeKeys()
+    names = RobotNames()
     for flag, default, what in (
         ("--cmd-vel", names.cmd_vel_name, "velocity topic"),
         ("--odom", names.odom_name, "odometry topic"),
@@ -86,14 +105,23 @@ def robot_options(args: argparse.Namespace) -> RobotOptions:
         return None if value == AUTO else kind(value)
 
     return RobotOptions(
-        keys=BridgeKeys(
+        names=RobotNames(
             args.namespace,
             cmd_vel_name=args.cmd_vel,
             odom_name=args.odom,
             camera_name=args.camera,
             navigate_name=args.navigate,
         ),
+        transport=chosen(TransportKind, args.transport),
+        domain_id=args.domain_id,
         distro=chosen(RosDistro, args.distro),
         cmd_vel_type=chosen(CmdVelType, args.cmd_vel_type),
         camera_type=chosen(CameraType, args.camera_type),
     )
+
+
+def _domain_id(text: str) -> int:
+    try:
+        return RmwZenohKeys(int(text)).domain_id
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(f"ROS domain id {text!r}: {exc}") from exc

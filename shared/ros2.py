@@ -16,14 +16,20 @@ import functools
 import math
 import uuid
 from dataclasses import dataclass
-from enum import IntEnum, StrEnum
-from typing import Any, NamedTuple, Self, TypeVar
+from enum import IntEnum
+from typing import Any, NamedTuple, TypeVar
 
 import numpy as np
+from rosbags.interfaces import Nodetype
 from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
 
 from .errors import VoicectlError
+
+# Re-exported: every module that speaks ROS 2 messages names these.
+from .robot.kinds import CameraType as CameraType
+from .robot.kinds import CmdVelType as CmdVelType
+from .robot.kinds import RosDistro as RosDistro
 
 GOAL_ID_SIZE = 16
 CANCEL_ALL = bytes(GOAL_ID_SIZE)
@@ -32,17 +38,6 @@ CANCEL_ALL = bytes(GOAL_ID_SIZE)
 
 class CdrError(VoicectlError):
     """Bytes that are not the CDR encoding of the ROS 2 message that was expected."""
-
-
-class RosDistro(StrEnum):
-    """The ROS 2 distributions whose message definitions voicectl speaks."""
-
-    HUMBLE = "humble"
-    JAZZY = "jazzy"
-
-    @property
-    def store(self) -> Stores:
-        return Stores.ROS2_HUMBLE if self is RosDistro.HUMBLE else Stores.ROS2_JAZZY
 
 
 class GoalStatus(IntEnum):
@@ -69,42 +64,6 @@ class CancelCode(IntEnum):
     REJECTED = 1
     UNKNOWN_GOAL_ID = 2
     GOAL_TERMINATED = 3
-
-
-class _TopicType(StrEnum):
-    """A choice between message types for one topic, each with its ROS type name."""
-
-    @property
-    def ros_type(self) -> str:
-        return _ROS_TYPES[self]
-
-    @classmethod
-    def of(cls, ros_type: str) -> Self | None:
-        """The choice a bridge token's type names, if it is one of these."""
-        return next((kind for kind in cls if kind.ros_type == ros_type), None)
-
-
-class CmdVelType(_TopicType):
-    """What a robot's velocity topic takes: Humble's and most drivers' Twist, or the
-    TwistStamped of Jazzy's ros2_control diff drive controller and Kilted's Nav2."""
-
-    TWIST = "twist"
-    STAMPED = "stamped"
-
-
-class CameraType(_TopicType):
-    """A camera topic's message: raw sensor_msgs/Image or a CompressedImage (JPEG, PNG)."""
-
-    RAW = "raw"
-    COMPRESSED = "compressed"
-
-
-_ROS_TYPES: dict[_TopicType, str] = {
-    CmdVelType.TWIST: "geometry_msgs/msg/Twist",
-    CmdVelType.STAMPED: "geometry_msgs/msg/TwistStamped",
-    CameraType.RAW: "sensor_msgs/msg/Image",
-    CameraType.COMPRESSED: "sensor_msgs/msg/CompressedImage",
-}
 
 
 NAVIGATION_ERRORS = {
@@ -219,10 +178,17 @@ class CompressedImage(NamedTuple):
 # Bytes per pixel of the encodings `Ros2Codec.image` writes.
 IMAGE_ENCODINGS = {"rgb8": 3, "bgr8": 3, "rgba8": 4, "bgra8": 4, "mono8": 1, "mono16": 2}
 
+_STORES = {RosDistro.HUMBLE: Stores.ROS2_HUMBLE, RosDistro.JAZZY: Stores.ROS2_JAZZY}
+
 # --- type definitions -----------------------------------------------------------------------
 
-_NAV = "nav2_msgs/action/NavigateToPose"
-_CANCEL = "action_msgs/srv/CancelGoal"
+NAVIGATE_TO_POSE = "nav2_msgs/action/NavigateToPose"
+CANCEL_GOAL = "action_msgs/srv/CancelGoal"
+"""The service that cancels any action's goals."""
+NAVIGATE_SEND_GOAL = f"{NAVIGATE_TO_POSE}_SendGoal"
+NAVIGATE_GET_RESULT = f"{NAVIGATE_TO_POSE}_GetResult"
+NAVIGATE_FEEDBACK = f"{NAVIGATE_TO_POSE}_FeedbackMessage"
+"""The services and topic ROS 2 makes of Nav2's action, by their types."""
 
 _NAV_GOAL = """
 geometry_msgs/PoseStamped pose
@@ -280,14 +246,14 @@ action_msgs/msg/GoalInfo[] goals_canceling
 def _definitions(distro: RosDistro) -> dict[str, str]:
     """Message text of every type voicectl adds to the distribution's store."""
     texts = {
-        f"{_NAV}_Goal": _NAV_GOAL,
-        f"{_NAV}_Result": _NAV_RESULT[distro],
-        f"{_NAV}_Feedback": _NAV_FEEDBACK,
-        f"{_CANCEL}_Request": _CANCEL_REQUEST,
-        f"{_CANCEL}_Response": _CANCEL_RESPONSE,
+        f"{NAVIGATE_TO_POSE}_Goal": _NAV_GOAL,
+        f"{NAVIGATE_TO_POSE}_Result": _NAV_RESULT[distro],
+        f"{NAVIGATE_TO_POSE}_Feedback": _NAV_FEEDBACK,
+        f"{CANCEL_GOAL}_Request": _CANCEL_REQUEST,
+        f"{CANCEL_GOAL}_Response": _CANCEL_RESPONSE,
     }
     for suffix, text in _ACTION_WRAPPERS.items():
-        texts[f"{_NAV}{suffix}"] = text.format(action=_NAV)
+        texts[f"{NAVIGATE_TO_POSE}{suffix}"] = text.format(action=NAVIGATE_TO_POSE)
     return texts
 
 
@@ -295,7 +261,7 @@ def _definitions(distro: RosDistro) -> dict[str, str]:
 def typestore(distro: RosDistro) -> Typestore:
     """The distribution's rosbags store plus Nav2's action, built once per process."""
     # Building a store costs ~0.25 s, and a store is never changed after this function.
-    store = get_typestore(distro.store)
+    store = get_typestore(_STORES[distro])
     for name, text in _definitions(distro).items():
         if name in store.fielddefs:  # a future rosbags may ship action_msgs' services
             continue
@@ -303,6 +269,92 @@ def typestore(distro: RosDistro) -> Typestore:
         (definition,) = get_types_from_msg(text, name).values()
         store.register({name: definition})
     return store
+
+
+# --- names and hashes of types, as ROS 2's middlewares write them ----------------------------
+
+NO_TYPE_HASH = "TypeHashNotSupported"
+"""What rmw_zenoh writes where a type hash goes on Humble, which has none."""
+SERVICES = (NAVIGATE_SEND_GOAL, NAVIGATE_GET_RESULT, CANCEL_GOAL)
+"""The services voicectl calls or serves (an action's are services too)."""
+
+
+def dds_type_name(ros_type: str) -> str:
+    """A type as DDS and rmw_zenoh name it: 'geometry_msgs::msg::dds_::Twist_'."""
+    package, kind, name = _split_type(ros_type)
+    return f"{package}::{kind}::dds_::{name}_"
+
+
+def ros_type_of(dds_name: str) -> str:
+    """The inverse of `dds_type_name`; ValueError for a name not of that form."""
+    parts = dds_name.split("::")
+    if len(parts) != 4 or parts[2] != "dds_" or not parts[3].endswith("_"):
+        raise ValueError(f"{dds_name!r} is not a DDS type name ('pkg::msg::dds_::Name_')")
+    return "/".join((parts[0], parts[1], parts[3][:-1]))
+
+
+def _split_type(ros_type: str) -> tuple[str, str, str]:
+    parts = ros_type.split("/")
+    if len(parts) != 3 or not all(parts):
+        raise ValueError(f"{ros_type!r} is not a ROS type name ('pkg/msg/Name')")
+    return parts[0], parts[1], parts[2]
+
+
+def type_hash(distro: RosDistro, ros_type: str) -> str:
+    """The RIHS01 hash of a message or service type, as rosidl computes it and rmw_zenoh
+    writes it into keys ('RIHS01_<sha256>'); `NO_TYPE_HASH` on Humble."""
+    if distro is RosDistro.HUMBLE:
+        return NO_TYPE_HASH
+    return hash_store(distro).hash_rihs01(ros_type)
+
+
+@functools.cache
+def hash_store(distro: RosDistro) -> Typestore:
+    """A store whose descriptions hash as rosidl's: a service is a type of its own (request,
+    response and event messages) and a message's `char` is rosidl's `uint8`. Apart from the
+    codec's store: the hashes need types nothing encodes."""
+    store = get_typestore(_STORES[distro])
+    for name, text in _definitions(distro).items():
+        if name not in store.fielddefs:
+            (definition,) = get_types_from_msg(text, name).values()
+            store.register({name: definition})
+    for name, (constants, fields) in list(store.fielddefs.items()):
+        store.fielddefs[name] = (constants, [(f, _char_as_uint8(d)) for f, d in fields])
+    for service in SERVICES:
+        describe_service(store, service)
+    return store
+
+
+def describe_service(store: Typestore, service: str) -> None:
+    """Register the type rosidl hashes for `service`, whose `_Request` and `_Response` the
+    store has: its request, response and introspection event messages."""
+    event = f"{service}_Event"
+    store.fielddefs[event] = (
+        [],
+        [
+            ("info", (Nodetype.NAME, "service_msgs/msg/ServiceEventInfo")),
+            ("request", (Nodetype.SEQUENCE, ((Nodetype.NAME, f"{service}_Request"), 1))),
+            ("response", (Nodetype.SEQUENCE, ((Nodetype.NAME, f"{service}_Response"), 1))),
+        ],
+    )
+    store.fielddefs[service] = (
+        [],
+        [
+            ("request_message", (Nodetype.NAME, f"{service}_Request")),
+            ("response_message", (Nodetype.NAME, f"{service}_Response")),
+            ("event_message", (Nodetype.NAME, event)),
+        ],
+    )
+
+
+def _char_as_uint8(desc: Any) -> Any:
+    """A field description with `char` read as rosidl reads it in a .msg: uint8."""
+    kind, rest = desc
+    if kind == Nodetype.BASE and rest[0] == "char":
+        return (kind, ("uint8", rest[1]))
+    if kind in (Nodetype.ARRAY, Nodetype.SEQUENCE):
+        return (kind, (_char_as_uint8(rest[0]), rest[1]))
+    return desc
 
 
 # --- the codec ------------------------------------------------------------------------------
@@ -417,17 +469,17 @@ class Ros2Codec:
         self, goal_id: bytes, frame: str, pose: Pose2D, stamp_s: float = 0.0
     ) -> bytes:
         t = self._types
-        goal = t[f"{_NAV}_Goal"](
+        goal = t[f"{NAVIGATE_TO_POSE}_Goal"](
             pose=t["geometry_msgs/msg/PoseStamped"](
                 header=self._header(stamp_s, frame), pose=self._pose(pose)
             ),
             behavior_tree="",
         )
-        msg = t[f"{_NAV}_SendGoal_Request"](goal_id=self._uuid(goal_id), goal=goal)
-        return self._encode(msg, f"{_NAV}_SendGoal_Request")
+        msg = t[f"{NAVIGATE_TO_POSE}_SendGoal_Request"](goal_id=self._uuid(goal_id), goal=goal)
+        return self._encode(msg, f"{NAVIGATE_TO_POSE}_SendGoal_Request")
 
     def read_send_goal_request(self, raw: bytes) -> GoalRequest:
-        msg = self._decode(raw, f"{_NAV}_SendGoal_Request")
+        msg = self._decode(raw, f"{NAVIGATE_TO_POSE}_SendGoal_Request")
         return GoalRequest(
             goal_id=_goal_id(msg.goal_id),
             frame=str(msg.goal.pose.header.frame_id),
@@ -435,37 +487,41 @@ class Ros2Codec:
         )
 
     def send_goal_response(self, accepted: bool, stamp_s: float = 0.0) -> bytes:
-        msg = self._types[f"{_NAV}_SendGoal_Response"](accepted=accepted, stamp=self._time(stamp_s))
-        return self._encode(msg, f"{_NAV}_SendGoal_Response")
+        msg = self._types[f"{NAVIGATE_TO_POSE}_SendGoal_Response"](
+            accepted=accepted, stamp=self._time(stamp_s)
+        )
+        return self._encode(msg, f"{NAVIGATE_TO_POSE}_SendGoal_Response")
 
     def read_send_goal_response(self, raw: bytes) -> bool:
         """Whether the goal was accepted."""
-        return bool(self._decode(raw, f"{_NAV}_SendGoal_Response").accepted)
+        return bool(self._decode(raw, f"{NAVIGATE_TO_POSE}_SendGoal_Response").accepted)
 
     # --- navigate_to_pose: get_result ---------------------------------------------------
 
     def get_result_request(self, goal_id: bytes) -> bytes:
-        msg = self._types[f"{_NAV}_GetResult_Request"](goal_id=self._uuid(goal_id))
-        return self._encode(msg, f"{_NAV}_GetResult_Request")
+        msg = self._types[f"{NAVIGATE_TO_POSE}_GetResult_Request"](goal_id=self._uuid(goal_id))
+        return self._encode(msg, f"{NAVIGATE_TO_POSE}_GetResult_Request")
 
     def read_get_result_request(self, raw: bytes) -> bytes:
         """The goal id asked about."""
-        return _goal_id(self._decode(raw, f"{_NAV}_GetResult_Request").goal_id)
+        return _goal_id(self._decode(raw, f"{NAVIGATE_TO_POSE}_GetResult_Request").goal_id)
 
     def get_result_response(self, status: int, error_code: int = 0, error_msg: str = "") -> bytes:
         """The final status; `error_code` and `error_msg` are dropped on Humble."""
         t = self._types
         if self.distro is RosDistro.HUMBLE:
-            result = t[f"{_NAV}_Result"](result=t["std_msgs/msg/Empty"]())
+            result = t[f"{NAVIGATE_TO_POSE}_Result"](result=t["std_msgs/msg/Empty"]())
         else:
             if not 0 <= error_code <= 0xFFFF:
                 raise ValueError(f"error_code {error_code} must fit in uint16")
-            result = t[f"{_NAV}_Result"](error_code=error_code, error_msg=error_msg)
-        msg = t[f"{_NAV}_GetResult_Response"](status=int(GoalStatus(status)), result=result)
-        return self._encode(msg, f"{_NAV}_GetResult_Response")
+            result = t[f"{NAVIGATE_TO_POSE}_Result"](error_code=error_code, error_msg=error_msg)
+        msg = t[f"{NAVIGATE_TO_POSE}_GetResult_Response"](
+            status=int(GoalStatus(status)), result=result
+        )
+        return self._encode(msg, f"{NAVIGATE_TO_POSE}_GetResult_Response")
 
     def read_get_result_response(self, raw: bytes) -> NavigateResult:
-        msg = self._decode(raw, f"{_NAV}_GetResult_Response")
+        msg = self._decode(raw, f"{NAVIGATE_TO_POSE}_GetResult_Response")
         status = _enum(GoalStatus, msg.status, "goal status")
         if self.distro is RosDistro.HUMBLE:
             return NavigateResult(status=status)
@@ -487,7 +543,7 @@ class Ros2Codec:
         stamp_s: float = 0.0,
     ) -> bytes:
         t = self._types
-        feedback = t[f"{_NAV}_Feedback"](
+        feedback = t[f"{NAVIGATE_TO_POSE}_Feedback"](
             current_pose=t["geometry_msgs/msg/PoseStamped"](
                 header=self._header(stamp_s, frame), pose=self._pose(current)
             ),
@@ -496,11 +552,13 @@ class Ros2Codec:
             number_of_recoveries=0,
             distance_remaining=distance_remaining,
         )
-        msg = t[f"{_NAV}_FeedbackMessage"](goal_id=self._uuid(goal_id), feedback=feedback)
-        return self._encode(msg, f"{_NAV}_FeedbackMessage")
+        msg = t[f"{NAVIGATE_TO_POSE}_FeedbackMessage"](
+            goal_id=self._uuid(goal_id), feedback=feedback
+        )
+        return self._encode(msg, f"{NAVIGATE_TO_POSE}_FeedbackMessage")
 
     def read_feedback(self, raw: bytes) -> NavigateFeedback:
-        msg = self._decode(raw, f"{_NAV}_FeedbackMessage")
+        msg = self._decode(raw, f"{NAVIGATE_TO_POSE}_FeedbackMessage")
         return NavigateFeedback(
             goal_id=_goal_id(msg.goal_id),
             pose=_pose2d(msg.feedback.current_pose.pose),
@@ -511,22 +569,22 @@ class Ros2Codec:
 
     def cancel_goal_request(self, goal_id: bytes = CANCEL_ALL, stamp_s: float = 0.0) -> bytes:
         """Cancel `goal_id`; the default (all zeros, zero stamp) cancels every goal."""
-        msg = self._types[f"{_CANCEL}_Request"](goal_info=self._goal_info(goal_id, stamp_s))
-        return self._encode(msg, f"{_CANCEL}_Request")
+        msg = self._types[f"{CANCEL_GOAL}_Request"](goal_info=self._goal_info(goal_id, stamp_s))
+        return self._encode(msg, f"{CANCEL_GOAL}_Request")
 
     def read_cancel_goal_request(self, raw: bytes) -> CancelRequest:
-        info = self._decode(raw, f"{_CANCEL}_Request").goal_info
+        info = self._decode(raw, f"{CANCEL_GOAL}_Request").goal_info
         return CancelRequest(goal_id=_goal_id(info.goal_id), stamp_s=_seconds(info.stamp))
 
     def cancel_goal_response(self, return_code: int, goal_ids: tuple[bytes, ...] = ()) -> bytes:
-        msg = self._types[f"{_CANCEL}_Response"](
+        msg = self._types[f"{CANCEL_GOAL}_Response"](
             return_code=int(CancelCode(return_code)),
             goals_canceling=[self._goal_info(goal_id, 0.0) for goal_id in goal_ids],
         )
-        return self._encode(msg, f"{_CANCEL}_Response")
+        return self._encode(msg, f"{CANCEL_GOAL}_Response")
 
     def read_cancel_goal_response(self, raw: bytes) -> CancelResponse:
-        msg = self._decode(raw, f"{_CANCEL}_Response")
+        msg = self._decode(raw, f"{CANCEL_GOAL}_Response")
         return CancelResponse(
             return_code=_enum(CancelCode, msg.return_code, "cancel return code"),
             goal_ids=tuple(_goal_id(info.goal_id) for info in msg.goals_canceling),

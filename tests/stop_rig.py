@@ -30,7 +30,7 @@ from pathlib import Path
 from shared.bus import Bus
 from shared.client import VoicectlClient
 from shared.errors import BusError
-from shared.keys import BridgeKeys
+from shared.keys import RobotNames
 from shared.messages import (
     GetState,
     Order,
@@ -41,9 +41,11 @@ from shared.messages import (
     Submit,
     TargetPose,
 )
+from shared.robot import TransportKind
 from shared.ros2 import Odometry, Ros2Codec
 
 from .conftest import Processes, async_wait_until
+from .support import robot_key
 
 ROBOT = "r1"
 CODEC = Ros2Codec()
@@ -122,14 +124,22 @@ class StopRig:
         db: Path,
         time_scale: float = 1.0,
         stall_limit: float = 30.0,
+        transport: TransportKind = TransportKind.BRIDGE,
     ) -> None:
         self.stall_limit = stall_limit
         """30 s by default: the watchdog is tested on its own, STOP must do it alone."""
         self.router = router
         self.processes = processes
         self.db = db
+        self.transport = transport
         self.sim = processes.start(
-            "services.sim", "--connect", router, "--time-scale", f"{time_scale:g}"
+            "services.sim",
+            "--connect",
+            router,
+            "--time-scale",
+            f"{time_scale:g}",
+            "--transport",
+            transport.value,
         )
         self.supervisor: subprocess.Popen[bytes] | None = None
         self.executor: subprocess.Popen[bytes] | None = None
@@ -166,21 +176,29 @@ class StopRig:
     def listen(self, bus: Bus) -> None:
         """Timestamps, on Zenoh's thread as they arrive: odometry, zero velocities, and
         the navigation status the simulator publishes when a goal ends."""
-        keys = BridgeKeys()
+        names = RobotNames()
+
+        def key(name: str, ros_type: str) -> str:
+            return robot_key(self.transport, name, ros_type, any_hash=True)
 
         def on_cmd_vel(_key: str, twist: tuple[float, float]) -> None:
             if twist == (0.0, 0.0):
                 self.zero_at.append(time.monotonic())
 
-        bus.subscribe(keys.cmd_vel, CODEC.read_twist, on_cmd_vel, on_loop=False)
         bus.subscribe(
-            keys.navigate("status"),
+            key(names.cmd_vel, "geometry_msgs/msg/Twist"),
+            CODEC.read_twist,
+            on_cmd_vel,
+            on_loop=False,
+        )
+        bus.subscribe(
+            key(names.navigate("status"), "action_msgs/msg/GoalStatusArray"),
             bytes,
             lambda _key, _raw: self.status_at.append(time.monotonic()),
             on_loop=False,
         )
         bus.subscribe(
-            keys.odom,
+            key(names.odom, "nav_msgs/msg/Odometry"),
             CODEC.read_odometry,
             lambda _key, odom: self.odometry.append((time.monotonic(), odom)),
             on_loop=False,

@@ -11,7 +11,7 @@ from typing import Any, TypeVar
 from shared.bus import Bus, BusOptions, json_decoder
 from shared.client import VoicectlClient
 from shared.errors import BusError
-from shared.keys import BridgeKeys, RobotKeys
+from shared.keys import RmwZenohKeys, RobotKeys, RobotNames
 from shared.messages import (
     Accepted,
     CancelOrder,
@@ -32,7 +32,8 @@ from shared.messages import (
     Submitted,
     SupervisorReply,
 )
-from shared.ros2 import Odometry, Ros2Codec
+from shared.robot import TransportKind, open_transport
+from shared.ros2 import Odometry, Ros2Codec, RosDistro, dds_type_name, type_hash
 
 from .conftest import Processes, async_wait_until
 
@@ -60,6 +61,20 @@ async def until_heard(bus: Bus, key: str, timeout: float = 10.0) -> None:
         assert await stream.matched(timeout), f"no subscriber on {key} reached the router"
     finally:
         stream.close()
+
+
+def robot_key(transport: TransportKind, name: str, ros_type: str, any_hash: bool = False) -> str:
+    """The key a robot's graph on `transport` uses for topic `name` of `ros_type`, as a
+    Jazzy robot announces it (or, `any_hash`, whatever its type hash): for a test's own
+    publisher or subscriber."""
+    match transport:
+        case TransportKind.BRIDGE:
+            return name
+        case TransportKind.RMW_ZENOH:
+            keys, dds = RmwZenohKeys(0), dds_type_name(ros_type)
+            if any_hash:
+                return keys.data_any_hash(name, dds)
+            return keys.data(name, dds, type_hash(RosDistro.JAZZY, ros_type))
 
 
 def order(label: str, **params: Any) -> Order:
@@ -136,19 +151,28 @@ class ExecutorHarness:
     """Sends orders straight to an executor, in the supervisor's seat, and keeps what it
     reports and the robot's odometry (with the loop time each arrived)."""
 
-    def __init__(self, bus: Bus, robot: str = "r1", bridge: BridgeKeys | None = None) -> None:
+    def __init__(
+        self,
+        bus: Bus,
+        robot: str = "r1",
+        names: RobotNames | None = None,
+        transport: TransportKind = TransportKind.BRIDGE,
+    ) -> None:
         self.bus = bus
         self.keys = RobotKeys(robot)
-        self.bridge = bridge or BridgeKeys()
+        self.names = names or RobotNames()
+        self.transport = open_transport(bus, transport, "voicectl_test", self.names.namespace)
+        """The robot's graph as the test sees it, on the robot's own transport."""
         self.events: dict[str, list[ExecutorEvent]] = {}
         self.odometry: list[tuple[float, Odometry]] = []
         self._decode = json_decoder(ExecutorReply)
         loop = asyncio.get_running_loop()
         bus.subscribe(self.keys.executor_events, json_decoder(ExecutorEvent), self._on_event)
-        bus.subscribe(
-            self.bridge.odom,
+        self.transport.subscribe(
+            self.names.odom,
+            "nav_msgs/msg/Odometry",
             Ros2Codec().read_odometry,
-            lambda _key, odom: self.odometry.append((loop.time(), odom)),
+            lambda odom: self.odometry.append((loop.time(), odom)),
         )
 
     def _on_event(self, _key: str, event: ExecutorEvent) -> None:
@@ -201,13 +225,14 @@ class ExecutorHarness:
 def run_harness(
     router: str,
     body: Callable[[ExecutorHarness], Coroutine[Any, Any, None]],
-    bridge: BridgeKeys | None = None,
+    names: RobotNames | None = None,
+    transport: TransportKind = TransportKind.BRIDGE,
 ) -> None:
     """Run `body` with a harness on a bus connected to `router`, once the executor and
     the robot are up."""
 
     async def main(bus: Bus) -> None:
-        harness = ExecutorHarness(bus, bridge=bridge)
+        harness = ExecutorHarness(bus, names=names, transport=transport)
         await harness.ready()
         await body(harness)
 

@@ -11,7 +11,7 @@ import json5
 import pytest
 
 from services.executor.__main__ import parse_args
-from shared.keys import BridgeKeys
+from shared.keys import RobotNames
 from shared.robot_options import robot_options
 
 from .conftest import REPO
@@ -73,15 +73,15 @@ def test_every_option_is_one_the_bridge_knows(bridge: dict[str, Any]) -> None:
 @pytest.mark.parametrize(
     "keys",
     [
-        BridgeKeys(),
-        BridgeKeys(
+        RobotNames(),
+        RobotNames(
             cmd_vel_name="diff_drive_controller/cmd_vel",
             camera_name="front/image_raw/compressed",
         ),
     ],
     ids=["default", "remapped"],
 )
-def test_what_voicectl_uses_is_routed(bridge: dict[str, Any], keys: BridgeKeys) -> None:
+def test_what_voicectl_uses_is_routed(bridge: dict[str, Any], keys: RobotNames) -> None:
     assert allowed(bridge, "subscribers", f"/{keys.cmd_vel_name}")
     assert allowed(bridge, "publishers", f"/{keys.odom_name}")
     assert allowed(bridge, "publishers", f"/{keys.camera_name}")
@@ -116,4 +116,4 @@ def test_the_documented_executor_matches_the_config(bridge: dict[str, Any]) -> N
     words = shlex.split(executor_line)
     assert words[:2] == [".venv/bin/voicectl", "executor"]
     options = robot_options(parse_args(words[2:]))
-    assert options.keys.namespace == bridge["namespace"].strip("/")
+    assert options.names.namespace == bridge["namespace"].strip("/")

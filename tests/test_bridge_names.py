@@ -5,11 +5,11 @@ from __future__ import annotations
 
 import pytest
 
-from shared.keys import BridgeKeys, BridgeKind, BridgeToken, check_ros_name
+from shared.keys import BridgeKind, BridgeToken, RobotNames, check_ros_name
 
 
 def test_remapped_names_become_keys_under_the_namespace() -> None:
-    keys = BridgeKeys(
+    keys = RobotNames(
         "/bot1",
         cmd_vel_name="/diff_drive_controller/cmd_vel",
         camera_name="front/image_raw/compressed",
@@ -20,7 +20,7 @@ def test_remapped_names_become_keys_under_the_namespace() -> None:
     assert keys.odom == "bot1/odom"
     assert keys.camera_image == "bot1/front/image_raw/compressed"
     assert keys.navigate("send_goal") == "bot1/nav/navigate_to_pose/_action/send_goal"
-    assert BridgeKeys().navigate("get_result") == "navigate_to_pose/_action/get_result"
+    assert RobotNames().navigate("get_result") == "navigate_to_pose/_action/get_result"
 
 
 @pytest.mark.parametrize("name", ["bot1", "/a/b_c", "_hidden", "a1/b2/", ""])
@@ -44,7 +44,7 @@ def test_names_ros_refuses_are_refused_naming_the_part(name: str, part: str) -> 
 
 def test_an_empty_topic_name_is_refused() -> None:
     with pytest.raises(ValueError, match="cmd_vel name must not be empty"):
-        BridgeKeys(cmd_vel_name="/")
+        RobotNames(cmd_vel_name="/")
 
 
 def test_bridge_tokens_read_back_as_written() -> None:

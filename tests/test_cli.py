@@ -10,7 +10,7 @@ import sys
 from pathlib import Path
 
 from shared.bus import Bus, json_decoder
-from shared.keys import BridgeKeys, RobotKeys
+from shared.keys import RobotKeys, RobotNames
 from shared.messages import Failed, GetState, StateReply, SupervisorReply
 from shared.ros2 import Pose2D, Ros2Codec, RosDistro, new_goal_id
 
@@ -149,7 +149,7 @@ def test_a_stop_navigation_refuses_is_said_to_be_unconfirmed(
     async def navigate(bus: Bus) -> None:  # a goal of somebody else's, which the fault keeps
         codec = Ros2Codec(RosDistro.JAZZY)
         reply = await bus.request_bytes(
-            BridgeKeys().navigate("send_goal"),
+            RobotNames().navigate("send_goal"),
             codec.send_goal_request(new_goal_id(), "map", Pose2D(x=8.0, y=0.0, yaw=0.0)),
             timeout=10.0,
         )

@@ -41,7 +41,7 @@ TOKEN = "compose-test-token"
 
 WATCH = """
 import json, sys, time, zenoh
-from shared.keys import BridgeKeys
+from shared.keys import RobotNames
 from shared.ros2 import Ros2Codec
 codec, seen = Ros2Codec(), []
 if sys.argv[1].endswith(".json5"):  # a client configuration of the secured bus
@@ -52,7 +52,7 @@ else:
     config.insert_json5("connect/endpoints", json.dumps([sys.argv[1]]))
 with zenoh.open(config) as session:
     session.declare_subscriber(
-        BridgeKeys().odom, lambda s: seen.append(codec.read_odometry(s.payload.to_bytes()))
+        RobotNames().odom, lambda s: seen.append(codec.read_odometry(s.payload.to_bytes()))
     )
     time.sleep(float(sys.argv[2]))
 odometry = seen[-1]
@@ -64,11 +64,11 @@ secured router does, with a client configuration)."""
 
 INTRUDE = """
 import json, time, zenoh
-from shared.keys import BridgeKeys, RobotKeys
+from shared.keys import RobotNames, RobotKeys
 from shared.ros2 import Ros2Codec
 with zenoh.open(zenoh.Config.from_file("/etc/voicectl/bus/panel.json5")) as session:
     for _ in range(20):
-        session.put(BridgeKeys().cmd_vel, Ros2Codec().twist(0.5, 0.0))
+        session.put(RobotNames().cmd_vel, Ros2Codec().twist(0.5, 0.0))
         time.sleep(0.05)
     asked = RobotKeys("robot").executor_execute
     replies = list(session.get(asked, payload=b"{}", timeout=2.0))

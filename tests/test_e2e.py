@@ -16,7 +16,7 @@ import pytest
 import zenoh
 
 from shared.bus import BusOptions
-from shared.keys import BridgeKeys, RobotKeys
+from shared.keys import RobotKeys, RobotNames
 from shared.messages import OrderStatus, State, StateUpdate
 from shared.ros2 import Pose2D, Ros2Codec, RosDistro
 
@@ -36,7 +36,7 @@ class RobotWatch:
         self._decoder = msgspec.json.Decoder(StateUpdate)
         options = BusOptions(connect=[router])
         self.session = zenoh.open(options.zenoh_config())
-        self.session.declare_subscriber(BridgeKeys().odom, self._on_odom)
+        self.session.declare_subscriber(RobotNames().odom, self._on_odom)
         self.session.declare_subscriber(RobotKeys("robot").state, self._on_state)
 
     def _on_odom(self, sample: zenoh.Sample) -> None:

@@ -11,7 +11,7 @@ import pytest
 from PIL import Image as PilImage
 
 from shared.bus import json_decoder
-from shared.keys import BridgeKeys
+from shared.keys import RobotNames
 from shared.messages import (
     CancelOrder,
     Done,
@@ -144,7 +144,7 @@ def test_executor_announces_its_labels(robot: tuple[str, Path]) -> None:
         replies = harness.bus.session.liveliness().get("voice/r1/labels/*", timeout=2)
         labels = sorted(str(r.ok.key_expr).rsplit("/", 1)[1] for r in replies if r.ok)
         assert labels == ["drive", "mbgoal", "mul", "pic", "rotate", "runaway", "wait"]
-        simulator = harness.bus.session.liveliness().get(BridgeKeys().simulator, timeout=2)
+        simulator = harness.bus.session.liveliness().get(RobotNames().simulator, timeout=2)
         assert [str(r.ok.key_expr) for r in simulator if r.ok] == ["voicectl_sim/alive"]
 
     run_harness(robot[0], body)
@@ -155,7 +155,7 @@ def test_sim_publishes_tf_that_agrees_with_odometry(robot: tuple[str, Path]) -> 
         codec = Ros2Codec(RosDistro.JAZZY)
         transforms: list[list[tuple[str, str, object]]] = []
         harness.bus.subscribe(
-            BridgeKeys().tf, codec.read_transform, lambda _key, tf: transforms.append(tf)
+            RobotNames().tf, codec.read_transform, lambda _key, tf: transforms.append(tf)
         )
         await harness.finished(await harness.execute(order("drive", distance=0.3)))
         await async_wait_until(lambda: len(transforms) > 2, 5.0, "tf messages")

@@ -10,7 +10,7 @@ import pytest
 import zenoh
 
 from shared.bus import BusOptions
-from shared.keys import BridgeKeys, ConverterKeys, RobotKeys
+from shared.keys import ConverterKeys, RobotKeys, RobotNames
 from voicectl.health import SERVICES, token_key
 
 from .conftest import free_port, voicectl
@@ -20,7 +20,7 @@ def test_each_service_is_checked_by_its_own_token() -> None:
     assert token_key("converter", "r1") == ConverterKeys().alive
     for service in ("stt", "supervisor", "executor"):
         assert token_key(service, "r1") == RobotKeys("r1").alive(service)
-    assert token_key("sim", "r1", "bot1") == BridgeKeys("bot1").simulator
+    assert token_key("sim", "r1", "bot1") == RobotNames("bot1").simulator
     assert token_key("router", "r1") is None
     assert set(SERVICES) == {"router", "converter", "stt", "supervisor", "executor", "sim", "web"}
 
@@ -51,7 +51,7 @@ def test_a_service_is_up_while_its_token_is_there(router: str, client: zenoh.Ses
 
 def test_the_converter_and_the_simulator(router: str, client: zenoh.Session) -> None:
     tokens = [client.liveliness().declare_token(k) for k in (ConverterKeys().alive,)]
-    tokens.append(client.liveliness().declare_token(BridgeKeys("bot1").simulator))
+    tokens.append(client.liveliness().declare_token(RobotNames("bot1").simulator))
     assert voicectl("health", "converter", "--connect", router).returncode == 0
     sim = voicectl("health", "sim", "--namespace", "bot1", "--connect", router)
     assert (sim.returncode, sim.stdout) == (

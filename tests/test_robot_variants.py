@@ -1,10 +1,12 @@
 """The executor against the robots it meets outside the simulator's defaults, each played
 by `voicectl sim` in the matching mode over real Zenoh: remapped names with a namespace,
 TwistStamped cmd_vel, a compressed camera, Humble's navigator, and navigation that
-refuses a cancel, never answers one, loses a result or aborts a goal.
+refuses a cancel, never answers one, loses a result or aborts a goal. Every robot is
+played twice: behind zenoh-bridge-ros2dds and as nodes on rmw_zenoh.
 
-The executor is given names only; the types it must find out itself (bridge tokens for
-topics, a get_result probe for the distribution), as on a robot nobody documented."""
+The executor is given names only; the transport and the types it must find out itself
+(the graph's tokens for the transport and the topics, a get_result probe for the
+distribution), as on a robot nobody documented."""
 
 from __future__ import annotations
 
@@ -17,7 +19,7 @@ import pytest
 from PIL import Image as PilImage
 
 from shared.bus import Bus, BusOptions, json_decoder
-from shared.keys import BridgeKeys, RobotKeys
+from shared.keys import RobotKeys, RobotNames
 from shared.messages import (
     CancelOrder,
     Done,
@@ -28,10 +30,19 @@ from shared.messages import (
     OrderStatus,
     TargetPose,
 )
+from shared.robot import TransportKind, open_transport
 from shared.ros2 import Ros2Codec
 
 from .conftest import Processes, async_wait_until, voicectl
-from .support import ExecutorHarness, on_bus, order, run_harness, start_robot, until_heard
+from .support import (
+    ExecutorHarness,
+    on_bus,
+    order,
+    robot_key,
+    run_harness,
+    start_robot,
+    until_heard,
+)
 
 CODEC = Ros2Codec()
 Start = Callable[..., None]
@@ -49,7 +60,7 @@ NAMES = (
     "--navigate",
     "nav/navigate_to_pose",
 )
-REMAPPED = BridgeKeys(
+REMAPPED = RobotNames(
     "bot1",
     cmd_vel_name="diff_drive_controller/cmd_vel",
     odom_name="diff_drive_controller/odom",
@@ -58,10 +69,18 @@ REMAPPED = BridgeKeys(
 )
 
 
+@pytest.fixture(params=list(TransportKind))
+def transport(request: pytest.FixtureRequest) -> TransportKind:
+    """How the simulated robot shows its graph; the executor finds out by itself."""
+    kind: TransportKind = request.param
+    return kind
+
+
 @pytest.fixture
-def start(router: str, processes: Processes, tmp_path: Path) -> Start:
+def start(router: str, processes: Processes, tmp_path: Path, transport: TransportKind) -> Start:
     def start(sim_args: tuple[str, ...] = (), executor_args: tuple[str, ...] = ()) -> None:
-        start_robot(processes, router, tmp_path / "photos", sim_args, executor_args)
+        sim = ("--transport", transport.value, *sim_args)
+        start_robot(processes, router, tmp_path / "photos", sim, executor_args)
 
     return start
 
@@ -91,7 +110,7 @@ async def moving(harness: ExecutorHarness) -> None:
 
 
 def test_a_remapped_robot_with_stamped_cmd_vel_and_a_compressed_camera(
-    router: str, start: Start, tmp_path: Path
+    router: str, start: Start, transport: TransportKind, tmp_path: Path
 ) -> None:
     start(
         (*NAMES, "--cmd-vel-type", "stamped", "--camera-type", "compressed"),
@@ -119,14 +138,17 @@ def test_a_remapped_robot_with_stamped_cmd_vel_and_a_compressed_camera(
         assert result.status == OrderStatus.SUCCEEDED, result.message
         assert harness.pose().pose.x == pytest.approx(1.5, abs=0.15)
 
-    run_harness(router, body, REMAPPED)
+    run_harness(router, body, REMAPPED, transport)
 
 
-def test_the_camera_is_subscribed_only_while_a_photo_is_taken(router: str, start: Start) -> None:
+def test_the_camera_is_subscribed_only_while_a_photo_is_taken(
+    router: str, start: Start, transport: TransportKind
+) -> None:
     start()
 
     async def body(harness: ExecutorHarness) -> None:
-        camera = harness.bus.session.declare_publisher(BridgeKeys().camera_image)
+        key = robot_key(transport, RobotNames().camera_image, "sensor_msgs/msg/Image")
+        camera = harness.bus.session.declare_publisher(key)
 
         def subscribed() -> bool:
             return bool(getattr(camera.matching_status, "matching", False))
@@ -142,11 +164,11 @@ def test_the_camera_is_subscribed_only_while_a_photo_is_taken(router: str, start
         finally:
             camera.undeclare()
 
-    run_harness(router, body)
+    run_harness(router, body, transport=transport)
 
 
 def test_humble_goals_relative_to_the_robot_stay_where_they_were_asked(
-    router: str, start: Start
+    router: str, start: Start, transport: TransportKind
 ) -> None:
     """Humble's navigator re-transforms a base_link goal at every replan (1 Hz here), so
     sent as it is the goal would run ahead of the robot. The executor finds the distro
@@ -161,10 +183,12 @@ def test_humble_goals_relative_to_the_robot_stay_where_they_were_asked(
         end = harness.pose().pose
         assert end.x - begin.x == pytest.approx(2.0, abs=0.15)
 
-    run_harness(router, body)
+    run_harness(router, body, transport=transport)
 
 
-def test_a_distro_mismatch_fails_navigation_before_any_goal(router: str, start: Start) -> None:
+def test_a_distro_mismatch_fails_navigation_before_any_goal(
+    router: str, start: Start, transport: TransportKind
+) -> None:
     start(("--distro", "humble"), ("--distro", "jazzy"))
 
     async def body(harness: ExecutorHarness) -> None:
@@ -179,7 +203,7 @@ def test_a_distro_mismatch_fails_navigation_before_any_goal(router: str, start: 
         assert harness.pose().pose == begin
         assert harness.pose().linear_x == 0.0
 
-    run_harness(router, body)
+    run_harness(router, body, transport=transport)
 
 
 @pytest.mark.parametrize(
@@ -190,7 +214,7 @@ def test_a_distro_mismatch_fails_navigation_before_any_goal(router: str, start: 
     ],
 )
 def test_a_stop_the_robot_does_not_confirm_is_reported_not_assumed(
-    router: str, start: Start, fault: str, problem: str
+    router: str, start: Start, transport: TransportKind, fault: str, problem: str
 ) -> None:
     start(("--fault", fault))
 
@@ -204,10 +228,12 @@ def test_a_stop_the_robot_does_not_confirm_is_reported_not_assumed(
         assert result.status == OrderStatus.CANCELLED
         assert "navigation" in result.message  # the cancel of its own goal went unconfirmed
 
-    run_harness(router, body)
+    run_harness(router, body, transport=transport)
 
 
-def test_a_cancelled_goal_the_robot_keeps_is_named_in_the_result(router: str, start: Start) -> None:
+def test_a_cancelled_goal_the_robot_keeps_is_named_in_the_result(
+    router: str, start: Start, transport: TransportKind
+) -> None:
     start(("--fault", "cancel-rejected"))
 
     async def body(harness: ExecutorHarness) -> None:
@@ -218,10 +244,12 @@ def test_a_cancelled_goal_the_robot_keeps_is_named_in_the_result(router: str, st
         assert result.status == OrderStatus.CANCELLED
         assert result.message.startswith("cancelled; navigation refused to cancel goal ")
 
-    run_harness(router, body)
+    run_harness(router, body, transport=transport)
 
 
-def test_a_result_lost_once_is_asked_again(router: str, start: Start) -> None:
+def test_a_result_lost_once_is_asked_again(
+    router: str, start: Start, transport: TransportKind
+) -> None:
     start(("--fault", "result-lost-once"))
 
     async def body(harness: ExecutorHarness) -> None:
@@ -229,11 +257,11 @@ def test_a_result_lost_once_is_asked_again(router: str, start: Start) -> None:
         assert result.status == OrderStatus.SUCCEEDED, result.message
         assert harness.pose().pose.x == pytest.approx(1.0, abs=0.15)
 
-    run_harness(router, body)
+    run_harness(router, body, transport=transport)
 
 
 def test_a_result_that_never_comes_cancels_the_goal_before_failing(
-    router: str, start: Start
+    router: str, start: Start, transport: TransportKind
 ) -> None:
     start(("--fault", "result-lost"), ("--result-grace", "2"))
 
@@ -249,7 +277,7 @@ def test_a_result_that_never_comes_cancels_the_goal_before_failing(
         assert all(odom.linear_x == 0.0 for odom in harness.since(failed_at + 0.3))
         assert harness.pose().pose.x < 6.0  # stopped well short of the goal
 
-    run_harness(router, body)
+    run_harness(router, body, transport=transport)
 
 
 @pytest.mark.parametrize(
@@ -260,7 +288,7 @@ def test_a_result_that_never_comes_cancels_the_goal_before_failing(
     ],
 )
 def test_an_aborted_goal_reports_what_the_robot_said(
-    router: str, start: Start, distro: str, message: str
+    router: str, start: Start, transport: TransportKind, distro: str, message: str
 ) -> None:
     start(("--distro", distro, "--fault", "goal-aborts"))
 
@@ -268,7 +296,7 @@ def test_an_aborted_goal_reports_what_the_robot_said(
         result = await harness.finished(await harness.execute(goal("map", 8.0)))
         assert (result.status, result.message) == (OrderStatus.FAILED, message)
 
-    run_harness(router, body)
+    run_harness(router, body, transport=transport)
 
 
 def test_a_namespace_ros_would_refuse_is_refused_with_what_is_allowed() -> None:
@@ -281,17 +309,28 @@ def test_a_namespace_ros_would_refuse_is_refused_with_what_is_allowed() -> None:
 
 
 def test_the_stop_at_start_up_is_in_the_type_the_robot_takes(
-    router: str, processes: Processes, tmp_path: Path
+    router: str, processes: Processes, tmp_path: Path, transport: TransportKind
 ) -> None:
     """A starting executor stops whatever moves the robot; on a TwistStamped robot that
-    stop must be a TwistStamped, so it waits for the bridge to say so first."""
-    processes.start("services.sim", "--connect", router, *NAMES, "--cmd-vel-type", "stamped")
+    stop must be a TwistStamped, so it waits for the robot to say so first."""
+    processes.start(
+        "services.sim",
+        "--connect",
+        router,
+        *NAMES,
+        "--cmd-vel-type",
+        "stamped",
+        "--transport",
+        transport.value,
+    )
+    stamped = "geometry_msgs/msg/TwistStamped"
 
     async def main(bus: Bus) -> None:
         sent: list[bytes] = []
-        bus.subscribe(REMAPPED.cmd_vel, bytes, lambda _key, raw: sent.append(raw))
+        watch = open_transport(bus, transport, "voicectl_test", REMAPPED.namespace)
+        watch.subscribe(REMAPPED.cmd_vel, stamped, bytes, sent.append)
         with Bus.open(BusOptions(connect=[router]), asyncio.get_running_loop()) as probe:
-            await until_heard(probe, REMAPPED.cmd_vel)
+            await until_heard(probe, robot_key(transport, REMAPPED.cmd_vel, stamped))
         processes.start("services.executor", "--connect", router, "--robot", "r1", *NAMES)
         online = RobotKeys("r1").alive("executor")
 

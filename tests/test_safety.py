@@ -14,7 +14,7 @@ from pathlib import Path
 import pytest
 
 from shared.bus import Bus, json_decoder
-from shared.keys import BridgeKeys, RobotKeys
+from shared.keys import RobotKeys, RobotNames
 from shared.messages import (
     Done,
     EmergencyStop,
@@ -53,14 +53,14 @@ class Robot:
         processes: Processes,
         db: Path,
         robot_args: tuple[str, ...] = (),
-        bridge: BridgeKeys | None = None,
+        bridge: RobotNames | None = None,
     ) -> None:
         self.router = router
         self.processes = processes
         self.db = db
         self.robot_args = robot_args
         """Flags that say which robot the sim plays; the executor gets the names only."""
-        self.bridge = bridge or BridgeKeys()
+        self.bridge = bridge or RobotNames()
         self.sim = processes.start("services.sim", "--connect", router, *robot_args)
         self.supervisor: subprocess.Popen[bytes] | None = None
         self.executor: subprocess.Popen[bytes] | None = None
@@ -143,7 +143,7 @@ REMAPPED = (
 @pytest.fixture
 def remapped_robot(router: str, processes: Processes, tmp_path: Path) -> Robot:
     """A robot whose names are all remapped and whose cmd_vel takes TwistStamped."""
-    bridge = BridgeKeys("bot1", cmd_vel_name="base/cmd_vel", odom_name="base/odom")
+    bridge = RobotNames("bot1", cmd_vel_name="base/cmd_vel", odom_name="base/odom")
     return Robot(router, processes, tmp_path / "supervisor.sqlite3", REMAPPED, bridge)
 
 
@@ -204,7 +204,7 @@ def test_stop_stops_the_robot_when_the_executor_is_dead(robot: Robot) -> None:
         await client_wait_ready(client, executor=False)
         # Motion no executor of ours started (another client, or a crashed executor's goal).
         reply = await bus.request_bytes(
-            BridgeKeys().action("navigate_to_pose", "send_goal"),
+            RobotNames().action("navigate_to_pose", "send_goal"),
             CODEC.send_goal_request(new_goal_id(), "map", Pose2D(x=8.0, y=0.0, yaw=0.0)),
             timeout=WAIT,
         )
@@ -277,7 +277,7 @@ def test_a_starting_executor_ends_stray_motion(robot: Robot) -> None:
         # A goal nobody owns any more (as after an executor crash), sent straight to Nav2.
         goal = new_goal_id()
         reply = await bus.request_bytes(
-            BridgeKeys().action("navigate_to_pose", "send_goal"),
+            RobotNames().action("navigate_to_pose", "send_goal"),
             CODEC.send_goal_request(goal, "map", Pose2D(x=8.0, y=0.0, yaw=0.0)),
             timeout=WAIT,
         )

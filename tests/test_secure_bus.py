@@ -20,7 +20,7 @@ import pytest
 
 from shared.bus import Bus, BusOptions, json_decoder
 from shared.errors import BusError
-from shared.keys import BridgeKeys, RobotKeys
+from shared.keys import RobotKeys, RobotNames
 from shared.messages import Execute, ExecutorReply, GetRunning
 from shared.ros2 import Odometry, Ros2Codec
 from voicectl.bus_secrets import ROUTER_TEMPLATE, USERS, SecretsExist, write_bus_secrets
@@ -117,11 +117,11 @@ def test_the_panel_cannot_drive_the_robot_or_reach_the_executor(site: SecureSite
 
     async def body(bus: Bus) -> None:
         odometry: list[Odometry] = []
-        bus.subscribe(BridgeKeys().odom, CODEC.read_odometry, lambda _k, o: odometry.append(o))
+        bus.subscribe(RobotNames().odom, CODEC.read_odometry, lambda _k, o: odometry.append(o))
         client = Client(bus, "r1")
         await client_wait_ready(client)  # asking the supervisor is allowed
         for _ in range(20):
-            bus.publish_bytes(BridgeKeys().cmd_vel, CODEC.twist(0.5, 0.0), urgent=True)
+            bus.publish_bytes(RobotNames().cmd_vel, CODEC.twist(0.5, 0.0), urgent=True)
             await asyncio.sleep(0.05)
         await async_wait_until(lambda: len(odometry) > 30, 10.0, "odometry")
         assert all(o.linear_x == 0.0 for o in odometry)

@@ -14,7 +14,7 @@ import pytest
 import zenoh
 
 from shared.bus import BusOptions
-from shared.keys import BridgeKeys
+from shared.keys import RobotNames
 from shared.ros2 import (
     CANCEL_ALL,
     CancelCode,
@@ -43,7 +43,7 @@ class RobotClient:
         self, session: zenoh.Session, namespace: str, distro: RosDistro = RosDistro.JAZZY
     ) -> None:
         self.session = session
-        self.keys = BridgeKeys(namespace)
+        self.keys = RobotNames(namespace)
         self.codec = Ros2Codec(distro)
         self.odom: list[Odometry] = []
         self.feedback: list[NavigateFeedback] = []

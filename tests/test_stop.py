@@ -11,7 +11,6 @@ import pytest
 
 from shared.bus import Bus, BusOptions
 from shared.client import Unreachable, VoicectlClient
-from shared.halting import RobotStop, prepare, stop_codec
 from shared.messages import (
     EmergencyStop,
     ExecutorInfo,
@@ -21,7 +20,9 @@ from shared.messages import (
     Release,
     StateReply,
 )
-from shared.ros2 import RosDistro
+from shared.robot import TransportKind
+from shared.robot.stop import RobotStop, prepare, stop_codec
+from shared.ros2 import CmdVelType, RosDistro
 
 from .conftest import Processes, async_wait_until
 from .stop_rig import CASES, ROBOT, StopRig, ended, order
@@ -32,11 +33,20 @@ BOUND = 0.25
 p99 on an idle one is in docs/benchmarks.md)."""
 
 
-@pytest.mark.parametrize("case", CASES)
+@pytest.mark.parametrize(
+    ("case", "transport"),
+    [
+        *((case, TransportKind.BRIDGE) for case in CASES),
+        # On rmw_zenoh the robot hears only what carries its attachment, on its keys: the
+        # stops of whoever is left alive, through the same seam.
+        ("executor-killed", TransportKind.RMW_ZENOH),
+        ("supervisor-and-executor-killed", TransportKind.RMW_ZENOH),
+    ],
+)
 def test_stop_stops_the_robot_at_once_and_for_good(
-    case: str, router: str, processes: Processes, tmp_path: Path
+    case: str, transport: TransportKind, router: str, processes: Processes, tmp_path: Path
 ) -> None:
-    rig = StopRig(router, processes, tmp_path / "supervisor.sqlite3")
+    rig = StopRig(router, processes, tmp_path / "supervisor.sqlite3", transport=transport)
 
     async def body(bus: Bus) -> None:
         # The stopwatch listens in a session of its own, as the robot does: one that
@@ -156,22 +166,22 @@ def test_a_stop_for_a_robot_nobody_serves_creates_none(
     on_bus(router, body)
 
 
-def test_the_stop_codec_is_built_when_an_executor_announces_itself_not_at_stop() -> None:
+def test_the_stop_codec_is_built_when_an_executor_announces_itself_not_at_stop(
+    router: str,
+) -> None:
     """Building a distribution's types and encoders took the first STOP of a process
     about 0.1 s before zero velocity went out (bench/e2e.py); now whoever may stop a
     robot prepares it when the executor announces it, off the event loop."""
     stop_codec.cache_clear()
-    info = ExecutorInfo(distro="humble", cmd_vel_type="stamped")
+    info = ExecutorInfo(distro=RosDistro.HUMBLE, cmd_vel_type=CmdVelType.STAMPED)
 
-    async def announced() -> None:
+    async def announced(bus: Bus) -> None:
         await prepare(info)
+        built = stop_codec.cache_info().misses
+        stop = RobotStop.of(info, bus)
+        assert stop_codec.cache_info().misses == built  # nothing built at STOP time
+        assert stop.codec is stop_codec(RosDistro.HUMBLE)
+        stamped = stop.codec.velocity(stop.cmd_vel_type, 0.0, 0.0, 1.0)
+        assert stop.codec.read_twist_stamped(stamped) == (0.0, 0.0)
 
-    asyncio.run(announced())
-    built = stop_codec.cache_info().misses
-    stop = RobotStop.of(info, ROBOT)
-    assert stop_codec.cache_info().misses == built  # nothing built at STOP time
-    assert stop.codec is stop_codec(RosDistro.HUMBLE)
-    assert stop.codec.read_twist_stamped(stop.codec.velocity(stop.cmd_vel_type, 0.0, 0.0, 1.0)) == (
-        0.0,
-        0.0,
-    )
+    on_bus(router, announced)

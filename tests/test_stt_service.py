@@ -18,7 +18,7 @@ import zenoh
 
 from services.stt.audio import frames, read_wav
 from shared.bus import Bus, BusOptions, json_decoder
-from shared.keys import BridgeKeys, ConverterKeys, RobotKeys
+from shared.keys import ConverterKeys, RobotKeys, RobotNames
 from shared.messages import (
     AudioChunk,
     AudioStart,
@@ -309,7 +309,7 @@ def _spoken_to_the_stack(stack: Stack, wav: Path, expected: list[str]) -> Pose2D
     codec = Ros2Codec(RosDistro.JAZZY)
     with zenoh.open(BusOptions(connect=[stack.router]).zenoh_config()) as session:
         subscriber = session.declare_subscriber(
-            BridgeKeys().odom, lambda s: pose.append(codec.read_odometry(s.payload.to_bytes()).pose)
+            RobotNames().odom, lambda s: pose.append(codec.read_odometry(s.payload.to_bytes()).pose)
         )
         wait_until(lambda: pose, 30.0, "odometry")
         subscriber.undeclare()

@@ -16,7 +16,7 @@ import pytest
 from services.executor.runner import SUPERVISOR_LOST
 from shared.bus import Bus, json_decoder
 from shared.errors import BusError
-from shared.keys import BridgeKeys, RobotKeys
+from shared.keys import RobotKeys, RobotNames
 from shared.messages import (
     Accepted,
     Cancel,
@@ -380,7 +380,7 @@ def test_emergency_stop_halts_a_moving_robot_at_once(site: Site) -> None:
         odometry: list[tuple[float, Odometry]] = []
         loop = asyncio.get_running_loop()
         bus.subscribe(
-            BridgeKeys().odom,
+            RobotNames().odom,
             codec.read_odometry,
             lambda _key, odom: odometry.append((loop.time(), odom)),
         )

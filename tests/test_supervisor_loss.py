@@ -16,7 +16,7 @@ import pytest
 from services.executor.robot import UNSUPERVISED
 from services.executor.runner import SUPERVISOR_LOST
 from shared.bus import Bus
-from shared.keys import BridgeKeys, RobotKeys
+from shared.keys import RobotKeys, RobotNames
 from shared.messages import Done, Order, OrderStatus, Resume, TargetPose
 from shared.ros2 import Odometry, Pose2D, Ros2Codec
 
@@ -78,7 +78,7 @@ class Robot:
         async def main(bus: Bus) -> None:
             loop = asyncio.get_running_loop()
             bus.subscribe(
-                BridgeKeys().odom,
+                RobotNames().odom,
                 Ros2Codec().read_odometry,
                 lambda _key, odom: self.odometry.append((loop.time(), odom)),
             )

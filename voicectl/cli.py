@@ -17,7 +17,7 @@ from shared.bus import DEFAULT_ROUTER, Bus
 from shared.client import Refused, VoicectlClient
 from shared.config import data_dir, default_token_file, load_or_create_token
 from shared.errors import BusError, OrdersFileError
-from shared.keys import BridgeKeys, ConverterKeys, RobotKeys
+from shared.keys import ConverterKeys, RobotKeys, RobotNames
 from shared.messages import (
     Cancel,
     CancelAll,
@@ -30,6 +30,7 @@ from shared.messages import (
     StateReply,
 )
 from shared.process import add_bus_arguments, bus_options, robot_name
+from shared.robot.kinds import TransportKind
 
 from .health import add_health_arguments, check
 from .stack import Child, Panel, port_in_use, run_stack
@@ -65,6 +66,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="orders file or directory (default: every shipped file in orders/)",
     )
     up.add_argument("--time-scale", type=float, default=1.0, help="simulator speed-up")
+    up.add_argument(
+        "--transport",
+        choices=list(TransportKind),
+        default=TransportKind.BRIDGE.value,
+        help="how the simulated robot shows its ROS 2 graph: as zenoh-bridge-ros2dds does "
+        "('bridge', the default) or as nodes on rmw_zenoh ('rmw-zenoh')",
+    )
     up.add_argument("--no-web", action="store_true", help="do not start the panel")
     up.add_argument("--no-stt", action="store_true", help="do not start speech recognition")
     add_tls_arguments(up)
@@ -259,16 +267,17 @@ def _up(args: argparse.Namespace) -> int:
         return 2
     connect = ["--connect", args.router]
     robot = ["--robot", args.robot]
+    transport = ["--transport", args.transport]
     children = [
         Child("router", ["services.router", "--listen", args.router]),
         # The robot before the services that drive it, so that it stops after them: on
         # Ctrl-C the executor cancels a running order while the robot still listens.
-        Child("sim", ["services.sim", "--time-scale", str(args.time_scale), *connect]),
+        Child("sim", ["services.sim", "--time-scale", str(args.time_scale), *transport, *connect]),
         Child("converter", ["services.converter", "--orders", str(args.orders), *connect]),
         Child("supervisor", ["services.supervisor", *robot, *connect]),
         Child(
             "executor",
-            ["services.executor", *robot, *connect]
+            ["services.executor", *robot, *transport, *connect]
             + [arg for spec in args.executor for arg in ("--executor", spec)]
             + [arg for path in args.executors for arg in ("--executors", path)],
         ),
@@ -300,7 +309,7 @@ def _up(args: argparse.Namespace) -> int:
         ConverterKeys().alive,
         keys.alive("supervisor"),
         keys.alive("executor"),
-        BridgeKeys().simulator,
+        RobotNames().simulator,
     ] + ([] if args.no_stt else [keys.alive("stt")])
     return run_stack(children, web, args.router, ready)
 

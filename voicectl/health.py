@@ -20,7 +20,7 @@ import zenoh
 
 from shared.bus import Bus
 from shared.errors import BusError
-from shared.keys import BridgeKeys, ConverterKeys, RobotKeys, check_ros_name
+from shared.keys import ConverterKeys, RobotKeys, RobotNames, check_ros_name
 from shared.process import add_bus_arguments, bus_options, robot_name
 
 SERVICES = ("router", "converter", "stt", "supervisor", "executor", "sim", "web")
@@ -82,7 +82,7 @@ def token_key(service: str, robot: str, namespace: str = "") -> str | None:
         case "converter":
             return ConverterKeys().alive
         case "sim":
-            return BridgeKeys(namespace).simulator
+            return RobotNames(namespace).simulator
         case _:
             return RobotKeys(robot).alive(service)
 

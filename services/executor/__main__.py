@@ -13,14 +13,20 @@ from shared.bus import Bus
 from shared.config import data_dir
 from shared.keys import RobotKeys
 from shared.process import add_bus_arguments, bus_options, robot_name, setup_logging, wait_for_stop
+from shared.robot import TransportKind, detect_transport, open_transport
 from shared.robot_options import add_robot_arguments, robot_options
 
 from .builtin import builtin_executors
 from .framework import BindingError, Bindings, load_binding, load_bindings_file
-from .robot import RESULT_GRACE, RobotLink
+from .robot import RESULT_GRACE, PoseRelay, RobotLink
 from .runner import STALL_LIMIT, ExecutorService
 
 _LOGGER = logging.getLogger(__name__)
+
+NODE = "voicectl_executor"
+"""The ROS node the executor appears as on the robot, where nodes are seen (rmw_zenoh)."""
+DETECT_WAIT = 3.0
+"""Seconds `--transport auto` waits for the robot's graph to announce itself."""
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -92,15 +98,21 @@ def load_bindings(args: argparse.Namespace) -> Bindings:
     return bindings
 
 
-def executor_service(bus: Bus, args: argparse.Namespace, bindings: Bindings) -> ExecutorService:
-    """The executor `args` describe, on `bus`, not started (bench/robots.py hosts several)."""
+def executor_service(
+    bus: Bus, args: argparse.Namespace, bindings: Bindings, transport: TransportKind
+) -> ExecutorService:
+    """The executor `args` describe, on `bus`, reaching its robot by `transport`, not
+    started (bench/robots.py hosts several)."""
+    options = robot_options(args)
     robot = RobotLink(
-        bus,
-        robot_options(args),
-        RobotKeys(args.robot).pose,
+        open_transport(
+            bus, transport, NODE, options.names.namespace, options.domain_id, options.distro
+        ),
+        options,
         on_change=lambda: service.publish_info(),
         result_grace=args.result_grace,
     )
+    PoseRelay(bus, RobotKeys(args.robot).pose, robot)
     service = ExecutorService(
         bus,
         RobotKeys(args.robot),
@@ -122,7 +134,20 @@ async def main(argv: list[str] | None = None) -> int:
         return 2
     loop = asyncio.get_running_loop()
     with Bus.open(bus_options(args), loop) as bus:
-        service = executor_service(bus, args, bindings)
+        options = robot_options(args)
+        transport = options.transport
+        if transport is None:
+            transport = await detect_transport(bus, options.names, options.domain_id, DETECT_WAIT)
+            if transport is None:
+                transport = TransportKind.BRIDGE
+                _LOGGER.warning(
+                    "the robot announced nothing in %g s; reaching it through the bridge "
+                    "(see --transport)",
+                    DETECT_WAIT,
+                )
+            else:
+                _LOGGER.info("the robot's graph speaks %s", transport)
+        service = executor_service(bus, args, bindings, transport)
         service.start()
         labels = ", ".join(service.labels)
         _LOGGER.info("executor ready for %s; labels: %s", args.robot, labels)

@@ -1,10 +1,11 @@
-"""The robot as executors see it: ROS 2 through zenoh-bridge-ros2dds' keys, CDR payloads.
+"""The robot as executors see it: ROS 2 through the robot's transport, CDR payloads.
 
 `RobotLink` is the one connection of the process: it follows odometry, learns what the
-robot's topics take from the bridge's liveliness tokens, learns the ROS distribution from
-a get_result reply, and does the navigation and stop work. Each order gets an
-`OrderRobot`, a handle onto the link that is revoked when the order ends, so that an
-executor that outlives its order can never move the robot again.
+robot's topics take from what the robot's graph announces, learns the ROS distribution
+from a get_result reply, and does the navigation and stop work, through zenoh-bridge-ros2dds
+or rmw_zenoh alike (shared/robot/). Each order gets an `OrderRobot`, a handle onto the
+link that is revoked when the order ends, so that an executor that outlives its order can
+never move the robot again. `PoseRelay` publishes the pose for voicectl's own panels.
 """
 
 from __future__ import annotations
@@ -18,11 +19,15 @@ from collections.abc import Callable
 from shared.bus import Bus
 from shared.errors import BusError, OrderFailed
 from shared.geometry import compose
-from shared.halting import RobotStop
-from shared.keys import BRIDGE_TOKENS, BridgeKeys, BridgeKind, BridgeToken
+from shared.keys import RobotNames
 from shared.messages import RobotPose, TargetPose
+from shared.robot import Interface, RobotTransport, Role
+from shared.robot.stop import RobotStop
 from shared.robot_options import RobotOptions
 from shared.ros2 import (
+    NAVIGATE_FEEDBACK,
+    NAVIGATE_GET_RESULT,
+    NAVIGATE_SEND_GOAL,
     NAVIGATION_ERRORS,
     CameraType,
     CdrError,
@@ -53,6 +58,7 @@ RESULT_RETRY = 0.5
 PROBE_TIMEOUT = 3.0
 ROBOT_FRAME = "base_link"
 ODOM_FRAME = "odom"
+ODOMETRY = "nav_msgs/msg/Odometry"
 
 
 class RobotRevoked(OrderFailed):
@@ -64,21 +70,18 @@ class RobotLink:
 
     def __init__(
         self,
-        bus: Bus,
+        transport: RobotTransport,
         options: RobotOptions,
-        pose_key: str | None = None,
         on_change: Callable[[], None] = lambda: None,
         result_grace: float = RESULT_GRACE,
     ) -> None:
-        self.bus = bus
+        self.transport = transport
         self._result_grace = result_grace
         self.options = options
-        self.keys = options.keys
-        self._pose_key = pose_key
-        """Where to publish the pose for panels (`voice/<robot>/robot/pose`), if anywhere."""
+        self.names = options.names
         self._on_change = on_change
         """Called when what is known about the robot changes (a detected type)."""
-        self._pose_sent = 0.0
+        self._pose_listeners: list[Callable[[Pose2D], None]] = []
         self.pose: Pose2D | None = None
         """Latest pose from odometry, None until the first message."""
         self._odometry = asyncio.Event()
@@ -90,11 +93,11 @@ class RobotLink:
         self._distro_checked = False
         self._probing: asyncio.Task[None] | None = None
         self.navigation_seen = False
-        """Whether the robot's NavigateToPose server has shown itself (token or reply)."""
-        self.bridge_cmd_vel: CmdVelType | None = None
-        """What the bridge says the robot's cmd_vel subscribers take."""
+        """Whether the robot's NavigateToPose server has shown itself (announced or answered)."""
+        self.announced_cmd_vel: CmdVelType | None = None
+        """What the robot's graph says its cmd_vel subscribers take."""
         self._cmd_vel_learnt = asyncio.Event()
-        self.bridge_camera: CameraType | None = None
+        self.announced_camera: CameraType | None = None
         self._warned_cmd_vel = False
         self.latched = False
         """The emergency stop is on: no order may command the robot. Set from whatever
@@ -109,65 +112,71 @@ class RobotLink:
 
     @property
     def cmd_vel_type(self) -> CmdVelType:
-        """As configured, else as the bridge announced it, else plain Twist."""
-        return self.options.cmd_vel_type or self.bridge_cmd_vel or CmdVelType.TWIST
+        """As configured, else as the robot announced it, else plain Twist."""
+        return self.options.cmd_vel_type or self.announced_cmd_vel or CmdVelType.TWIST
 
     @property
     def camera_type(self) -> CameraType:
         if self.options.camera_type is not None:
             return self.options.camera_type
-        if self.bridge_camera is not None:
-            return self.bridge_camera
-        compressed = self.keys.camera_name.endswith("/compressed")
+        if self.announced_camera is not None:
+            return self.announced_camera
+        compressed = self.names.camera_name.endswith("/compressed")
         return CameraType.COMPRESSED if compressed else CameraType.RAW
 
     async def cmd_vel_type_known(self, timeout: float) -> bool:
         """Wait, at most `timeout` seconds, until the type cmd_vel takes is configured or
-        announced by the bridge: a stop in the wrong type is one the robot cannot read."""
+        announced by the robot: a stop in the wrong type is one the robot cannot read."""
         if self.options.cmd_vel_type is None:
             with contextlib.suppress(TimeoutError):
                 await asyncio.wait_for(self._cmd_vel_learnt.wait(), timeout)
-        return self.options.cmd_vel_type is not None or self.bridge_cmd_vel is not None
+        return self.options.cmd_vel_type is not None or self.announced_cmd_vel is not None
+
+    def on_pose(self, listener: Callable[[Pose2D], None]) -> None:
+        """Call `listener(pose)` on the loop for every odometry pose."""
+        self._pose_listeners.append(listener)
 
     def start(self) -> None:
         codec = self.codec
-        self.bus.subscribe(self.keys.odom, codec.read_odometry, self._on_odom)
-        self.bus.subscribe(self.keys.navigate("feedback"), codec.read_feedback, self._on_feedback)
-        self.bus.watch(BRIDGE_TOKENS, self._on_bridge_token)
+        names = self.names
+        self.transport.subscribe(names.odom, ODOMETRY, codec.read_odometry, self._on_odom)
+        self.transport.subscribe(
+            names.navigate("feedback"), NAVIGATE_FEEDBACK, codec.read_feedback, self._on_feedback
+        )
+        self.transport.discover(self._on_interface)
         self._probe_soon()
 
-    def _on_bridge_token(self, token_key: str, alive: bool) -> None:
-        token = BridgeToken.parse(token_key)
-        if token is None or not alive:
+    def _on_interface(self, interface: Interface, present: bool) -> None:
+        if not present:
             return
-        keys = self.keys
-        match token.kind:
-            case BridgeKind.SUBSCRIBER if token.key == keys.cmd_vel:
-                self._learn_cmd_vel(token.ros_type)
-            case BridgeKind.PUBLISHER if token.key == keys.camera_image:
-                self.bridge_camera = CameraType.of(token.ros_type)
-            case BridgeKind.ACTION_SERVER if token.key == keys.topic(keys.navigate_name):
+        names = self.names
+        match interface.role:
+            case Role.SUBSCRIBER if interface.name == names.cmd_vel:
+                self._learn_cmd_vel(interface.ros_type)
+            case Role.PUBLISHER if interface.name == names.camera_image:
+                self.announced_camera = CameraType.of(interface.ros_type)
+            case Role.ACTION_SERVER if interface.name == names.topic(names.navigate_name):
                 self.navigation_seen = True
                 self._probe_soon()
 
     def _learn_cmd_vel(self, ros_type: str) -> None:
         found = CmdVelType.of(ros_type)
         if found is None:
-            _LOGGER.error("'%s' takes %s, which voicectl cannot send", self.keys.cmd_vel, ros_type)
+            _LOGGER.error("'%s' takes %s, which voicectl cannot send", self.names.cmd_vel, ros_type)
             return
         configured = self.options.cmd_vel_type
         if configured is not None and configured is not found:
             _LOGGER.error(
-                "'%s' takes %s, says the bridge, but --cmd-vel-type is %s: the robot will "
+                "'%s' takes %s, says the robot, but --cmd-vel-type is %s: the robot will "
                 "not understand its velocity commands",
-                self.keys.cmd_vel,
+                self.names.cmd_vel,
                 ros_type,
                 configured,
             )
         self._cmd_vel_learnt.set()
-        if found is not self.bridge_cmd_vel:
-            self.bridge_cmd_vel = found
-            _LOGGER.info("'%s' takes %s (from the bridge)", self.keys.cmd_vel, ros_type)
+        if found is not self.announced_cmd_vel:
+            self.announced_cmd_vel = found
+            _LOGGER.info("'%s' takes %s (announced by the robot)", self.names.cmd_vel, ros_type)
             self._on_change()
 
     # --- the distribution -----------------------------------------------------------------
@@ -180,10 +189,12 @@ class RobotLink:
     async def _probe_distro(self) -> None:
         """Ask get_result about a goal that does not exist: an action server answers at
         once, in its distribution's layout, and nothing moves."""
-        key = self.keys.navigate("get_result")
         try:
-            reply = await self.bus.request_bytes(
-                key, self.codec.get_result_request(new_goal_id()), PROBE_TIMEOUT
+            reply = await self.transport.call(
+                self.names.navigate("get_result"),
+                NAVIGATE_GET_RESULT,
+                self.codec.get_result_request(new_goal_id()),
+                PROBE_TIMEOUT,
             )
         except BusError as exc:
             _LOGGER.debug("no answer to the distribution probe: %s", exc)
@@ -222,21 +233,18 @@ class RobotLink:
         if self.distro is None:
             raise OrderFailed(
                 f"cannot tell the robot's ROS distribution: nothing answered on "
-                f"'{self.keys.navigate('get_result')}' (is Nav2 up, and the bridge routing "
-                "its NavigateToPose?); or start the executor with --distro"
+                f"'{self.names.navigate('get_result')}' (is Nav2 up, and reachable on the "
+                f"{self.transport.kind} transport?); or start the executor with --distro"
             )
         return self.distro
 
     # --- topics ---------------------------------------------------------------------------
 
-    def _on_odom(self, _key: str, odometry: Odometry) -> None:
+    def _on_odom(self, odometry: Odometry) -> None:
         self.pose = odometry.pose
         self._odometry.set()
-        now = asyncio.get_running_loop().time()
-        if self._pose_key is not None and now - self._pose_sent >= POSE_EVERY:
-            self._pose_sent = now
-            pose = RobotPose(x=self.pose.x, y=self.pose.y, yaw=self.pose.yaw)
-            self.bus.publish(self._pose_key, pose, superseded=True)
+        for listener in self._pose_listeners:
+            listener(odometry.pose)
 
     async def next_pose(self, timeout: float = 5.0) -> Pose2D:
         """The next odometry pose (fresher than any seen so far)."""
@@ -244,7 +252,7 @@ class RobotLink:
         try:
             await asyncio.wait_for(self._odometry.wait(), timeout)
         except TimeoutError:
-            raise OrderFailed(f"no odometry on '{self.keys.odom}' for {timeout:g} s") from None
+            raise OrderFailed(f"no odometry on '{self.names.odom}' for {timeout:g} s") from None
         assert self.pose is not None
         return self.pose
 
@@ -253,7 +261,7 @@ class RobotLink:
         streams a topic across the network whenever someone subscribes to it."""
         frame: asyncio.Future[Image | CompressedImage] = asyncio.get_running_loop().create_future()
 
-        def on_frame(_key: str, image: Image | CompressedImage) -> None:
+        def on_frame(image: Image | CompressedImage) -> None:
             if not frame.done():
                 frame.set_result(image)
 
@@ -263,18 +271,17 @@ class RobotLink:
             if self.camera_type is CameraType.COMPRESSED
             else codec.read_image
         )
-        unsubscribe = self.bus.subscribe(self.keys.camera_image, decode, on_frame)
+        kind = self.camera_type.ros_type
+        name = self.names.camera_image
+        unsubscribe = self.transport.subscribe(name, kind, decode, on_frame)
         try:
             return await asyncio.wait_for(frame, timeout)
         except TimeoutError:
-            key = self.keys.camera_image
-            raise OrderFailed(
-                f"no {self.camera_type.ros_type} on '{key}' for {timeout:g} s"
-            ) from None
+            raise OrderFailed(f"no {kind} on '{name}' for {timeout:g} s") from None
         finally:
             unsubscribe()
 
-    def _on_feedback(self, _key: str, feedback: NavigateFeedback) -> None:
+    def _on_feedback(self, feedback: NavigateFeedback) -> None:
         listener = self._feedback.get(feedback.goal_id)
         if listener is not None:
             listener(feedback.pose, feedback.distance_remaining)
@@ -283,25 +290,25 @@ class RobotLink:
         """Publish one velocity command on cmd_vel, in the type the robot takes. A zero
         one is a stop: it waits for room rather than being dropped, and goes first."""
         kind = self.cmd_vel_type
-        if kind is CmdVelType.TWIST and self.bridge_cmd_vel is None and not self._warned_cmd_vel:
+        if kind is CmdVelType.TWIST and self.announced_cmd_vel is None and not self._warned_cmd_vel:
             self._warned_cmd_vel = self.options.cmd_vel_type is None
             if self._warned_cmd_vel:
                 _LOGGER.warning(
-                    "the bridge has not announced '%s'; sending Twist (see --cmd-vel-type)",
-                    self.keys.cmd_vel,
+                    "the robot has not announced '%s'; sending Twist (see --cmd-vel-type)",
+                    self.names.cmd_vel,
                 )
         stop = linear_x == 0.0 and angular_z == 0.0
         payload = self.codec.velocity(kind, linear_x, angular_z, time.time())
-        self.bus.publish_bytes(self.keys.cmd_vel, payload, urgent=stop)
+        self.transport.publish(self.names.cmd_vel, kind.ros_type, payload, urgent=stop)
 
     @property
     def stopper(self) -> RobotStop:
         """How to stop this robot, as far as it is known now."""
-        return RobotStop(self.keys, self.codec, self.cmd_vel_type)
+        return RobotStop(self.transport, self.names, self.codec, self.cmd_vel_type)
 
     def stop_moving(self) -> str:
         """Zero velocity, at once; callable from any thread."""
-        return self.stopper.zero_velocity(self.bus)
+        return self.stopper.zero_velocity()
 
     # --- stopping -------------------------------------------------------------------------
 
@@ -314,7 +321,7 @@ class RobotLink:
     async def cancel_goals(self, goal_id: bytes | None = None) -> str | None:
         """Cancel one navigation goal (or all); None when navigation confirmed it or had
         nothing to cancel, else what went wrong, logged, with zero velocity sent again."""
-        cancelled = await self.stopper.cancel_goals(self.bus, goal_id)
+        cancelled = await self.stopper.cancel_goals(goal_id)
         self.navigation_seen |= cancelled.answered
         if cancelled.confirmed:
             return None
@@ -346,10 +353,11 @@ class RobotLink:
             pose, frame = compose(await self.next_pose(), pose), ODOM_FRAME
         goal_id = new_goal_id()
         try:
-            reply = await self.bus.request_bytes(
-                self.keys.navigate("send_goal"),
+            reply = await self.transport.call(
+                self.names.navigate("send_goal"),
+                NAVIGATE_SEND_GOAL,
                 codec.send_goal_request(goal_id, frame, pose),
-                timeout=SEND_GOAL_TIMEOUT,
+                SEND_GOAL_TIMEOUT,
             )
         except BusError as exc:
             raise OrderFailed(f"navigation unavailable: {exc}") from exc
@@ -377,10 +385,11 @@ class RobotLink:
         failing_since: float | None = None
         while True:
             try:
-                raw = await self.bus.request_bytes(
-                    self.keys.navigate("get_result"),
+                raw = await self.transport.call(
+                    self.names.navigate("get_result"),
+                    NAVIGATE_GET_RESULT,
                     codec.get_result_request(goal_id),
-                    timeout=RESULT_TIMEOUT,
+                    RESULT_TIMEOUT,
                 )
                 return codec.read_get_result_response(raw)
             except (BusError, CdrError) as exc:
@@ -466,8 +475,9 @@ class OrderRobot:
         return self._link.pose
 
     @property
-    def keys(self) -> BridgeKeys:
-        return self._link.keys
+    def names(self) -> RobotNames:
+        """The robot's ROS names; `names.topic("name")` is a name under its namespace."""
+        return self._link.names
 
     @property
     def codec(self) -> Ros2Codec:
@@ -492,11 +502,30 @@ class OrderRobot:
     ) -> None:
         await self._command().navigate(target, on_feedback, self.problems.append)
 
-    def publish(self, key: str, payload: bytes) -> None:
-        """Publish CDR bytes on any other key of the robot (`keys.topic(name)`): any
-        topic may move it."""
-        self._command().bus.publish_bytes(key, payload)
+    def publish(self, name: str, ros_type: str, payload: bytes) -> None:
+        """Publish CDR bytes on any other topic of the robot (`names.topic("name")`, of
+        ROS type `ros_type`): any topic may move it."""
+        self._command().transport.publish(name, ros_type, payload)
 
-    async def request(self, key: str, payload: bytes, timeout: float) -> bytes:
+    async def call(self, name: str, service_type: str, request: bytes, timeout: float) -> bytes:
         """Call any other service of the robot with CDR bytes; its reply's bytes."""
-        return await self._command().bus.request_bytes(key, payload, timeout)
+        return await self._command().transport.call(name, service_type, request, timeout)
+
+
+class PoseRelay:
+    """The robot's pose for voicectl's panels (`voice/<robot>/robot/pose`), from the
+    link's odometry, at most every `POSE_EVERY` seconds: the panel's, not the robot's."""
+
+    def __init__(self, bus: Bus, key: str, link: RobotLink) -> None:
+        self._bus = bus
+        self._key = key
+        self._sent = -POSE_EVERY
+        link.on_pose(self._on_pose)
+
+    def _on_pose(self, pose: Pose2D) -> None:
+        now = asyncio.get_running_loop().time()
+        if now - self._sent >= POSE_EVERY:
+            self._sent = now
+            self._bus.publish(
+                self._key, RobotPose(x=pose.x, y=pose.y, yaw=pose.yaw), superseded=True
+            )

@@ -47,7 +47,7 @@ from .watchdog import LoopWatchdog
 _LOGGER = logging.getLogger(__name__)
 RECENT_RESULTS = 32
 CMD_VEL_TYPE_WAIT = 2.0
-"""Seconds the start-up stop waits for the bridge to say what cmd_vel takes."""
+"""Seconds the start-up stop waits for the robot to say what cmd_vel takes."""
 STALL_LIMIT = 0.5
 """Seconds the event loop may stall before an order commanding the robot is halted."""
 SUPERVISOR_LOST = "supervisor lost: robot stopped (no one could STOP it)"
@@ -130,11 +130,13 @@ class ExecutorService:
         again when something about the robot is learnt (the type its cmd_vel takes)."""
         robot = self._robot
         info = ExecutorInfo(
-            namespace=robot.keys.namespace,
+            transport=robot.transport.kind,
+            domain_id=robot.options.domain_id,
+            namespace=robot.names.namespace,
             distro=robot.codec.distro,
-            cmd_vel=robot.keys.cmd_vel_name,
+            cmd_vel=robot.names.cmd_vel_name,
             cmd_vel_type=robot.cmd_vel_type,
-            navigate=robot.keys.navigate_name,
+            navigate=robot.names.navigate_name,
         )
         if self._info is not None:
             self._info.publish(info)
@@ -146,9 +148,9 @@ class ExecutorService:
         halt's cancel."""
         if not await self._robot.cmd_vel_type_known(CMD_VEL_TYPE_WAIT):
             _LOGGER.warning(
-                "after %g s the bridge has still not said what '%s' takes; stopping with Twist",
+                "after %g s the robot has still not said what '%s' takes; stopping with Twist",
                 CMD_VEL_TYPE_WAIT,
-                self._robot.keys.cmd_vel,
+                self._robot.names.cmd_vel,
             )
         problem = await self._robot.halt()
         if problem is None:
@@ -245,8 +247,8 @@ class ExecutorService:
             return
         running.robot.revoke()
         stopper = self._robot.stopper
-        stopper.zero_velocity(self._bus)
-        stopper.cancel_goals_now(self._bus)
+        stopper.zero_velocity()
+        stopper.cancel_goals_now()
         running.cancel_status = OrderStatus.FAILED
         running.cancel_reason = (
             f"the executor's event loop stalled (blocking code in execute?): robot halted "

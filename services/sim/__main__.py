@@ -10,6 +10,7 @@ import sys
 
 from shared.bus import Bus
 from shared.process import add_bus_arguments, bus_options, setup_logging, wait_for_stop
+from shared.robot import TransportKind, open_transport
 from shared.robot_options import add_robot_arguments, robot_options
 from shared.ros2 import CameraType, CmdVelType, Ros2Codec, RosDistro
 
@@ -17,6 +18,9 @@ from .node import SimConfig, SimFault, SimNode
 from .robot import Bounds, Limits
 
 _LOGGER = logging.getLogger(__name__)
+
+NODE = "voicectl_sim"
+"""The ROS node the simulated robot appears as, where nodes are seen (rmw_zenoh)."""
 
 
 def _bounds(text: str) -> Bounds:
@@ -84,7 +88,7 @@ def sim_node(bus: Bus, args: argparse.Namespace) -> SimNode:
     """The simulated robot `args` describe, on `bus` (bench/robots.py hosts several)."""
     robot = robot_options(args)
     config = SimConfig(
-        keys=robot.keys,
+        names=robot.names,
         cmd_vel_type=robot.cmd_vel_type or CmdVelType.TWIST,
         camera_type=robot.camera_type or CameraType.RAW,
         faults=frozenset(args.fault),
@@ -92,9 +96,12 @@ def sim_node(bus: Bus, args: argparse.Namespace) -> SimNode:
         bounds=args.bounds,
         limits=Limits(max_linear=args.max_linear, max_angular=args.max_angular),
     )
-    node = SimNode(bus, Ros2Codec(robot.distro or RosDistro.JAZZY), config)
+    distro = robot.distro or RosDistro.JAZZY
+    kind = robot.transport or TransportKind.BRIDGE
+    transport = open_transport(bus, kind, NODE, robot.names.namespace, robot.domain_id, distro)
+    node = SimNode(transport, Ros2Codec(distro), config)
     node.declare()
-    bus.announce(robot.keys.simulator)
+    bus.announce(robot.names.simulator)
     return node
 
 

@@ -1,14 +1,16 @@
-"""The simulated robot as zenoh-bridge-ros2dds exposes a real one: topics and Nav2's action.
+"""The simulated robot as a real one shows itself over Zenoh: topics and Nav2's action.
 
-Keys and payloads are exactly the bridge's (`BridgeKeys`, CDR from `Ros2Codec`), so code that
-drives this node drives a real robot behind the real bridge unchanged:
+It speaks through the same transports as the executor (shared/robot/): as zenoh-bridge-
+ros2dds exposes a robot, or as a robot whose nodes run on rmw_zenoh, with the same CDR
+(`Ros2Codec`), so code that drives this node drives a real robot unchanged:
 
 - ``cmd_vel`` (geometry_msgs/Twist, or TwistStamped) in; ``odom`` (nav_msgs/Odometry) out
   at 20 Hz; ``camera/image_raw`` (sensor_msgs/Image, 64x48 rgb8, or a JPEG
   CompressedImage) out at 2 Hz; every name can be remapped;
 - ``navigate_to_pose/_action/{send_goal,get_result,cancel_goal}`` queryables and
   ``.../{feedback,status}`` publications, behaving like Nav2's bt_navigator;
-- a liveliness token per interface, in the bridge's format, naming its ROS type.
+- a liveliness token per interface, as the bridge or rmw_zenoh announces it, naming its
+  ROS type.
 
 Decisions, where Nav2 leaves a choice:
 
@@ -48,11 +50,16 @@ from dataclasses import dataclass, field
 import numpy as np
 from PIL import Image as PilImage
 
-from shared.bus import Bus
 from shared.geometry import compose
-from shared.keys import BridgeKeys, BridgeKind, BridgeToken
+from shared.keys import RobotNames
+from shared.robot import Interface, RobotTransport, Role
 from shared.ros2 import (
     CANCEL_ALL,
+    CANCEL_GOAL,
+    NAVIGATE_FEEDBACK,
+    NAVIGATE_GET_RESULT,
+    NAVIGATE_SEND_GOAL,
+    NAVIGATE_TO_POSE,
     CameraType,
     CancelCode,
     CmdVelType,
@@ -83,6 +90,9 @@ ABORT_AFTER_S = 1.0
 """Sim seconds a goal runs before `SimFault.GOAL_ABORTS` aborts it."""
 ABORT_CODE = 105
 """What an aborted goal's result says on Jazzy: FollowPath's FAILED_TO_MAKE_PROGRESS."""
+ODOMETRY = "nav_msgs/msg/Odometry"
+TF = "tf2_msgs/msg/TFMessage"
+STATUS = "action_msgs/msg/GoalStatusArray"
 
 
 class SimFault(enum.StrEnum):
@@ -102,7 +112,7 @@ class SimFault(enum.StrEnum):
 
 @dataclass(frozen=True)
 class SimConfig:
-    keys: BridgeKeys = field(default_factory=BridgeKeys)
+    names: RobotNames = field(default_factory=RobotNames)
     """The robot's namespace and the names of its topics and action."""
     cmd_vel_type: CmdVelType = CmdVelType.TWIST
     camera_type: CameraType = CameraType.RAW
@@ -141,15 +151,15 @@ class SimNode:
 
     def __init__(
         self,
-        bus: Bus,
+        transport: RobotTransport,
         codec: Ros2Codec,
         config: SimConfig,
         clock: Callable[[], float] = time.monotonic,
     ) -> None:
-        self._bus = bus
+        self._transport = transport
         self._codec = codec
         self._config = config
-        self._keys = config.keys
+        self._names = config.names
         self._clock = clock
         self._epoch = clock()
         self._robot = Robot(config.limits)
@@ -164,31 +174,31 @@ class SimNode:
 
     def declare(self) -> None:
         """Subscribe, serve and announce; call before `run()` so that odom means 'ready'."""
-        keys = self._keys
+        names = self._names
         kind = self._config.cmd_vel_type
-        self._bus.subscribe(
-            keys.cmd_vel, lambda raw: self._codec.read_velocity(kind, raw), self._on_cmd_vel
+        transport = self._transport
+        transport.subscribe(
+            names.cmd_vel,
+            kind.ros_type,
+            lambda raw: self._codec.read_velocity(kind, raw),
+            self._on_cmd_vel,
         )
-        self._bus.serve_bytes(keys.navigate("send_goal"), self._on_send_goal)
-        self._bus.serve_bytes(keys.navigate("get_result"), self._on_get_result)
-        self._bus.serve_bytes(keys.navigate("cancel_goal"), self._on_cancel_goal)
-        zid = str(self._bus.session.zid())
-        for token in (
-            BridgeToken(BridgeKind.SUBSCRIBER, keys.cmd_vel, kind.ros_type),
-            BridgeToken(BridgeKind.PUBLISHER, keys.odom, "nav_msgs/msg/Odometry"),
-            BridgeToken(BridgeKind.PUBLISHER, keys.tf, "tf2_msgs/msg/TFMessage"),
-            BridgeToken(BridgeKind.PUBLISHER, keys.camera_image, self._config.camera_type.ros_type),
-            BridgeToken(
-                BridgeKind.ACTION_SERVER,
-                keys.topic(keys.navigate_name),
-                "nav2_msgs/action/NavigateToPose",
-            ),
+        transport.serve(names.navigate("send_goal"), NAVIGATE_SEND_GOAL, self._on_send_goal)
+        transport.serve(names.navigate("get_result"), NAVIGATE_GET_RESULT, self._on_get_result)
+        transport.serve(names.navigate("cancel_goal"), CANCEL_GOAL, self._on_cancel_goal)
+        for interface in (
+            Interface(Role.SUBSCRIBER, names.cmd_vel, kind.ros_type),
+            Interface(Role.PUBLISHER, names.odom, ODOMETRY),
+            Interface(Role.PUBLISHER, names.tf, TF),
+            Interface(Role.PUBLISHER, names.camera_image, self._config.camera_type.ros_type),
+            Interface(Role.ACTION_SERVER, names.topic(names.navigate_name), NAVIGATE_TO_POSE),
         ):
-            self._bus.announce(token.token_key(zid))
+            transport.offer(interface)
         faults = ", ".join(sorted(self._config.faults)) or "none"
         _LOGGER.info(
-            "simulated robot on '%s' (%s, cmd_vel %s, camera %s), time x%g; faults: %s",
-            keys.namespace or "/",
+            "simulated robot on '%s' over %s (%s, cmd_vel %s, camera %s), time x%g; faults: %s",
+            names.namespace or "/",
+            transport.kind,
             self._codec.distro,
             kind,
             self._config.camera_type,
@@ -269,15 +279,18 @@ class SimNode:
     def _publish(self, tick: int) -> None:
         robot = self._robot
         stamp = time.time()
-        self._bus.publish_bytes(
-            self._keys.odom,
+        names, transport = self._names, self._transport
+        transport.publish(
+            names.odom,
+            ODOMETRY,
             self._codec.odometry(robot.pose, robot.linear, robot.angular, stamp),
         )
-        self._bus.publish_bytes(self._keys.tf, self._codec.transform(robot.pose, stamp))
+        transport.publish(names.tf, TF, self._codec.transform(robot.pose, stamp))
         goal = self._active
         if goal is not None and tick % FEEDBACK_EVERY == 0:
-            self._bus.publish_bytes(
-                self._keys.navigate("feedback"),
+            transport.publish(
+                names.navigate("feedback"),
+                NAVIGATE_FEEDBACK,
                 self._codec.feedback(
                     goal.goal_id,
                     robot.pose,
@@ -287,12 +300,13 @@ class SimNode:
                 ),
             )
         if tick % CAMERA_EVERY == 0:
-            self._bus.publish_bytes(self._keys.camera_image, self._camera_message(stamp))
+            camera = self._config.camera_type.ros_type
+            transport.publish(names.camera_image, camera, self._camera_message(stamp))
 
     def _publish_status(self) -> None:
         goals = [*self._finished, *([self._active] if self._active else [])]
         payload = self._codec.goal_status_array([(g.goal_id, g.status) for g in goals])
-        self._bus.publish_bytes(self._keys.navigate("status"), payload)
+        self._transport.publish(self._names.navigate("status"), STATUS, payload)
 
     def _camera_message(self, stamp: float) -> bytes:
         width, height = CAMERA_SIZE
@@ -327,7 +341,7 @@ class SimNode:
 
     # --- topic and action handlers --------------------------------------------------------
 
-    def _on_cmd_vel(self, _key: str, velocity: tuple[float, float]) -> None:
+    def _on_cmd_vel(self, velocity: tuple[float, float]) -> None:
         if self._active is not None:
             _LOGGER.debug("cmd_vel ignored while a goal is active")
             return

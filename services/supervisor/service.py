@@ -16,7 +16,6 @@ import time
 
 from shared.bus import Bus, json_decoder
 from shared.errors import BusError
-from shared.halting import Cancelled, RobotStop, prepare
 from shared.keys import RobotKeys, last_chunk, robot_of
 from shared.messages import (
     Accepted,
@@ -53,6 +52,8 @@ from shared.messages import (
     Submitted,
     SupervisorRequest,
 )
+from shared.robot.stop import Cancelled, RobotStop, prepare
+from shared.ros2 import NAVIGATE_FEEDBACK
 
 from .queue import RequestConflict, RobotQueue
 from .store import OrderStore
@@ -72,6 +73,8 @@ CONFIRM_WAIT = 0.3
 is acknowledged: the zero velocity is out before, so this delays only the answer."""
 HOLD_EVERY = 0.1
 """While the stop is latched, zero velocity goes out this often."""
+STOP_NODE = "voicectl_supervisor"
+"""The ROS node the supervisor appears as where nodes are seen (rmw_zenoh), for its stops."""
 
 
 class RobotSupervisor:
@@ -212,13 +215,13 @@ class RobotSupervisor:
         robot whatever process has died or blocked. Acknowledged after at most
         `CONFIRM_WAIT`, with what answered by then; later answers land in the state."""
         stop = self._robot_stop()
-        sent = stop.zero_velocity(self._bus)
+        sent = stop.zero_velocity()
         self._queue.stopped = True
         cleared = self._queue.clear_queue("emergency stop")
         self._store.write([self._store.save_stopped(self.robot, True)])
         self._hold()
         latch = asyncio.ensure_future(self._latch_executor(True))
-        cancel = asyncio.ensure_future(stop.cancel_goals(self._bus))
+        cancel = asyncio.ensure_future(stop.cancel_goals())
         await asyncio.wait({latch, cancel}, timeout=CONFIRM_WAIT)
         confirmed, detail = self._stop_outcome(sent, cleared, latch, cancel)
         self._queue.stop_detail = detail
@@ -301,7 +304,7 @@ class RobotSupervisor:
             return Failed(reason=f"executor unreachable: {exc}")
 
     def _robot_stop(self) -> RobotStop:
-        return RobotStop.of(self.executor_info, self.robot)
+        return RobotStop.of(self.executor_info, self._bus, STOP_NODE)
 
     def _hold(self) -> None:
         """While the stop is latched, keep the robot at zero velocity and without goals,
@@ -312,17 +315,17 @@ class RobotSupervisor:
     async def _hold_still(self) -> None:
         stop = self._robot_stop()
         goals = asyncio.Event()
-        unsubscribe = self._bus.subscribe(
-            stop.keys.navigate("feedback"), bytes, lambda _key, _raw: goals.set()
+        unsubscribe = stop.transport.subscribe(
+            stop.names.navigate("feedback"), NAVIGATE_FEEDBACK, bytes, lambda _raw: goals.set()
         )
         said = ""
         try:
             while self._queue.stopped:
                 stop = self._robot_stop()
-                stop.zero_velocity(self._bus)
+                stop.zero_velocity()
                 if goals.is_set():  # navigation works on a goal: nobody may, now
                     goals.clear()
-                    cancelled = await stop.cancel_goals(self._bus)
+                    cancelled = await stop.cancel_goals()
                     if cancelled.detail != said:  # once, not ten times a second
                         said = cancelled.detail
                         _LOGGER.warning("%s: a goal during the stop: %s", self.robot, said)
@@ -331,9 +334,9 @@ class RobotSupervisor:
             unsubscribe()
 
     async def _halt_robot(self) -> str:
-        """Zero velocity and cancel every navigation goal, on the robot's bridge keys as
-        the executor announced them; says what it did."""
-        return (await self._robot_stop().halt(self._bus)).detail
+        """Zero velocity and cancel every navigation goal, on the robot's transport and
+        names as the executor announced them; says what it did."""
+        return (await self._robot_stop().halt()).detail
 
     async def _send_control(self, request: CancelOrder | Halt | GetRunning | GetResult) -> Message:
         try:

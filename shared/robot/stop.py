@@ -1,9 +1,9 @@
-"""Stopping a robot on its bridge keys: the one implementation of "stop the robot".
+"""Stopping a robot: the one implementation of "stop the robot", on any transport.
 
 Zero velocity on cmd_vel, then a cancel of every navigation goal, and what navigation
 answered. The executor stops its robot with it, the supervisor on STOP and when the
 executor is lost, and `voicectl stop` and the panel when no supervisor answers: whoever
-is left alive can stop the robot the same way.
+is left alive can stop the robot the same way, through the bridge or on rmw_zenoh.
 
 `zero_velocity` is a plain put: it may be called from any thread (a Zenoh callback, the
 executor's watchdog), never waits for an event loop, and goes out at once.
@@ -12,17 +12,28 @@ executor's watchdog), never waits for an event loop, and goes out at once.
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import functools
 import logging
 import time
 from dataclasses import dataclass
 
-from .bus import Bus
-from .errors import BusError
-from .keys import BridgeKeys
-from .messages import ExecutorInfo
-from .ros2 import CANCEL_ALL, CancelCode, CdrError, CmdVelType, Ros2Codec, RosDistro
+from ..bus import Bus
+from ..errors import BusError
+from ..keys import RobotNames
+from ..messages import ExecutorInfo
+from ..ros2 import (
+    CANCEL_ALL,
+    CANCEL_GOAL,
+    CancelCode,
+    CdrError,
+    CmdVelType,
+    Ros2Codec,
+    RosDistro,
+    type_hash,
+)
+from . import open_transport
+from .kinds import TransportKind
+from .transport import RobotTransport
 
 _LOGGER = logging.getLogger(__name__)
 
@@ -30,6 +41,8 @@ STOP_REPEAT = 3
 """Zero velocity is sent this many times: one lost sample must not leave the robot moving."""
 CANCEL_TIMEOUT = 2.0
 """How long navigation has to answer a cancel."""
+NODE = "voicectl_stop"
+"""The ROS node a process that only stops a robot appears as, where nodes are seen."""
 
 
 @functools.cache
@@ -49,13 +62,15 @@ _BUILDING: set[asyncio.Future[None]] = set()
 
 
 def prepare(info: ExecutorInfo) -> asyncio.Future[None]:
-    """Build the codec that will stop the robot `info` announces, off the event loop, as
-    soon as its executor announces it: not when someone presses STOP. Nobody has to
-    keep or await the future."""
+    """Build what will stop the robot `info` announces (its codec; on rmw_zenoh the type
+    hashes in its keys), off the event loop, as soon as its executor announces it: not
+    when someone presses STOP. Nobody has to keep or await the future."""
 
     def build() -> None:
-        with contextlib.suppress(ValueError):  # RobotStop.of says what was wrong, later
-            stop_codec(RosDistro(info.distro))
+        stop_codec(info.distro)
+        if info.transport is TransportKind.RMW_ZENOH:
+            type_hash(info.distro, info.cmd_vel_type.ros_type)
+            type_hash(info.distro, CANCEL_GOAL)
 
     building = asyncio.ensure_future(asyncio.to_thread(build))
     _BUILDING.add(building)
@@ -65,42 +80,47 @@ def prepare(info: ExecutorInfo) -> asyncio.Future[None]:
 
 @dataclass(frozen=True)
 class RobotStop:
-    """How to stop one robot: its bridge keys, its distribution, what cmd_vel takes."""
+    """How to stop one robot: its transport and names, its distribution, what cmd_vel takes."""
 
-    keys: BridgeKeys
+    transport: RobotTransport
+    names: RobotNames
     codec: Ros2Codec
     cmd_vel_type: CmdVelType
 
     @classmethod
-    def of(cls, info: ExecutorInfo, robot: str = "") -> RobotStop:
-        """From what the executor announced; the defaults (with a warning) when it makes
-        no sense, since a stop on the usual keys beats no stop."""
+    def of(cls, info: ExecutorInfo, bus: Bus, node: str = NODE) -> RobotStop:
+        """From what the executor announced; names that make no sense fall back to the
+        defaults (with a warning), since a stop on the usual names beats no stop."""
         try:
-            keys = BridgeKeys(
+            names = RobotNames(
                 info.namespace, cmd_vel_name=info.cmd_vel, navigate_name=info.navigate
             )
-            codec = stop_codec(RosDistro(info.distro))
-            return cls(keys, codec, CmdVelType(info.cmd_vel_type))
         except ValueError as exc:
-            _LOGGER.warning("%s: unusable executor info (%s); stopping on default keys", robot, exc)
-            return cls(BridgeKeys(), stop_codec(RosDistro.JAZZY), CmdVelType.TWIST)
+            _LOGGER.warning("unusable executor info (%s); stopping on default names", exc)
+            names = RobotNames()
+        transport = open_transport(
+            bus, info.transport, node, names.namespace, info.domain_id, info.distro
+        )
+        return cls(transport, names, stop_codec(info.distro), info.cmd_vel_type)
 
-    def zero_velocity(self, bus: Bus) -> str:
+    def zero_velocity(self) -> str:
         """Send zero velocity, first and at once; says where."""
         payload = self.codec.velocity(self.cmd_vel_type, 0.0, 0.0, time.time())
         for _ in range(STOP_REPEAT):
-            bus.publish_bytes(self.keys.cmd_vel, payload, urgent=True)
-        return f"sent zero velocity on '{self.keys.cmd_vel}'"
+            self.transport.publish(
+                self.names.cmd_vel, self.cmd_vel_type.ros_type, payload, urgent=True
+            )
+        return f"sent zero velocity on '{self.names.cmd_vel}'"
 
     async def cancel_goals(
-        self, bus: Bus, goal_id: bytes | None = None, timeout: float = CANCEL_TIMEOUT
+        self, goal_id: bytes | None = None, timeout: float = CANCEL_TIMEOUT
     ) -> Cancelled:
         """Cancel one navigation goal, or every goal; what navigation answered."""
         what = f"goal {goal_id.hex()[:8]}" if goal_id is not None else "every goal"
         request = self.codec.cancel_goal_request(goal_id or CANCEL_ALL)
         try:
-            raw = await bus.request_bytes(
-                self.keys.navigate("cancel_goal"), request, timeout, urgent=True
+            raw = await self.transport.call(
+                self.names.navigate("cancel_goal"), CANCEL_GOAL, request, timeout, urgent=True
             )
         except BusError as exc:
             return Cancelled(
@@ -122,18 +142,21 @@ class RobotStop:
             case _:
                 return Cancelled(True, True, f"navigation cancelled {what}")
 
-    def cancel_goals_now(self, bus: Bus) -> None:
+    def cancel_goals_now(self) -> None:
         """Ask navigation to cancel every goal without waiting for its answer; from any
         thread (one whose event loop is stalled)."""
-        bus.query_and_forget(
-            self.keys.navigate("cancel_goal"), self.codec.cancel_goal_request(), CANCEL_TIMEOUT
+        self.transport.call_and_forget(
+            self.names.navigate("cancel_goal"),
+            CANCEL_GOAL,
+            self.codec.cancel_goal_request(),
+            CANCEL_TIMEOUT,
         )
 
-    async def halt(self, bus: Bus) -> Cancelled:
+    async def halt(self) -> Cancelled:
         """Zero velocity now, then every goal cancelled; the cancel's outcome, its detail
         prefixed with where the zero velocity went."""
-        sent = self.zero_velocity(bus)
-        cancelled = await self.cancel_goals(bus)
+        sent = self.zero_velocity()
+        cancelled = await self.cancel_goals()
         return Cancelled(cancelled.answered, cancelled.confirmed, f"{sent}; {cancelled.detail}")
 
 

@@ -1,0 +1,70 @@
+"""A ROS 2 graph behind zenoh-bridge-ros2dds: a ROS name is its key, a payload is all.
+
+The bridge routes an interface only once it has discovered it on the DDS side, and
+announces each one with a liveliness token naming its ROS type (``@/<zid>/@ros2_lv/...``,
+`BridgeToken`). Services answer Zenoh queries on their name; an action is its services
+and topics under ``<action>/_action/``. Details of what a stock robot needs behind the
+bridge are in docs/deploy.md.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Awaitable, Callable
+from typing import TypeVar
+
+from ..bus import Bus
+from ..keys import BRIDGE_TOKENS, BridgeKind, BridgeToken
+from .kinds import TransportKind
+from .transport import Interface, RobotTransport, Role
+
+T = TypeVar("T")
+
+_KINDS = {
+    Role.PUBLISHER: BridgeKind.PUBLISHER,
+    Role.SUBSCRIBER: BridgeKind.SUBSCRIBER,
+    Role.SERVICE_SERVER: BridgeKind.SERVICE_SERVER,
+    Role.SERVICE_CLIENT: BridgeKind.SERVICE_CLIENT,
+    Role.ACTION_SERVER: BridgeKind.ACTION_SERVER,
+    Role.ACTION_CLIENT: BridgeKind.ACTION_CLIENT,
+}
+_ROLES = {kind: role for role, kind in _KINDS.items()}
+
+
+class BridgeTransport(RobotTransport):
+    kind = TransportKind.BRIDGE
+
+    def __init__(self, bus: Bus) -> None:
+        self._bus = bus
+
+    def publish(self, name: str, ros_type: str, payload: bytes, urgent: bool = False) -> None:
+        self._bus.publish_bytes(name, payload, urgent=urgent)
+
+    def subscribe(
+        self, name: str, ros_type: str, decode: Callable[[bytes], T], handler: Callable[[T], None]
+    ) -> Callable[[], None]:
+        return self._bus.subscribe(name, decode, lambda _key, message: handler(message))
+
+    async def call(
+        self, name: str, service_type: str, request: bytes, timeout: float, urgent: bool = False
+    ) -> bytes:
+        return await self._bus.request_bytes(name, request, timeout, urgent=urgent)
+
+    def call_and_forget(self, name: str, service_type: str, request: bytes, timeout: float) -> None:
+        self._bus.query_and_forget(name, request, timeout)
+
+    def serve(
+        self, name: str, service_type: str, handler: Callable[[bytes], Awaitable[bytes | None]]
+    ) -> None:
+        self._bus.serve_bytes(name, handler)
+
+    def offer(self, interface: Interface) -> None:
+        token = BridgeToken(_KINDS[interface.role], interface.name, interface.ros_type)
+        self._bus.announce(token.token_key(str(self._bus.session.zid())))
+
+    def discover(self, handler: Callable[[Interface, bool], None]) -> None:
+        def on_token(key: str, present: bool) -> None:
+            token = BridgeToken.parse(key)
+            if token is not None:
+                handler(Interface(_ROLES[token.kind], token.key, token.ros_type), present)
+
+        self._bus.watch(BRIDGE_TOKENS, on_token)

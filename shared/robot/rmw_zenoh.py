@@ -1,0 +1,270 @@
+"""A ROS 2 graph whose nodes speak rmw_zenoh: voicectl as one more node, with no bridge.
+
+What rmw_zenoh puts on the wire, as read in ros2/rmw_zenoh's docs/design.md and its
+rmw_zenoh_cpp sources as released for Humble (0.1.9), Jazzy (0.2.10) and Kilted (0.6.7):
+
+- Keys ``<domain>/<name>/<DDS type>/<type hash>`` (`RmwZenohKeys`). What voicectl sends
+  goes to the exact key the robot's side announced (its token carries its type hash), or,
+  before that is known, to the key of the type hash this distribution computes
+  (`shared.ros2.type_hash`); what it hears or asks, it hears or asks whatever the hash.
+- An attachment on every publication, query and reply, in zenoh's own serialization:
+  int64 sequence number (per publisher or client, from 1), int64 source timestamp in
+  nanoseconds since the epoch, then the 16-byte source GID as a sequence (a 0x10 length
+  byte first): 33 bytes. Subscribers drop samples without one. A service's reply carries
+  the request's sequence number and the client's GID, with a timestamp of its own.
+- GIDs: XXH3-128 of the entity's liveliness token, low half first, little-endian.
+- Services are queryables declared complete (rmw_zenoh's clients ask only those); an action
+  is its three services and two topics under ``<action>/_action/``.
+- A liveliness token per node and per publisher, subscription, client and server
+  (``@ros2_lv/...``), from which `ros2 node list` and `ros2 topic info` on the robot show
+  voicectl, and from which voicectl learns what the robot offers, with which types and
+  hashes. A ROS client sees a service only once a server's token is there.
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+import struct
+import threading
+import time
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass
+from typing import TypeVar
+
+import xxhash
+
+from ..bus import Bus
+from ..keys import (
+    RMW_QOS_DEFAULT,
+    RMW_QOS_LATCHED,
+    RmwKind,
+    RmwToken,
+    RmwZenohKeys,
+)
+from ..ros2 import NO_TYPE_HASH, RosDistro, dds_type_name, ros_type_of, type_hash
+from .kinds import TransportKind
+from .transport import Interface, RobotTransport, Role, action_members, action_of
+
+_LOGGER = logging.getLogger(__name__)
+
+T = TypeVar("T")
+
+GID_SIZE = 16
+_ATTACHMENT = struct.Struct(f"<qqB{GID_SIZE}s")
+
+
+@dataclass(frozen=True)
+class Attachment:
+    """What rmw_zenoh sends beside every payload."""
+
+    sequence: int
+    timestamp_ns: int
+    gid: bytes
+
+    def encode(self) -> bytes:
+        return _ATTACHMENT.pack(self.sequence, self.timestamp_ns, GID_SIZE, self.gid)
+
+    @staticmethod
+    def decode(raw: bytes) -> Attachment:
+        """ValueError for bytes of another layout (rmw_zenoh before Jazzy 0.2.4 and Humble
+        0.1.2 wrote a key before each field, and is not spoken here)."""
+        if len(raw) != _ATTACHMENT.size:
+            raise ValueError(f"an rmw_zenoh attachment is {_ATTACHMENT.size} bytes, not {len(raw)}")
+        sequence, timestamp, size, gid = _ATTACHMENT.unpack(raw)
+        if size != GID_SIZE:
+            raise ValueError(f"GID of {size} bytes in an rmw_zenoh attachment, not {GID_SIZE}")
+        return Attachment(sequence, timestamp, gid)
+
+
+def gid_of(token_key: str) -> bytes:
+    """An entity's GID as rmw_zenoh derives it from its liveliness token."""
+    return xxhash.xxh3_128(token_key.encode()).intdigest().to_bytes(GID_SIZE, "little")
+
+
+class _Entity:
+    """One publisher, subscription, client or server of this process: its token, its GID
+    and its sequence numbers."""
+
+    def __init__(self, token_key: str) -> None:
+        self.token_key = token_key
+        self.gid = gid_of(token_key)
+        self._sequence = itertools.count(1)  # next() is atomic: any thread may send
+
+    def attachment(self) -> bytes:
+        return Attachment(next(self._sequence), time.time_ns(), self.gid).encode()
+
+
+_KINDS = {
+    RmwKind.PUBLISHER: Role.PUBLISHER,
+    RmwKind.SUBSCRIBER: Role.SUBSCRIBER,
+    RmwKind.SERVICE_SERVER: Role.SERVICE_SERVER,
+    RmwKind.SERVICE_CLIENT: Role.SERVICE_CLIENT,
+}
+
+
+class RmwZenohTransport(RobotTransport):
+    """This process as one rmw_zenoh node, `node` in the robot's `namespace`."""
+
+    kind = TransportKind.RMW_ZENOH
+
+    def __init__(
+        self,
+        bus: Bus,
+        node: str,
+        namespace: str = "",
+        domain_id: int = 0,
+        distro: RosDistro | None = None,
+    ) -> None:
+        self._bus = bus
+        self.keys = RmwZenohKeys(domain_id)
+        self._node = node
+        self._namespace = namespace
+        self.distro = distro
+        """The robot's distribution as configured, or as its tokens' hashes say; None until
+        known (Jazzy's hashes are sent meanwhile)."""
+        self._zid = str(bus.session.zid())
+        self._ids = itertools.count()
+        self._node_id = next(self._ids)
+        self._entities: dict[tuple[RmwKind, str, str], _Entity] = {}
+        self._lock = threading.Lock()
+        self._announced: dict[tuple[str, str], str] = {}
+        """(name, DDS type) -> the type hash the robot's side announced for it."""
+        node_token = RmwToken(
+            self._zid, self._node_id, self._node_id, RmwKind.NODE, namespace, node
+        )
+        bus.announce(self.keys.token(node_token))
+
+    # --- keys and entities --------------------------------------------------------------
+
+    def _hash(self, name: str, ros_type: str) -> str:
+        announced = self._announced.get((name, dds_type_name(ros_type)))
+        return announced or type_hash(self.distro or RosDistro.JAZZY, ros_type)
+
+    def _exact(self, name: str, ros_type: str) -> str:
+        return self.keys.data(name, dds_type_name(ros_type), self._hash(name, ros_type))
+
+    def _any_hash(self, name: str, ros_type: str) -> str:
+        return self.keys.data_any_hash(name, dds_type_name(ros_type))
+
+    def entity(self, kind: RmwKind, name: str, ros_type: str) -> _Entity:
+        """This process's entity of that kind on that name, its token declared on first use."""
+        with self._lock:
+            known = self._entities.get((kind, name, ros_type))
+            if known is not None:
+                return known
+            qos = RMW_QOS_LATCHED if name.endswith("/_action/status") else RMW_QOS_DEFAULT
+            token = RmwToken(
+                self._zid,
+                self._node_id,
+                next(self._ids),
+                kind,
+                self._namespace,
+                self._node,
+                name,
+                dds_type_name(ros_type),
+                self._hash(name, ros_type),
+                qos,
+            )
+            entity = self._entities[(kind, name, ros_type)] = _Entity(self.keys.token(token))
+        self._bus.announce(entity.token_key)
+        return entity
+
+    # --- the seam -----------------------------------------------------------------------
+
+    def publish(self, name: str, ros_type: str, payload: bytes, urgent: bool = False) -> None:
+        entity = self.entity(RmwKind.PUBLISHER, name, ros_type)
+        self._bus.publish_bytes(
+            self._exact(name, ros_type), payload, urgent=urgent, attachment=entity.attachment()
+        )
+
+    def subscribe(
+        self, name: str, ros_type: str, decode: Callable[[bytes], T], handler: Callable[[T], None]
+    ) -> Callable[[], None]:
+        self.entity(RmwKind.SUBSCRIBER, name, ros_type)
+        key = self._any_hash(name, ros_type)
+        return self._bus.subscribe(key, decode, lambda _key, message: handler(message))
+
+    async def call(
+        self, name: str, service_type: str, request: bytes, timeout: float, urgent: bool = False
+    ) -> bytes:
+        entity = self.entity(RmwKind.SERVICE_CLIENT, name, service_type)
+        return await self._bus.request_bytes(
+            self._any_hash(name, service_type),
+            request,
+            timeout,
+            urgent=urgent,
+            attachment=entity.attachment(),
+        )
+
+    def call_and_forget(self, name: str, service_type: str, request: bytes, timeout: float) -> None:
+        entity = self.entity(RmwKind.SERVICE_CLIENT, name, service_type)
+        self._bus.query_and_forget(
+            self._any_hash(name, service_type), request, timeout, attachment=entity.attachment()
+        )
+
+    def serve(
+        self, name: str, service_type: str, handler: Callable[[bytes], Awaitable[bytes | None]]
+    ) -> None:
+        self.entity(RmwKind.SERVICE_SERVER, name, service_type)
+        self._bus.serve_bytes(
+            self._exact(name, service_type), handler, complete=True, reply_attachment=_reply_to
+        )
+
+    def offer(self, interface: Interface) -> None:
+        match interface.role:
+            case Role.PUBLISHER:
+                self.entity(RmwKind.PUBLISHER, interface.name, interface.ros_type)
+            case Role.SUBSCRIBER:
+                self.entity(RmwKind.SUBSCRIBER, interface.name, interface.ros_type)
+            case Role.SERVICE_SERVER:
+                self.entity(RmwKind.SERVICE_SERVER, interface.name, interface.ros_type)
+            case Role.SERVICE_CLIENT:
+                self.entity(RmwKind.SERVICE_CLIENT, interface.name, interface.ros_type)
+            case Role.ACTION_SERVER | Role.ACTION_CLIENT:
+                server = interface.role is Role.ACTION_SERVER
+                for member in action_members(interface.name, interface.ros_type):
+                    kind = (
+                        (RmwKind.SERVICE_SERVER if server else RmwKind.SERVICE_CLIENT)
+                        if member.service
+                        else (RmwKind.PUBLISHER if server else RmwKind.SUBSCRIBER)
+                    )
+                    self.entity(kind, member.name, member.ros_type)
+
+    def discover(self, handler: Callable[[Interface, bool], None]) -> None:
+        def on_token(key: str, present: bool) -> None:
+            token = self.keys.parse_token(key)
+            if token is None or token.zid == self._zid or token.kind is RmwKind.NODE:
+                return
+            try:
+                ros_type = ros_type_of(token.dds_type)
+            except ValueError:
+                return
+            if present:
+                self._learn(token)
+            role = _KINDS[token.kind]
+            handler(Interface(role, token.name, ros_type, token.type_hash), present)
+            action = action_of(token.name, ros_type)
+            if action is not None and role in (Role.SERVICE_SERVER, Role.SERVICE_CLIENT):
+                whole = Role.ACTION_SERVER if role is Role.SERVICE_SERVER else Role.ACTION_CLIENT
+                handler(Interface(whole, action[0], action[1], token.type_hash), present)
+
+        self._bus.watch(self.keys.tokens, on_token)
+
+    def _learn(self, token: RmwToken) -> None:
+        """Note the robot's type hash for a name, and its distribution from it."""
+        if token.kind in (RmwKind.SUBSCRIBER, RmwKind.SERVICE_SERVER):
+            self._announced[(token.name, token.dds_type)] = token.type_hash
+        found = RosDistro.HUMBLE if token.type_hash == NO_TYPE_HASH else RosDistro.JAZZY
+        if self.distro is None:
+            self.distro = found
+            _LOGGER.info("the robot's rmw_zenoh speaks ROS 2 %s (from its tokens)", found.title())
+
+
+def _reply_to(asked: bytes | None) -> bytes:
+    """A reply's attachment: the request's sequence number and client GID, a new time."""
+    try:
+        request = Attachment.decode(asked or b"")
+    except ValueError:
+        request = Attachment(0, 0, bytes(GID_SIZE))
+    return Attachment(request.sequence, time.time_ns(), request.gid).encode()

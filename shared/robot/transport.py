@@ -1,0 +1,134 @@
+"""The robot-transport seam: how voicectl reaches a ROS 2 graph over Zenoh.
+
+Two layouts exist: zenoh-bridge-ros2dds routing a DDS graph (`bridge.py`), and ROS 2's own
+Zenoh middleware, rmw_zenoh, where every node is a Zenoh participant (`rmw_zenoh.py`). Both
+carry the same CDR payloads; they differ in keys, in what travels beside a payload, and in
+how the graph announces itself. Everything above this seam (the executor's robot, the
+stop, the simulator, `voicectl health`) names topics and services by their ROS names and
+types and never builds a key.
+
+Names are full ROS names without the leading '/' ('bot1/cmd_vel',
+'navigate_to_pose/_action/send_goal', from `RobotNames`); types are ROS type names
+('geometry_msgs/msg/Twist'; a service's own type, 'action_msgs/srv/CancelGoal').
+"""
+
+from __future__ import annotations
+
+import abc
+import enum
+from collections.abc import Awaitable, Callable
+from dataclasses import dataclass
+from typing import ClassVar, TypeVar
+
+from ..keys import ACTION_MEMBERS, action_member
+from .kinds import TransportKind
+
+T = TypeVar("T")
+
+
+class Role(enum.StrEnum):
+    """What a discovered interface does in the robot's graph."""
+
+    PUBLISHER = "publisher"
+    SUBSCRIBER = "subscriber"
+    SERVICE_SERVER = "service server"
+    SERVICE_CLIENT = "service client"
+    ACTION_SERVER = "action server"
+    ACTION_CLIENT = "action client"
+
+
+@dataclass(frozen=True)
+class Interface:
+    """A topic, service or action of the robot's graph, with the type it uses."""
+
+    role: Role
+    name: str
+    """Full ROS name without the leading '/' ('bot1/cmd_vel'; an action's own name)."""
+    ros_type: str
+    """'geometry_msgs/msg/TwistStamped', 'nav2_msgs/action/NavigateToPose'."""
+    type_hash: str = ""
+    """As announced ('RIHS01_...', 'TypeHashNotSupported'); '' when the layout has none."""
+
+
+class RobotTransport(abc.ABC):
+    """One process's way onto the robot's graph. Calls that send may come from any thread
+    (a stop from Zenoh's thread or a watchdog): they never wait for the event loop."""
+
+    kind: ClassVar[TransportKind]
+
+    @abc.abstractmethod
+    def publish(self, name: str, ros_type: str, payload: bytes, urgent: bool = False) -> None:
+        """Publish one CDR message on a topic. An `urgent` one (zero velocity) waits for
+        room instead of being dropped, and goes first."""
+
+    @abc.abstractmethod
+    def subscribe(
+        self, name: str, ros_type: str, decode: Callable[[bytes], T], handler: Callable[[T], None]
+    ) -> Callable[[], None]:
+        """Call `handler(message)` on the loop for every sample on a topic that decodes;
+        returns the function that ends the subscription."""
+
+    @abc.abstractmethod
+    async def call(
+        self, name: str, service_type: str, request: bytes, timeout: float, urgent: bool = False
+    ) -> bytes:
+        """Call a service with a CDR request; its CDR reply. BusError when nothing answers."""
+
+    @abc.abstractmethod
+    def call_and_forget(self, name: str, service_type: str, request: bytes, timeout: float) -> None:
+        """Call a service urgently, from any thread, without waiting for its answer."""
+
+    @abc.abstractmethod
+    def serve(
+        self, name: str, service_type: str, handler: Callable[[bytes], Awaitable[bytes | None]]
+    ) -> None:
+        """Answer a service's CDR requests (a simulated robot's); a handler returning None
+        leaves the request unanswered."""
+
+    @abc.abstractmethod
+    def offer(self, interface: Interface) -> None:
+        """Announce that this process offers `interface` as the robot's graph would show
+        it, so that what discovers the robot finds it (a simulated robot's)."""
+
+    @abc.abstractmethod
+    def discover(self, handler: Callable[[Interface, bool], None]) -> None:
+        """Call `handler(interface, present)` on the loop as the robot's interfaces appear
+        and go, those that were there before included; this process's own excepted."""
+
+
+@dataclass(frozen=True)
+class ActionMember:
+    """One of the services and topics ROS 2 makes of an action."""
+
+    name: str
+    """'navigate_to_pose/_action/send_goal'."""
+    ros_type: str
+    service: bool
+
+
+def action_members(action: str, action_type: str) -> list[ActionMember]:
+    """The three services and two topics of action `action` of type `action_type`
+    ('nav2_msgs/action/NavigateToPose'), with their types, as rcl_action makes them."""
+    types = {
+        "send_goal": f"{action_type}_SendGoal",
+        "cancel_goal": "action_msgs/srv/CancelGoal",
+        "get_result": f"{action_type}_GetResult",
+        "feedback": f"{action_type}_FeedbackMessage",
+        "status": "action_msgs/msg/GoalStatusArray",
+    }
+    return [
+        ActionMember(action_member(action, member), types[member], member in SERVICE_MEMBERS)
+        for member in ACTION_MEMBERS
+    ]
+
+
+SERVICE_MEMBERS = frozenset({"send_goal", "cancel_goal", "get_result"})
+
+
+def action_of(name: str, ros_type: str) -> tuple[str, str] | None:
+    """The action whose send_goal service `name` of type `ros_type` is, as (name, type);
+    None for any other service."""
+    suffix = action_member("", "send_goal")
+    if name.endswith(suffix) and ros_type.endswith("_SendGoal"):
+        return name.removesuffix(suffix), ros_type.removesuffix("_SendGoal")
+    return None
