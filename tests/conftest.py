@@ -22,6 +22,7 @@ import zenoh
 
 from bench.speech_set import Voice, real_recordings, speak
 from shared.bus import BusOptions
+from shared.robot import TransportKind
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -202,6 +203,8 @@ class Stack:
     env: dict[str, str]
     process: subprocess.Popen[str]
     output: list[str] = field(default_factory=list)
+    transport: TransportKind = TransportKind.BRIDGE
+    """How the simulated robot shows its graph."""
 
     def voicectl(self, *args: str) -> subprocess.CompletedProcess[str]:
         return subprocess.run(
@@ -216,7 +219,10 @@ class Stack:
 
 
 @pytest.fixture
-def stack(tmp_path: Path) -> Iterator[Stack]:
+def stack(tmp_path: Path, request: pytest.FixtureRequest) -> Iterator[Stack]:
+    """`voicectl up` with the simulator ten times faster than life; parametrize it
+    (indirectly) with a transport to play a robot on rmw_zenoh."""
+    transport: TransportKind = getattr(request, "param", TransportKind.BRIDGE)
     router_port, port = free_ports(2)
     router = f"tcp/127.0.0.1:{router_port}"
     env = {**os.environ, "VOICECTL_DATA": str(tmp_path / "data"), "PYTHONUNBUFFERED": "1"}
@@ -233,6 +239,8 @@ def stack(tmp_path: Path) -> Iterator[Stack]:
             str(port),
             "--time-scale",
             "10",
+            "--transport",
+            transport.value,
             "--orders",
             str(REPO / "orders"),
         ],
@@ -243,7 +251,7 @@ def stack(tmp_path: Path) -> Iterator[Stack]:
         cwd=REPO,
         start_new_session=True,
     )
-    running = Stack(router, port, env, process)
+    running = Stack(router, port, env, process, transport=transport)
 
     def pump() -> None:
         assert process.stdout is not None

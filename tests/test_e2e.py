@@ -18,9 +18,11 @@ import zenoh
 from shared.bus import BusOptions
 from shared.keys import RobotKeys, RobotNames
 from shared.messages import OrderStatus, State, StateUpdate
+from shared.robot import TransportKind
 from shared.ros2 import Pose2D, Ros2Codec, RosDistro
 
 from .conftest import Stack, wait_until
+from .support import robot_key
 
 pytestmark = pytest.mark.e2e
 
@@ -28,7 +30,7 @@ pytestmark = pytest.mark.e2e
 class RobotWatch:
     """The test's own eyes on the bus: odometry from the sim, state from the supervisor."""
 
-    def __init__(self, router: str) -> None:
+    def __init__(self, router: str, transport: TransportKind = TransportKind.BRIDGE) -> None:
         self.codec = Ros2Codec(RosDistro.JAZZY)
         self.pose: Pose2D | None = None
         self.pose_at_finish: dict[str, Pose2D] = {}
@@ -36,7 +38,8 @@ class RobotWatch:
         self._decoder = msgspec.json.Decoder(StateUpdate)
         options = BusOptions(connect=[router])
         self.session = zenoh.open(options.zenoh_config())
-        self.session.declare_subscriber(RobotNames().odom, self._on_odom)
+        odom = robot_key(transport, RobotNames().odom, "nav_msgs/msg/Odometry", any_hash=True)
+        self.session.declare_subscriber(odom, self._on_odom)
         self.session.declare_subscriber(RobotKeys("robot").state, self._on_state)
 
     def _on_odom(self, sample: zenoh.Sample) -> None:
@@ -53,8 +56,11 @@ class RobotWatch:
         self.session.close()
 
 
+@pytest.mark.parametrize("stack", list(TransportKind), indirect=True, ids=str)
 def test_spoken_sequence_moves_the_simulated_robot(stack: Stack) -> None:
-    watch = RobotWatch(stack.router)
+    """The demo, on a robot behind zenoh-bridge-ros2dds and on one whose nodes speak
+    rmw_zenoh (`voicectl up --transport rmw-zenoh`): the same orders, the same motion."""
+    watch = RobotWatch(stack.router, stack.transport)
     try:
         wait_until(lambda: watch.pose is not None, 30.0, "odometry from the sim")
         said = stack.voicectl("say", "--connect", stack.router, "turn left then reach kitchen")

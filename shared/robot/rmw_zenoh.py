@@ -168,6 +168,7 @@ class RmwZenohTransport(RobotTransport):
             )
             entity = self._entities[(kind, name, ros_type)] = _Entity(self.keys.token(token))
         self._bus.announce(entity.token_key)
+        _LOGGER.debug("rmw_zenoh entity %s", entity.token_key)
         return entity
 
     # --- the seam -----------------------------------------------------------------------
