@@ -76,6 +76,13 @@ def transport(request: pytest.FixtureRequest) -> TransportKind:
     return kind
 
 
+BRIDGE_ONLY = pytest.mark.parametrize("transport", [TransportKind.BRIDGE], ids=str)
+"""For what happens above the transport (navigation's faults, the distribution's check):
+played once, behind the bridge. What reaches the robot differently on each transport
+(driving, turning, goals with feedback and results, cancels, the camera, the stop at
+start-up, Humble's layout) is played on both."""
+
+
 @pytest.fixture
 def start(router: str, processes: Processes, tmp_path: Path, transport: TransportKind) -> Start:
     def start(sim_args: tuple[str, ...] = (), executor_args: tuple[str, ...] = ()) -> None:
@@ -186,6 +193,7 @@ def test_humble_goals_relative_to_the_robot_stay_where_they_were_asked(
     run_harness(router, body, transport=transport)
 
 
+@BRIDGE_ONLY
 def test_a_distro_mismatch_fails_navigation_before_any_goal(
     router: str, start: Start, transport: TransportKind
 ) -> None:
@@ -206,6 +214,7 @@ def test_a_distro_mismatch_fails_navigation_before_any_goal(
     run_harness(router, body, transport=transport)
 
 
+@BRIDGE_ONLY
 @pytest.mark.parametrize(
     ("fault", "problem"),
     [
@@ -247,6 +256,7 @@ def test_a_cancelled_goal_the_robot_keeps_is_named_in_the_result(
     run_harness(router, body, transport=transport)
 
 
+@BRIDGE_ONLY
 def test_a_result_lost_once_is_asked_again(
     router: str, start: Start, transport: TransportKind
 ) -> None:
@@ -260,6 +270,7 @@ def test_a_result_lost_once_is_asked_again(
     run_harness(router, body, transport=transport)
 
 
+@BRIDGE_ONLY
 def test_a_result_that_never_comes_cancels_the_goal_before_failing(
     router: str, start: Start, transport: TransportKind
 ) -> None:
@@ -280,6 +291,7 @@ def test_a_result_that_never_comes_cancels_the_goal_before_failing(
     run_harness(router, body, transport=transport)
 
 
+@BRIDGE_ONLY
 @pytest.mark.parametrize(
     ("distro", "message"),
     [

@@ -28,6 +28,7 @@ import logging
 import struct
 import threading
 import time
+import weakref
 from collections.abc import Awaitable, Callable
 from dataclasses import dataclass
 from typing import TypeVar
@@ -95,6 +96,10 @@ class _Entity:
         return Attachment(next(self._sequence), time.time_ns(), self.gid).encode()
 
 
+_IDS: weakref.WeakKeyDictionary[Bus, itertools.count[int]] = weakref.WeakKeyDictionary()
+"""Node and entity ids, one counter per Zenoh session as rmw_zenoh keeps one per context:
+the graph tells nodes apart by (session, node id)."""
+
 _KINDS = {
     RmwKind.PUBLISHER: Role.PUBLISHER,
     RmwKind.SUBSCRIBER: Role.SUBSCRIBER,
@@ -124,7 +129,7 @@ class RmwZenohTransport(RobotTransport):
         """The robot's distribution as configured, or as its tokens' hashes say; None until
         known (Jazzy's hashes are sent meanwhile)."""
         self._zid = str(bus.session.zid())
-        self._ids = itertools.count()
+        self._ids = _IDS.setdefault(bus, itertools.count())
         self._node_id = next(self._ids)
         self._entities: dict[tuple[RmwKind, str, str], _Entity] = {}
         self._lock = threading.Lock()
