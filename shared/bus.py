@@ -534,6 +534,27 @@ class Bus:
         )
         return self._undeclare_once(subscriber)
 
+    def watch_heard(self, key: str, handler: Callable[[bool], None]) -> Callable[[], None]:
+        """Call `handler(heard)` on the loop as someone starts and stops subscribing to
+        `key` (a relay that works only while it is listened to), and now; until the bus
+        closes or the returned function ends the watch."""
+        publisher = self._session.declare_publisher(key)
+
+        def on_status(status: zenoh.MatchingStatus) -> None:
+            self._call_soon(handler, status.matching)
+
+        stop_publishing = self._undeclare_once(publisher)
+        listener = publisher.declare_matching_listener(_direct(on_status))
+        stop_listening = self._undeclare_once(listener)  # closed first: it lives in the publisher
+        now: Any = publisher.matching_status
+        self._call_soon(handler, now.matching)
+
+        def stop() -> None:
+            stop_listening()
+            stop_publishing()
+
+        return stop
+
     def watch_served(self, key: str, handler: Callable[[bool], None]) -> None:
         """Call `handler(served)` on the loop as a service answering queries on `key`
         becomes reachable through the router, and as it goes. A token says a process is

@@ -140,6 +140,11 @@ class RobotKeys:
         """The robot's pose from odometry, published by its executor."""
         return f"{self.prefix}/robot/pose"
 
+    @property
+    def map(self) -> str:
+        """The robot's own map, relayed by its executor while someone listens."""
+        return f"{self.prefix}/robot/map"
+
     def label(self, label: str) -> str:
         """Liveliness token of one order label an executor of this robot serves."""
         return f"{self.prefix}/labels/{check_chunk(label, 'label') if label != ANY else ANY}"
@@ -173,6 +178,11 @@ class ConverterKeys:
     def status(self) -> str:
         """Whether the orders files loaded; published on every (re)load."""
         return f"{ROOT}/converter/status"
+
+    @property
+    def places(self) -> str:
+        """The named places of the orders; published on every (re)load."""
+        return f"{ROOT}/converter/places"
 
     @property
     def all_transcripts(self) -> str:
@@ -222,10 +232,12 @@ class RobotNames:
     camera_name: str = "camera/image_raw"
     navigate_name: str = "navigate_to_pose"
     """Nav2's NavigateToPose action."""
+    map_name: str = "map"
+    """The occupancy grid a Nav2 robot's map server publishes."""
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "namespace", check_ros_name(self.namespace, "ROS namespace"))
-        for field in ("cmd_vel_name", "odom_name", "camera_name", "navigate_name"):
+        for field in ("cmd_vel_name", "odom_name", "camera_name", "navigate_name", "map_name"):
             name = check_ros_name(getattr(self, field), field.removesuffix("_name") + " name")
             if not name:
                 raise ValueError(f"{field.removesuffix('_name')} name must not be empty")
@@ -251,6 +263,10 @@ class RobotNames:
     @property
     def camera_image(self) -> str:
         return self.topic(self.camera_name)
+
+    @property
+    def map(self) -> str:
+        return self.topic(self.map_name)
 
     @property
     def simulator(self) -> str:

@@ -256,6 +256,25 @@ class OrdersStatus(Message):
     """How many orders are loaded (the previous set when the reload failed)."""
 
 
+class Place(Data):
+    """A named place of the orders ('kitchen'): where one of them takes the robot on the map."""
+
+    name: str
+    """The case's name ('kitchen'), or the order's when it has no cases."""
+    phrase: str
+    """Words that make the order ('reach kitchen'): what a click on the place stages."""
+    description: str
+    """The order's description ('reach kitchen')."""
+    pose: TargetPose
+    """Where it is, in the 'map' frame."""
+
+
+class Places(Message):
+    """Every named place of the loaded orders, published on every (re)load."""
+
+    places: list[Place] = msgspec.field(default_factory=list)
+
+
 # --- robot ------------------------------------------------------------------------------------
 
 
@@ -274,6 +293,22 @@ class ExecutorInfo(Message):
     cmd_vel_type: CmdVelType = CmdVelType.TWIST
     navigate: str = "navigate_to_pose"
     """The NavigateToPose action's name."""
+
+
+class RobotMap(Message):
+    """The robot's own map (a Nav2 robot's occupancy grid), relayed by its executor while a
+    panel shows it, at most every few seconds."""
+
+    width: int
+    """Cells; the image is `width` x `height` pixels."""
+    height: int
+    resolution: float
+    """Metres per cell."""
+    origin: TargetPose
+    """Where the cell (0, 0) corner is, in the map's frame."""
+    png: str
+    """The grid as a base64 8-bit grey PNG, row 0 at the origin: 0 occupied, 254 free,
+    205 unknown (map_server's colours)."""
 
 
 class RobotPose(Message):

@@ -78,6 +78,7 @@ def add_robot_arguments(parser: argparse.ArgumentParser, detect: bool) -> None:
         ("--odom", names.odom_name, "odometry topic"),
         ("--camera", names.camera_name, "camera topic"),
         ("--navigate", names.navigate_name, "Nav2 NavigateToPose action"),
+        ("--map", names.map_name, "occupancy grid (a Nav2 robot's map)"),
     ):
         group.add_argument(
             flag,
@@ -111,6 +112,7 @@ def robot_options(args: argparse.Namespace) -> RobotOptions:
             odom_name=args.odom,
             camera_name=args.camera,
             navigate_name=args.navigate,
+            map_name=args.map,
         ),
         transport=chosen(TransportKind, args.transport),
         domain_id=args.domain_id,

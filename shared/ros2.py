@@ -176,6 +176,18 @@ class CompressedImage(NamedTuple):
 
 
 # Bytes per pixel of the encodings `Ros2Codec.image` writes.
+class OccupancyGrid(NamedTuple):
+    """A map: `width` x `height` cells of `resolution` metres, row 0 at `origin`, each -1
+    (unknown) or 0 (free) to 100 (occupied), as int8 bytes row by row."""
+
+    width: int
+    height: int
+    resolution: float
+    origin: Pose2D
+    cells: bytes
+    frame: str = "map"
+
+
 IMAGE_ENCODINGS = {"rgb8": 3, "bgr8": 3, "rgba8": 4, "bgra8": 4, "mono8": 1, "mono16": 2}
 
 _STORES = {RosDistro.HUMBLE: Stores.ROS2_HUMBLE, RosDistro.JAZZY: Stores.ROS2_JAZZY}
@@ -674,6 +686,40 @@ class Ros2Codec:
     def read_compressed_image(self, raw: bytes) -> CompressedImage:
         msg = self._decode(raw, "sensor_msgs/msg/CompressedImage")
         return CompressedImage(format=str(msg.format), data=bytes(msg.data))
+
+    # --- nav_msgs/msg/OccupancyGrid -------------------------------------------------------
+
+    def occupancy_grid(self, grid: OccupancyGrid, stamp_s: float = 0.0) -> bytes:
+        t = self._types
+        info = t["nav_msgs/msg/MapMetaData"](
+            map_load_time=self._time(stamp_s),
+            resolution=grid.resolution,
+            width=grid.width,
+            height=grid.height,
+            origin=self._pose(grid.origin),
+        )
+        msg = t["nav_msgs/msg/OccupancyGrid"](
+            header=self._header(stamp_s, grid.frame),
+            info=info,
+            data=np.frombuffer(grid.cells, dtype=np.int8),
+        )
+        return self._encode(msg, "nav_msgs/msg/OccupancyGrid")
+
+    def read_occupancy_grid(self, raw: bytes) -> OccupancyGrid:
+        msg = self._decode(raw, "nav_msgs/msg/OccupancyGrid")
+        info = msg.info
+        width, height = int(info.width), int(info.height)
+        cells = bytes(np.asarray(msg.data, dtype=np.int8).tobytes())
+        if len(cells) != width * height:
+            raise CdrError(f"an occupancy grid of {width}x{height} cells carries {len(cells)}")
+        return OccupancyGrid(
+            width=width,
+            height=height,
+            resolution=float(info.resolution),
+            origin=_pose2d(info.origin),
+            cells=cells,
+            frame=str(msg.header.frame_id),
+        )
 
     # --- helpers ------------------------------------------------------------------------
 

@@ -129,7 +129,7 @@ def test_log_in_type_stage_edit_suggest_send_and_watch(stack: Stack, tmp_path: P
         expect(history.nth(0)).to_contain_text("succeeded")
         expect(history.nth(1)).to_contain_text("turn left")
         expect(history.nth(1)).to_contain_text("succeeded")
-        expect(page.locator("#pose")).to_contain_text("x 3.00")
+        expect(page.locator("#pose")).to_contain_text("x 3.0 m")
 
         # a reload keeps the login and shows the history at once
         page.reload()

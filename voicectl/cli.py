@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import datetime
 import importlib
 import sys
 from pathlib import Path
@@ -412,14 +413,29 @@ async def _say(args: argparse.Namespace) -> int:
         print(f"voicectl say: {exc}", file=sys.stderr)
         return 3
     result = said.result
-    _print_json({"orders": result.orders, "errors": result.errors, "order_ids": said.order_ids})
+    # What went to the robot is under "orders"; what was understood and held back is not
+    # printed as if it had been sent.
+    sent = bool(said.order_ids)
+    _print_json(
+        {
+            "submitted": sent,
+            "orders": result.orders if sent else [],
+            "not_sent": [] if sent else result.orders,
+            "errors": result.errors,
+            "order_ids": said.order_ids,
+        }
+    )
     for error in result.errors:
-        print(f"voicectl say: {error.text!r}: {error.reason}", file=sys.stderr)
-    if result.errors and not args.partial:
+        maybe = [c for c in error.candidates if "/" not in c]  # phrases, not order names
+        hint = f"; did you mean: {' or '.join(maybe)}?" if maybe else ""
+        print(f"voicectl say: {error.text!r}: {error.reason}{hint}", file=sys.stderr)
+    if result.errors and not args.partial and result.orders:
         print(
             "voicectl say: nothing submitted (--partial submits what was understood)",
             file=sys.stderr,
         )
+    elif not sent:
+        print("voicectl say: nothing submitted", file=sys.stderr)
     return 0 if result.orders and not result.errors else 1
 
 
@@ -436,10 +452,34 @@ async def _ask_supervisor(args: argparse.Namespace, request: Message) -> int:
         return 3
     match reply:
         case StateReply(state=state):
-            _print_json(state)
+            _print_json(_with_times(state))
         case _:
-            _print_json(reply)
+            _print_json(_with_times(reply))
     return 0
+
+
+def _with_times(message: object) -> object:
+    """`message` as JSON, every `..._at` epoch time followed by its ISO 8601 reading
+    (`ended_at_iso`, local time with its offset): the epoch for scripts, the date for
+    people."""
+
+    def add(value: object) -> object:
+        if isinstance(value, dict):
+            out: dict[str, object] = {}
+            for key, item in value.items():
+                out[key] = add(item)
+                if key.endswith("_at") and isinstance(item, int | float):
+                    out[f"{key}_iso"] = (
+                        datetime.datetime.fromtimestamp(item)
+                        .astimezone()
+                        .isoformat(timespec="seconds")
+                    )
+            return out
+        if isinstance(value, list):
+            return [add(item) for item in value]
+        return value
+
+    return add(msgspec.to_builtins(message))
 
 
 async def _stop(args: argparse.Namespace) -> int:

@@ -21,6 +21,7 @@ from shared.messages import (
     ParseError,
     ParseReply,
     ParseRequest,
+    Places,
     Proposal,
     Transcript,
     excerpt,
@@ -29,6 +30,7 @@ from shared.messages import (
 from .grammar import build_grammar
 from .orders import OrderSet, OrdersInvalid
 from .parser import Parser
+from .places import places_of
 from .watch import Signature, signature
 
 _LOGGER = logging.getLogger(__name__)
@@ -83,6 +85,7 @@ class ConverterService:
         self._closers = contextlib.ExitStack()
         self._grammar: Latest | None = None
         self._status: Latest | None = None
+        self._places: Latest | None = None
 
     @property
     def loaded(self) -> Loaded:
@@ -94,6 +97,9 @@ class ConverterService:
         )
         self._status = self._closers.enter_context(
             contextlib.closing(self._bus.latest(self._keys.status))
+        )
+        self._places = self._closers.enter_context(
+            contextlib.closing(self._bus.latest(self._keys.places))
         )
         self._bus.serve(self._keys.parse, json_decoder(ConverterRequest), self._on_request)
         self._bus.subscribe(
@@ -144,7 +150,9 @@ class ConverterService:
     def _publish_loaded(self) -> None:
         orders = self._loaded.orders
         assert self._grammar is not None, "publishing before the service started"
+        assert self._places is not None
         self._grammar.publish(self._loaded.grammar)
+        self._places.publish(Places(places=places_of(orders)))
         self._publish_status(
             OrdersStatus(ok=True, sources=list(orders.sources), orders=len(orders.orders))
         )

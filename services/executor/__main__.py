@@ -18,7 +18,7 @@ from shared.robot_options import add_robot_arguments, robot_options
 
 from .builtin import builtin_executors
 from .framework import BindingError, Bindings, load_binding, load_bindings_file
-from .robot import RESULT_GRACE, PoseRelay, RobotLink
+from .robot import RESULT_GRACE, MapRelay, PoseRelay, RobotLink
 from .runner import STALL_LIMIT, ExecutorService
 
 _LOGGER = logging.getLogger(__name__)
@@ -113,6 +113,7 @@ def executor_service(
         result_grace=args.result_grace,
     )
     PoseRelay(bus, RobotKeys(args.robot).pose, robot)
+    MapRelay(bus, RobotKeys(args.robot).map, robot)
     service = ExecutorService(
         bus,
         RobotKeys(args.robot),

@@ -11,16 +11,21 @@ never move the robot again. `PoseRelay` publishes the pose for voicectl's own pa
 from __future__ import annotations
 
 import asyncio
+import base64
 import contextlib
+import io
 import logging
 import time
 from collections.abc import Callable
+
+import numpy as np
+from PIL import Image as PilImage
 
 from shared.bus import Bus
 from shared.errors import BusError, OrderFailed
 from shared.geometry import compose
 from shared.keys import RobotNames
-from shared.messages import RobotPose, TargetPose
+from shared.messages import RobotMap, RobotPose, TargetPose
 from shared.robot import Interface, RobotTransport, Role
 from shared.robot.stop import RobotStop
 from shared.robot_options import RobotOptions
@@ -37,6 +42,7 @@ from shared.ros2 import (
     Image,
     NavigateFeedback,
     NavigateResult,
+    OccupancyGrid,
     Odometry,
     Pose2D,
     Ros2Codec,
@@ -49,6 +55,9 @@ _LOGGER = logging.getLogger(__name__)
 
 POSE_EVERY = 0.5
 """Seconds between two poses published for panels."""
+MAP_EVERY = 2.0
+"""Seconds between two maps relayed for panels (a SLAM map changes about once a second)."""
+OCCUPANCY_GRID = "nav_msgs/msg/OccupancyGrid"
 SEND_GOAL_TIMEOUT = 10.0
 RESULT_TIMEOUT = 24 * 3600.0
 """get_result answers when navigation ends, which can take as long as the robot needs."""
@@ -529,3 +538,64 @@ class PoseRelay:
             self._bus.publish(
                 self._key, RobotPose(x=pose.x, y=pose.y, yaw=pose.yaw), superseded=True
             )
+
+
+class MapRelay:
+    """The robot's own map for voicectl's panels (`voice/<robot>/robot/map`): its occupancy
+    grid, subscribed on the robot only while someone listens to the relay (a map crosses
+    the robot's link only for a panel that shows it), at most every `MAP_EVERY` seconds,
+    as a PNG, kept for panels that open later."""
+
+    def __init__(self, bus: Bus, key: str, link: RobotLink) -> None:
+        self._link = link
+        self._latest = bus.latest(key)
+        self._unsubscribe: Callable[[], None] | None = None
+        self._sent = -MAP_EVERY
+        self._encoding: asyncio.Task[None] | None = None
+        bus.watch_heard(key, self._on_heard)
+
+    def _on_heard(self, heard: bool) -> None:
+        if heard and self._unsubscribe is None:
+            link = self._link
+            self._unsubscribe = link.transport.subscribe(
+                link.names.map,
+                OCCUPANCY_GRID,
+                link.codec.read_occupancy_grid,
+                self._on_map,
+                latched=True,
+            )
+        elif not heard and self._unsubscribe is not None:
+            self._unsubscribe()
+            self._unsubscribe = None
+
+    def _on_map(self, grid: OccupancyGrid) -> None:
+        loop = asyncio.get_running_loop()
+        busy = self._encoding is not None and not self._encoding.done()
+        if busy or loop.time() - self._sent < MAP_EVERY:
+            return
+        self._sent = loop.time()
+        self._encoding = loop.create_task(self._relay(grid))
+
+    async def _relay(self, grid: OccupancyGrid) -> None:
+        png = await asyncio.to_thread(map_png, grid)  # a large map takes a while
+        origin = TargetPose(frame=grid.frame, x=grid.origin.x, y=grid.origin.y, yaw=grid.origin.yaw)
+        self._latest.publish(
+            RobotMap(
+                width=grid.width,
+                height=grid.height,
+                resolution=grid.resolution,
+                origin=origin,
+                png=base64.b64encode(png).decode(),
+            )
+        )
+
+
+def map_png(grid: OccupancyGrid) -> bytes:
+    """An occupancy grid as an 8-bit grey PNG in map_server's colours: occupied black (0),
+    free white (254), unknown grey (205), and shades between; row 0 first."""
+    cells = np.frombuffer(grid.cells, dtype=np.int8).astype(np.int16)
+    grey = np.where(cells < 0, 205, 254 - np.clip(cells, 0, 100) * 254 // 100).astype(np.uint8)
+    image = PilImage.fromarray(grey.reshape(grid.height, grid.width), mode="L")
+    encoded = io.BytesIO()
+    image.save(encoded, format="PNG", optimize=True)
+    return encoded.getvalue()

@@ -6,7 +6,8 @@ ros2dds exposes a robot, or as a robot whose nodes run on rmw_zenoh, with the sa
 
 - ``cmd_vel`` (geometry_msgs/Twist, or TwistStamped) in; ``odom`` (nav_msgs/Odometry) out
   at 20 Hz; ``camera/image_raw`` (sensor_msgs/Image, 64x48 rgb8, or a JPEG
-  CompressedImage) out at 2 Hz; every name can be remapped;
+  CompressedImage) out at 2 Hz; ``map`` (nav_msgs/OccupancyGrid, its world's walls,
+  `world.py`) every 2 s; every name can be remapped;
 - ``navigate_to_pose/_action/{send_goal,get_result,cancel_goal}`` queryables and
   ``.../{feedback,status}`` publications, behaving like Nav2's bt_navigator;
 - a liveliness token per interface, as the bridge or rmw_zenoh announces it, naming its
@@ -70,6 +71,7 @@ from shared.ros2 import (
 )
 
 from .robot import Bounds, GoToPose, Limits, Robot
+from .world import floor_plan
 
 _LOGGER = logging.getLogger(__name__)
 
@@ -79,6 +81,9 @@ FEEDBACK_EVERY = 2
 """Ticks between feedback messages: 10 Hz."""
 CAMERA_EVERY = 10
 """Ticks between camera frames: 2 Hz."""
+MAP_EVERY = 40
+"""Ticks between two publications of the map: every 2 s (a map server publishes once and
+latches it; publishing again lets whoever subscribes late have it too)."""
 CAMERA_SIZE = (64, 48)
 HISTORY = 16
 """Finished goals remembered for get_result and status."""
@@ -93,6 +98,7 @@ ABORT_CODE = 105
 ODOMETRY = "nav_msgs/msg/Odometry"
 TF = "tf2_msgs/msg/TFMessage"
 STATUS = "action_msgs/msg/GoalStatusArray"
+OCCUPANCY_GRID = "nav_msgs/msg/OccupancyGrid"
 
 
 class SimFault(enum.StrEnum):
@@ -163,6 +169,7 @@ class SimNode:
         self._clock = clock
         self._epoch = clock()
         self._robot = Robot(config.limits)
+        self._map = codec.occupancy_grid(floor_plan(config.bounds))
         self._active: _Goal | None = None
         self._finished: collections.deque[_Goal] = collections.deque(maxlen=HISTORY)
         self._waiting = 0
@@ -191,6 +198,7 @@ class SimNode:
             Interface(Role.PUBLISHER, names.odom, ODOMETRY),
             Interface(Role.PUBLISHER, names.tf, TF),
             Interface(Role.PUBLISHER, names.camera_image, self._config.camera_type.ros_type),
+            Interface(Role.PUBLISHER, names.map, OCCUPANCY_GRID),
             Interface(Role.ACTION_SERVER, names.topic(names.navigate_name), NAVIGATE_TO_POSE),
         ):
             transport.offer(interface)
@@ -302,6 +310,8 @@ class SimNode:
         if tick % CAMERA_EVERY == 0:
             camera = self._config.camera_type.ros_type
             transport.publish(names.camera_image, camera, self._camera_message(stamp))
+        if tick % MAP_EVERY == 0:
+            transport.publish(names.map, OCCUPANCY_GRID, self._map)
 
     def _publish_status(self) -> None:
         goals = [*self._finished, *([self._active] if self._active else [])]

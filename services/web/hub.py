@@ -2,7 +2,9 @@
 
 One subscription per kind of message covers every robot (`voice/*/...`); each browser
 listens to the robot it selected. New listeners get the last state, recogniser status,
-pose and parts at once, so a reloaded page is whole without asking.
+pose, parts and the orders' places at once, so a reloaded page is whole without asking.
+A robot's own map is subscribed to only while a browser listens to that robot: its
+executor relays the map only while someone does.
 """
 
 from __future__ import annotations
@@ -10,7 +12,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import logging
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 
 import msgspec
 
@@ -18,7 +20,9 @@ from shared.bus import Bus, json_decoder
 from shared.keys import ANY, ConverterKeys, RobotKeys, last_chunk, robot_of
 from shared.messages import (
     PartialTranscript,
+    Places,
     Proposal,
+    RobotMap,
     RobotPose,
     StateUpdate,
     SttStatus,
@@ -55,7 +59,7 @@ class Labels(msgspec.Struct, tag="labels", tag_field="type"):
     labels: list[str]
 
 
-Event = StateUpdate | Proposal | PartialTranscript | Transcript | SttStatus | RobotPose
+Event = StateUpdate | Proposal | PartialTranscript | Transcript | SttStatus | RobotPose | RobotMap
 
 
 class Hub:
@@ -73,6 +77,10 @@ class Hub:
         self._posed: dict[str, float] = {}
         self._labels: dict[str, set[str]] = {}
         """Per robot, the labels its executors announce."""
+        self._places = b""
+        """The last places of the orders, as a frame."""
+        self._maps: dict[str, Callable[[], None]] = {}
+        """Per robot listened to, the end of its map subscription."""
         self._encoder = msgspec.json.Encoder()
 
     def start(self) -> None:
@@ -86,6 +94,9 @@ class Hub:
             (every.pose, RobotPose),
         ):
             self._bus.subscribe(key, json_decoder(kind), self._on_event, history=kind is SttStatus)
+        self._bus.subscribe(
+            ConverterKeys().places, json_decoder(Places), self._on_places, history=True
+        )
         self._bus.watch(ConverterKeys().alive, self._on_converter)
         self._bus.watch(every.alive(ANY), self._on_alive)
         self._bus.watch(every.label(ANY), self._on_label)
@@ -129,11 +140,20 @@ class Hub:
         queue.put_nowait(self._frame(self.parts(robot)))
         queue.put_nowait(self._frame(Robots(robots=self.robots)))
         queue.put_nowait(self._frame(self.labels(robot)))
-        self._listeners.setdefault(robot, set()).add(queue)
+        if self._places:
+            queue.put_nowait(self._places)
+        listeners = self._listeners.setdefault(robot, set())
+        listeners.add(queue)
+        if robot not in self._maps:
+            self._maps[robot] = self._bus.subscribe(
+                RobotKeys(robot).map, json_decoder(RobotMap), self._on_event, history=True
+            )
         try:
             yield queue
         finally:
-            self._listeners[robot].discard(queue)
+            listeners.discard(queue)
+            if not listeners and robot in self._maps:
+                self._maps.pop(robot)()
 
     def _frame(self, message: object) -> bytes:
         return b"data: " + self._encoder.encode(message) + b"\n\n"
@@ -150,6 +170,8 @@ class Hub:
         match message:
             case StateUpdate() | SttStatus():
                 self._last.setdefault(robot, {})[type(message).__name__] = frame
+            case RobotMap():
+                self._last.setdefault(robot, {})["map"] = frame
             case RobotPose():
                 self._last.setdefault(robot, {})["pose"] = frame
                 fresh = robot not in self._posed
@@ -157,6 +179,12 @@ class Hub:
                 if fresh:
                     self._send_parts(robot)
         self._send(robot, frame)
+
+    def _on_places(self, _key: str, places: Places) -> None:
+        self._places = self._frame(places)
+        for listeners in self._listeners.values():
+            for queue in listeners:
+                queue.put_nowait(self._places)
 
     def labels(self, robot: str) -> Labels:
         return Labels(robot=robot, labels=sorted(self._labels.get(robot, ())))

@@ -40,9 +40,16 @@ class BridgeTransport(RobotTransport):
         self._bus.publish_bytes(name, payload, urgent=urgent)
 
     def subscribe(
-        self, name: str, ros_type: str, decode: Callable[[bytes], T], handler: Callable[[T], None]
+        self,
+        name: str,
+        ros_type: str,
+        decode: Callable[[bytes], T],
+        handler: Callable[[T], None],
+        latched: bool = False,
     ) -> Callable[[], None]:
-        return self._bus.subscribe(name, decode, lambda _key, message: handler(message))
+        return self._bus.subscribe(
+            name, decode, lambda _key, message: handler(message), history=latched
+        )
 
     async def call(
         self, name: str, service_type: str, request: bytes, timeout: float, urgent: bool = False

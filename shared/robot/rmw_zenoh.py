@@ -185,11 +185,20 @@ class RmwZenohTransport(RobotTransport):
         )
 
     def subscribe(
-        self, name: str, ros_type: str, decode: Callable[[bytes], T], handler: Callable[[T], None]
+        self,
+        name: str,
+        ros_type: str,
+        decode: Callable[[bytes], T],
+        handler: Callable[[T], None],
+        latched: bool = False,
     ) -> Callable[[], None]:
+        # A transient local publisher of rmw_zenoh is Zenoh's advanced publisher with a
+        # cache: a subscriber with history gets what it keeps.
         self.entity(RmwKind.SUBSCRIBER, name, ros_type)
         key = self._any_hash(name, ros_type)
-        return self._bus.subscribe(key, decode, lambda _key, message: handler(message))
+        return self._bus.subscribe(
+            key, decode, lambda _key, message: handler(message), history=latched
+        )
 
     async def call(
         self, name: str, service_type: str, request: bytes, timeout: float, urgent: bool = False

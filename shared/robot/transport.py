@@ -63,10 +63,16 @@ class RobotTransport(abc.ABC):
 
     @abc.abstractmethod
     def subscribe(
-        self, name: str, ros_type: str, decode: Callable[[bytes], T], handler: Callable[[T], None]
+        self,
+        name: str,
+        ros_type: str,
+        decode: Callable[[bytes], T],
+        handler: Callable[[T], None],
+        latched: bool = False,
     ) -> Callable[[], None]:
         """Call `handler(message)` on the loop for every sample on a topic that decodes;
-        returns the function that ends the subscription."""
+        returns the function that ends the subscription. A `latched` topic (ROS's
+        transient local: a map) also gives what its publishers keep for late subscribers."""
 
     @abc.abstractmethod
     async def call(

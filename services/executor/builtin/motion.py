@@ -57,7 +57,10 @@ class Drive(Executor):
 
         def command(velocity: float, remaining: float) -> None:
             ctx.robot.drive(velocity, 0.0)
-            ctx.progress(f"{abs(remaining):.2f} m to go", distance_linear=abs(remaining))
+            done = 100.0 * (1.0 - abs(remaining) / abs(distance)) if distance else None
+            ctx.progress(
+                f"{abs(remaining):.1f} m to go", distance_linear=abs(remaining), percent=done
+            )
 
         await _close_loop(ctx, distance, travelled, command, speed, gain=1.5, tolerance=0.02)
         return f"drove {distance:g} m"
@@ -77,10 +80,16 @@ class Rotate(Executor):
 
         def command(velocity: float, remaining: float) -> None:
             ctx.robot.drive(0.0, velocity)
-            ctx.progress(f"{abs(remaining):.2f} rad to go", distance_angular=abs(remaining))
+            done = 100.0 * (1.0 - abs(remaining) / abs(angle)) if angle else None
+            ctx.progress(
+                f"{math.degrees(abs(remaining)):.0f}° to turn",
+                distance_angular=abs(remaining),
+                percent=done,
+            )
 
         await _close_loop(ctx, angle, turned.update, command, speed, gain=2.0, tolerance=0.02)
-        return f"turned {angle:g} rad"
+        side = "left" if angle > 0 else "right"
+        return f"turned {side} {math.degrees(abs(angle)):.0f}° ({angle:g} rad)"
 
 
 async def _close_loop(

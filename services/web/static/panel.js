@@ -23,7 +23,15 @@ const view = {
   historyOffset: 0,
   events: null, // AbortController of the event stream
   mic: null, // the open microphone, see startMic
+  pose: null, // the robot's last pose
+  trail: [], // its recent poses
+  places: [], // the named places of the orders
+  map: null, // the robot's own map, when it has one
+  startedAt: {}, // order id -> the pose where it started (a relative goal is from there)
+  drawing: false,
 };
+const TRAIL = 300;
+const PART_NAMES = { converter: "orders", stt: "speech", supervisor: "queue", executor: "executor", robot: "odometry" };
 
 // --- helpers -----------------------------------------------------------------------------------
 
@@ -77,7 +85,29 @@ function showLogin(why) {
   $("login").hidden = false;
   stopMic();
   if (view.events) view.events.abort();
+  showConnected("not connected");
   setStatus(why || "");
+}
+
+function showConnected(trouble) {
+  // A panel that cannot reach voicectl must not look live: it says so. Without a token
+  // STOP cannot work from here and says why; while the stream reconnects it stays armed
+  // (the stop request may still get through).
+  const badge = $("connection");
+  badge.textContent = trouble || "connected";
+  badge.className = `badge ${trouble ? "offline" : "online"}`;
+  const loggedOut = trouble === "not connected";
+  $("stop").disabled = loggedOut;
+  $("stop").title = loggedOut ? "Not connected: this panel cannot stop the robot (use voicectl stop)"
+    : "Emergency stop: halt now and clear the queue";
+  $("mic").disabled = Boolean(trouble);
+  if (trouble) {
+    $("current").textContent = trouble;
+    $("current").className = "muted";
+    $("parts").replaceChildren();
+  } else if (!view.state) {
+    $("current").textContent = "waiting for the queue's state";
+  }
 }
 
 async function start() {
@@ -116,7 +146,7 @@ function showRobots(robots) {
 
 function showParts(parts) {
   $("parts").replaceChildren(...Object.entries(parts).map(([name, alive]) => {
-    const item = el("li", name, `badge ${alive ? "online" : "offline"}`);
+    const item = el("li", PART_NAMES[name] || name, `badge ${alive ? "online" : "offline"}`);
     item.title = `${name} ${alive ? "online" : "offline"}`;
     item.dataset.part = name;
     return item;
@@ -136,7 +166,44 @@ function showStt(status) {
 
 function showPose(pose) {
   const degrees = Math.round((pose.yaw * 180) / Math.PI);
-  $("pose").textContent = `x ${pose.x.toFixed(2)}  y ${pose.y.toFixed(2)}  ${degrees}°`;
+  $("pose").textContent = `x ${pose.x.toFixed(1)} m, y ${pose.y.toFixed(1)} m, facing ${degrees}°`;
+  view.pose = { x: pose.x, y: pose.y, yaw: pose.yaw };
+  const last = view.trail[view.trail.length - 1];
+  if (!last || Math.hypot(last.x - pose.x, last.y - pose.y) > 0.02) view.trail.push(view.pose);
+  if (view.trail.length > TRAIL) view.trail.splice(0, view.trail.length - TRAIL);
+  redraw();
+}
+
+// --- the map -----------------------------------------------------------------------------------
+
+function redraw() {
+  if (view.drawing) return; // once per frame, however many updates arrive
+  view.drawing = true;
+  requestAnimationFrame(() => {
+    view.drawing = false;
+    window.voicectlMap.draw($("map"), scene(), (place) => addText(place.phrase));
+  });
+}
+
+function scene() {
+  // Where the robot will go: the running order from where it started, then the queue, then
+  // what is staged, each from where the one before ends.
+  const steps = [];
+  let at = view.pose;
+  const state = view.state;
+  const chain = (orders, kind, from) => {
+    const planned = window.voicectlMap.plan(from, orders);
+    for (const step of planned) {
+      steps.push({ ...step, kind, running: kind === "running" });
+      if (step.to) at = step.to;
+    }
+  };
+  if (state && state.current) {
+    chain([state.current.order], "running", view.startedAt[state.current.id] || view.pose);
+  }
+  if (state) chain(state.queue.map((record) => record.order), "queued", at);
+  chain(view.staged.map((item) => item.order), "staged", at);
+  return { pose: view.pose, trail: view.trail, places: view.places, steps, map: view.map };
 }
 
 // --- the live stream ---------------------------------------------------------------------------
@@ -155,6 +222,7 @@ async function listen() {
       });
       if (response.status === 401) { showLogin("wrong or missing token"); return; }
       if (!response.ok) throw new Error((await response.json()).error || response.statusText);
+      showConnected("");
       const reader = response.body.getReader();
       const decoder = new TextDecoder();
       let buffer = "";
@@ -172,6 +240,7 @@ async function listen() {
       }
     } catch (error) {
       if (controller.signal.aborted) return;
+      showConnected("reconnecting");
       setStatus(`connection lost (${error.message}); retrying`);
     }
     await new Promise((resolve) => setTimeout(resolve, 1000));
@@ -186,6 +255,8 @@ function handle(message) {
     case "robots": showRobots(message.robots); break;
     case "labels": if (message.robot === view.robot) { view.labels = message.labels; showStaged(); } break;
     case "robotpose": showPose(message); break;
+    case "places": view.places = message.places; redraw(); break;
+    case "robotmap": view.map = message; redraw(); break;
     case "sttstatus": showStt(message); break;
     case "partialtranscript": if (mine) showHeard(message.text, "partial"); break;
     case "transcript":
@@ -397,6 +468,7 @@ function showStaged() {
   $("staged-empty").hidden = !empty;
   $("send").disabled = empty;
   $("clear").disabled = empty;
+  redraw();
 }
 
 function move(from, to, keepFocus) {
@@ -429,18 +501,14 @@ async function submit(items, requestId = newRequestId()) {
 // --- watching ---------------------------------------------------------------------------------
 
 function progressLine(progress) {
-  const parts = [];
-  if (progress.text) parts.push(progress.text);
-  if (progress.distance_linear !== null && progress.distance_linear !== undefined) {
-    parts.push(`${progress.distance_linear.toFixed(2)} m to go`);
+  // The executor's own words when it has any ("2.1 m to go"); the numbers otherwise.
+  if (progress.text) return progress.text;
+  const given = (value) => value !== null && value !== undefined;
+  if (given(progress.distance_linear)) return `${progress.distance_linear.toFixed(1)} m to go`;
+  if (given(progress.distance_angular)) {
+    return `${Math.round((progress.distance_angular * 180) / Math.PI)}° to turn`;
   }
-  if (progress.distance_angular !== null && progress.distance_angular !== undefined) {
-    parts.push(`${Math.round((progress.distance_angular * 180) / Math.PI)}° to turn`);
-  }
-  if (progress.percent !== null && progress.percent !== undefined) {
-    parts.push(`${Math.round(progress.percent)} %`);
-  }
-  return parts.join(" · ");
+  return given(progress.percent) ? `${Math.round(progress.percent)} % done` : "";
 }
 
 function queueLine(record, index, length) {
@@ -472,6 +540,7 @@ function showState(state) {
   $("resume").hidden = state.stopped || !state.paused;
   $("stop").classList.toggle("latched", state.stopped);
   const current = state.current;
+  if (current && !view.startedAt[current.id]) view.startedAt[current.id] = view.pose;
   if (current) {
     const box = el("div", undefined, "current");
     box.append(queueLine(current, -1, 0));
@@ -497,14 +566,16 @@ function showState(state) {
   const more = length - state.queue.length;
   if (more > 0) $("queue").append(el("li", `… and ${more} more`, "muted"));
   if (view.historyOffset === 0) showHistory(state.history, null);
+  redraw();
 }
 
 function showHistory(records, total) {
   $("history").replaceChildren(...records.map((record) => {
     const row = el("tr");
     const ended = record.ended_at ? new Date(record.ended_at * 1000).toLocaleString() : "";
-    row.append(el("td", record.order.description), el("td", record.status, record.status),
-      el("td", record.message), el("td", record.transcript, "muted"), el("td", ended, "muted"));
+    row.append(el("td", record.order.description, "what"), el("td", record.status, record.status),
+      el("td", record.message, "message"), el("td", record.transcript, "muted said"),
+      el("td", ended, "muted ended"));
     return row;
   }));
   const first = view.historyOffset + 1;

@@ -1,0 +1,143 @@
+"""The panel's map in a real headless Chromium against the real stack: the places of the
+orders, the robot and its trail, where staged and queued orders will take it, the
+simulator's own map, a click on a place; a phone-sized screen; a panel with no token.
+Screenshots go to test-artifacts/."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pytest
+
+from .conftest import REPO, Stack
+from .test_panel_browser import ARTIFACTS, CHROMIUM, CHROMIUM_FLAGS, login, panel, pytestmark
+
+__all__ = ["pytestmark"]  # the browser's marks and skip, as in test_panel_browser
+
+MAP_JS = REPO / "services" / "web" / "static" / "map.js"
+
+
+def test_the_map_shows_places_robot_and_where_orders_go_before_and_after_send(
+    stack: Stack, tmp_path: Path
+) -> None:
+    from playwright.sync_api import expect
+
+    with panel(stack, tmp_path / "profile") as page:
+        page.set_viewport_size({"width": 1280, "height": 900})
+        login(page, stack)
+        places = page.locator("#map .place")
+        expect(places).to_have_count(4)  # base, bathroom, kitchen, dumpster (orders/demo.yaml)
+        expect(places.filter(has_text="kitchen")).to_have_count(1)
+        expect(page.locator("#map .robot")).to_have_count(1)
+        # The simulator's occupancy grid, relayed by the executor while the panel shows it.
+        grid = page.locator("#map image.grid")
+        expect(grid).to_have_count(1, timeout=15_000)
+        assert grid.get_attribute("href").startswith("data:image/png;base64,")
+
+        # Before Send: the turn is drawn where the robot stands, the path to the kitchen
+        # from where the turn ends.
+        page.fill("#text", "turn left then reach the kitchen")
+        page.press("#text", "Enter")
+        staged = page.locator("#map .step.staged")
+        expect(staged).to_have_count(2)
+        assert [staged.nth(i).get_attribute("data-order") for i in range(2)] == [
+            "turn left",
+            "reach kitchen",
+        ]
+        path = staged.nth(1).locator("line")
+        assert float(path.get_attribute("x2")) == 3.0
+        assert float(path.get_attribute("y2")) == -5.0  # SVG's y points down
+        assert abs(float(path.get_attribute("x1"))) < 0.2  # from the turn's end, at base
+        ARTIFACTS.mkdir(exist_ok=True)
+        page.screenshot(path=str(ARTIFACTS / "map-staged.png"), full_page=True)
+
+        # A click on a place stages what saying it would.
+        places.filter(has_text="bathroom").click()
+        expect(page.locator("#staged li .what")).to_have_text(
+            ["turn left", "reach kitchen", "reach bathroom"]
+        )
+        expect(staged).to_have_count(3)
+
+        # After Send: the queue, the running order highlighted, the trail growing.
+        page.click("#send")
+        expect(page.locator("#map .step.running")).to_have_count(1)
+        trail = page.locator("#map .trail")
+        expect(trail).to_have_count(1)
+        before = len(trail.get_attribute("points").split())
+        page.wait_for_function(
+            f"document.querySelector('#map .trail').getAttribute('points').split(' ').length"
+            f" > {before + 1}"  # poses come twice a second; the robot drives 10x life
+        )
+        expect(page.locator("#current .progress-text")).to_contain_text(" to ")
+        page.screenshot(path=str(ARTIFACTS / "map-running.png"), full_page=True)
+        history = page.locator("#history tr")
+        expect(history.nth(0)).to_contain_text("reached bathroom", timeout=60_000)
+        expect(history.nth(2)).to_contain_text("turned left 90°")
+
+
+def test_on_a_phone_nothing_scrolls_sideways_and_stop_stays_in_reach(
+    stack: Stack, tmp_path: Path
+) -> None:
+    from playwright.sync_api import expect
+
+    with panel(stack, tmp_path / "profile") as page:
+        # Without a token the panel says it is not connected, and STOP says why it is off.
+        page.set_viewport_size({"width": 390, "height": 844})
+        page.goto(f"http://127.0.0.1:{stack.port}/")
+        expect(page.locator("#connection")).to_have_text("not connected")
+        expect(page.locator("#stop")).to_be_disabled()
+
+        login(page, stack)
+        expect(page.locator("#connection")).to_have_text("connected")
+        expect(page.locator("#stop")).to_be_enabled()
+        page.fill("#text", "turn left then turn right then wait two seconds")
+        page.press("#text", "Enter")
+        page.click("#send")
+        expect(page.locator("#history tr")).to_have_count(3, timeout=60_000)
+        assert page.evaluate("document.documentElement.scrollWidth") <= 390
+        page.evaluate("window.scrollTo(0, document.body.scrollHeight)")
+        stop = page.locator("#stop").bounding_box()
+        assert stop is not None
+        assert stop["y"] >= 0, stop
+        assert stop["y"] + stop["height"] <= 844, stop
+        page.screenshot(path=str(ARTIFACTS / "map-phone.png"), full_page=False)
+        page.screenshot(path=str(ARTIFACTS / "map-phone-full.png"), full_page=True)
+
+
+def test_where_chained_orders_take_the_robot(tmp_path: Path) -> None:
+    """The map's own arithmetic (map.js), run in Chromium: a relative order goes from where
+    the one before ends, an absolute one to its place, one without a pose nowhere."""
+    from playwright.sync_api import sync_playwright
+
+    with sync_playwright() as playwright:
+        browser = playwright.chromium.launch_persistent_context(
+            str(tmp_path / "profile"), executable_path=CHROMIUM, headless=True, args=CHROMIUM_FLAGS
+        )
+        try:
+            page = browser.new_page()
+            page.set_content("<svg id='map'></svg>")
+            page.add_script_tag(path=str(MAP_JS))
+            steps = page.evaluate(
+                """() => {
+                    const pose = (frame, x, y, yaw) => ({frame, x, y, yaw});
+                    return voicectlPlan({x: 1, y: 2, yaw: 0}, [
+                        {target_pose: pose("base_link", 0, 0, Math.PI / 2)},
+                        {target_pose: pose("base_link", 2, 0, 0)},
+                        {target_pose: pose("map", 3, 5, 1)},
+                        {target_pose: null},
+                        {target_pose: pose("base_link", -1, 0, 3.14)},
+                    ]);
+                }"""
+            )
+        finally:
+            browser.close()
+    ends = [step["to"] for step in steps]
+    assert ends[0] == {"x": 1, "y": 2, "yaw": math.pi / 2}
+    assert (round(ends[1]["x"], 9), round(ends[1]["y"], 9)) == (1.0, 4.0)
+    assert ends[2] == {"x": 3, "y": 5, "yaw": 1}
+    assert ends[3] is None
+    assert steps[4]["from"] == {"x": 3, "y": 5, "yaw": 1}  # the photo left it where it was
+    assert ends[4]["x"] == pytest.approx(3 - math.cos(1))
+    assert ends[4]["y"] == pytest.approx(5 - math.sin(1))
+    assert ends[4]["yaw"] == pytest.approx(1 + 3.14 - 2 * math.pi)  # kept in [-pi, pi)
