@@ -361,23 +361,25 @@ class RobotLink:
         if distro is RosDistro.HUMBLE and frame == ROBOT_FRAME:
             pose, frame = compose(await self.next_pose(), pose), ODOM_FRAME
         goal_id = new_goal_id()
-        try:
-            reply = await self.transport.call(
-                self.names.navigate("send_goal"),
-                NAVIGATE_SEND_GOAL,
-                codec.send_goal_request(goal_id, frame, pose),
-                SEND_GOAL_TIMEOUT,
-            )
-        except BusError as exc:
-            raise OrderFailed(f"navigation unavailable: {exc}") from exc
-        if not codec.read_send_goal_response(reply):
-            raise OrderFailed(
-                f"navigation rejected the goal ({target.frame} {target.x:g}, {target.y:g})"
-            )
         self._feedback[goal_id] = on_feedback
         try:
+            try:
+                reply = await self.transport.call(
+                    self.names.navigate("send_goal"),
+                    NAVIGATE_SEND_GOAL,
+                    codec.send_goal_request(goal_id, frame, pose),
+                    SEND_GOAL_TIMEOUT,
+                )
+            except BusError as exc:
+                raise OrderFailed(f"navigation unavailable: {exc}") from exc
+            if not codec.read_send_goal_response(reply):
+                raise OrderFailed(
+                    f"navigation rejected the goal ({target.frame} {target.x:g}, {target.y:g})"
+                )
             result = await self._result(goal_id, codec)
         except asyncio.CancelledError:
+            # While send_goal is still under way too: navigation may have the goal already
+            # (its answer not back yet), and a goal nobody follows must not drive on.
             problem = await asyncio.shield(self.cancel_goals(goal_id))
             if problem is not None:
                 on_problem(problem)
