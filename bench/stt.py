@@ -315,7 +315,7 @@ async def through_service(
         loop = asyncio.get_running_loop()
         with Bus.open(BusOptions(connect=[router]), loop) as bus:
             finals: dict[str, tuple[float, Transcript]] = {}
-            proposals: dict[str, float] = {}
+            proposals: dict[str, tuple[float, Proposal]] = {}
             arrived: dict[str, asyncio.Event] = {}
             ready = asyncio.Event()
 
@@ -323,7 +323,7 @@ async def through_service(
                 finals.setdefault(transcript.session, (time.monotonic(), transcript))
 
             def on_proposal(_key: str, proposal: Proposal) -> None:
-                proposals.setdefault(proposal.session, time.monotonic())
+                proposals.setdefault(proposal.session, (time.monotonic(), proposal))
                 arrived.setdefault(proposal.session, asyncio.Event()).set()
 
             bus.subscribe(KEYS.transcript, json_decoder(Transcript), on_final)
@@ -359,13 +359,15 @@ async def through_service(
                 outcome = Outcome(utterance)
                 if session in finals:
                     at, transcript = finals[session]
-                    outcome.text, outcome.rejected = transcript.text, transcript.rejected
+                    outcome.text = transcript.text
                     outcome.to_final = at - spoken_end
-                    if session in proposals:
-                        outcome.to_proposal = proposals[session] - spoken_end
                     outcome.heard, outcome.doubts = transcript.heard, transcript.doubts
-                    if not transcript.rejected:
-                        outcome.orders = parser.parse(transcript.text).orders
+                # The converter's proposal is the verdict: it rejects speech that does
+                # not make whole orders.
+                if session in proposals:
+                    at, proposal = proposals[session]
+                    outcome.to_proposal = at - spoken_end
+                    outcome.rejected, outcome.orders = proposal.rejected, proposal.orders
                 outcomes.append(outcome)
                 # One person speaking: the next utterance starts once this session has
                 # closed, as a panel's next press of Listen would (else two decoders are

@@ -165,8 +165,8 @@ class ConverterKeys:
         """Request/reply: text in, orders and errors out."""
         return f"{ROOT}/converter/parse"
 
-    @property
     def alive(self) -> str:
+        """Liveliness token of the converter (a method, as `RobotKeys.alive(service)`)."""
         return f"{ROOT}/converter/alive"
 
     @property

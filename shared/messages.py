@@ -65,7 +65,7 @@ class Order(Data, kw_only=True):
     target_pose: TargetPose | None = None
 
 
-class ParseError(Data, omit_defaults=True):
+class ParseProblem(Data, omit_defaults=True):
     """A piece of text that did not become an order, and why."""
 
     text: str
@@ -78,7 +78,7 @@ class ParseResult(Data):
     """What the converter made of a text: orders in spoken order, plus errors."""
 
     orders: list[Order] = msgspec.field(default_factory=list)
-    errors: list[ParseError] = msgspec.field(default_factory=list)
+    errors: list[ParseProblem] = msgspec.field(default_factory=list)
 
 
 # --- speech ---------------------------------------------------------------------------------
@@ -146,7 +146,7 @@ class Doubt(Data):
 
 
 class Transcript(Message):
-    """A final transcript: one per utterance, from the recogniser or typed by a person."""
+    """A final transcript: one per spoken utterance, from the recogniser."""
 
     text: str
     confidence: float | None = None
@@ -198,7 +198,7 @@ class Proposal(Message):
 
     transcript: str
     orders: list[Order] = msgspec.field(default_factory=list)
-    errors: list[ParseError] = msgspec.field(default_factory=list)
+    errors: list[ParseProblem] = msgspec.field(default_factory=list)
     session: str = ""
     """The audio session of the transcript, so that a panel knows its own utterances."""
     utterance: int = 0

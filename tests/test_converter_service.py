@@ -55,7 +55,7 @@ class Converter:
         self.alive: list[bool] = []
         bus.subscribe(KEYS.status, json_decoder(OrdersStatus), lambda _k, m: self._got(m))
         bus.subscribe(KEYS.grammar, json_decoder(Grammar), lambda _k, m: self.grammars.append(m))
-        bus.watch(KEYS.alive, lambda _k, alive: self.alive.append(alive))
+        bus.watch(KEYS.alive(), lambda _k, alive: self.alive.append(alive))
         self.process = processes.start(
             "services.converter", "--connect", router, "--orders", str(orders), "--debug"
         )
@@ -175,13 +175,25 @@ def test_final_transcripts_become_proposals_per_robot(
         deadline = time.monotonic() + WAIT
         # Our subscription reaches the router at some point: publish until a proposal comes.
         while not proposals and time.monotonic() < deadline:
-            converter.bus.publish(robot.transcript, Transcript(text="turn lift then reach base"))
+            converter.bus.publish(robot.transcript, Transcript(text="turn left then reach base"))
             with contextlib.suppress(AssertionError):
                 await async_wait_until(lambda: proposals, 0.5, "a proposal")
         proposal = proposals[0]
-        assert proposal.transcript == "turn lift then reach base"
-        assert [o.case for o in proposal.orders] == ["base"]
-        assert proposal.errors[0].candidates == ["turn left"]
+        assert proposal.transcript == "turn left then reach base"
+        assert [o.case for o in proposal.orders] == ["left", "base"]
+        assert not proposal.rejected
+        assert proposal.errors == []
+        # Speech that makes only part of an order list is not half-obeyed: a part that did
+        # not parse says the rest may be misheard too.
+        heard = len(proposals)
+        converter.bus.publish(robot.transcript, Transcript(text="turn lift then reach base"))
+        await async_wait_until(lambda: len(proposals) > heard, WAIT, "the second proposal")
+        partial = proposals[-1]
+        assert partial.rejected
+        assert partial.orders == []
+        assert "not a command" in partial.errors[0].reason
+        assert "'turn lift'" in partial.errors[0].reason
+        assert partial.errors[0].candidates == ["turn left"]
 
     scenario(router, processes, ORDERS / "demo.yaml", body)
 

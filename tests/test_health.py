@@ -17,7 +17,7 @@ from .conftest import free_port, voicectl
 
 
 def test_each_service_is_checked_by_its_own_token() -> None:
-    assert token_key("converter", "r1") == ConverterKeys().alive
+    assert token_key("converter", "r1") == ConverterKeys().alive()
     for service in ("stt", "supervisor", "executor"):
         assert token_key(service, "r1") == RobotKeys("r1").alive(service)
     assert token_key("sim", "r1", "bot1") == RobotNames("bot1").simulator
@@ -50,7 +50,7 @@ def test_a_service_is_up_while_its_token_is_there(router: str, client: zenoh.Ses
 
 
 def test_the_converter_and_the_simulator(router: str, client: zenoh.Session) -> None:
-    tokens = [client.liveliness().declare_token(k) for k in (ConverterKeys().alive,)]
+    tokens = [client.liveliness().declare_token(k) for k in (ConverterKeys().alive(),)]
     tokens.append(client.liveliness().declare_token(RobotNames("bot1").simulator))
     assert voicectl("health", "converter", "--connect", router).returncode == 0
     sim = voicectl("health", "sim", "--namespace", "bot1", "--connect", router)

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from services.converter.orders import OrderSet
 from services.converter.parser import MAX_TEXT_CHARS, Parser, normalise
 from shared.errors import OrdersFileError
-from shared.messages import ParseError
+from shared.messages import ParseProblem
 
 DEMO = Parser(OrderSet.load(Path(__file__).resolve().parents[1] / "orders" / "demo.yaml"))
 
@@ -199,7 +199,7 @@ def test_normalise_keeps_a_minus_sign_starting_a_number() -> None:
 
 
 def test_bad_input_is_one_clear_error() -> None:
-    assert ALL.parse("").errors == [ParseError(text="", reason="empty text")]
+    assert ALL.parse("").errors == [ParseProblem(text="", reason="empty text")]
     huge = ALL.parse("x" * 100_000)
     assert huge.errors[0].reason == f"text too long: 100000 characters, at most {MAX_TEXT_CHARS}"
     assert len(huge.errors[0].text) <= 80

@@ -12,15 +12,15 @@ from services.sim.robot import (
     CMD_VEL_TIMEOUT,
     Bounds,
     GoToPose,
-    Limits,
     Phase,
     Robot,
+    SpeedLimits,
     integrate,
 )
 from shared.geometry import compose, normalize_angle
 from shared.ros2 import Pose2D
 
-LIMITS = Limits(max_linear=0.5, max_angular=1.5)
+LIMITS = SpeedLimits(max_linear=0.5, max_angular=1.5)
 
 
 def drive_to(
@@ -171,4 +171,4 @@ def test_stop_halts_mid_goal() -> None:
 
 def test_limits_must_be_positive() -> None:
     with pytest.raises(ValueError, match="positive"):
-        Limits(max_linear=0.0)
+        SpeedLimits(max_linear=0.0)

@@ -167,13 +167,11 @@ def test_speech_that_is_not_a_command_is_rejected(
 
     async def body(listener: Listener) -> None:
         await stream(listener.bus, "chat", wav)
-        [final] = await listener.final("chat")
-        assert final.rejected
-        assert final.reason
-        proposal = await listener.proposal("chat")
+        await listener.final("chat")
+        proposal = await listener.proposal("chat")  # rejected by the recogniser or the converter
         assert proposal.rejected
         assert proposal.orders == []
-        assert proposal.errors[0].reason.startswith("not a command")
+        assert "not a command" in proposal.errors[0].reason
 
     scenario(router, processes, body)
 
@@ -215,8 +213,8 @@ def test_a_grammar_change_applies_without_a_restart(
     async def body(listener: Listener) -> None:
         before = await listener.ready()
         await stream(listener.bus, "old", wav)
-        [old] = await listener.final("old")
-        assert old.rejected, old
+        await listener.final("old")
+        assert (await listener.proposal("old")).rejected
         demo = orders / "demo.yaml"
         temporary = demo.with_suffix(".tmp")
         temporary.write_text(demo.read_text() + WAVE)

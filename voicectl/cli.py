@@ -34,7 +34,7 @@ from shared.process import add_bus_arguments, bus_options, robot_name
 from shared.robot.kinds import TransportKind
 
 from .health import add_health_arguments, check
-from .stack import Child, Panel, port_in_use, run_stack
+from .stack import Child, PanelAddress, port_in_use, run_stack
 
 SERVICES = ("router", "converter", "stt", "supervisor", "executor", "sim", "web")
 SHIPPED_ORDERS = shipped_orders()
@@ -304,10 +304,10 @@ def _up(args: argparse.Namespace) -> int:
         shown = "127.0.0.1" if args.host in ("0.0.0.0", "::") else args.host
         # The token rides in the fragment: one click logs in, and a browser never sends a
         # fragment to the server, so no access log can keep it.
-        web = Panel(args.host, args.port, f"{scheme}://{shown}:{args.port}/#token={token}")
+        web = PanelAddress(args.host, args.port, f"{scheme}://{shown}:{args.port}/#token={token}")
     keys = RobotKeys(args.robot)
     ready = [
-        ConverterKeys().alive,
+        ConverterKeys().alive(),
         keys.alive("supervisor"),
         keys.alive("executor"),
         RobotNames().simulator,

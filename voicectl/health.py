@@ -80,7 +80,7 @@ def token_key(service: str, robot: str, namespace: str = "") -> str | None:
         case "router" | "web":
             return None
         case "converter":
-            return ConverterKeys().alive
+            return ConverterKeys().alive()
         case "sim":
             return RobotNames(namespace).simulator
         case _:

@@ -28,7 +28,7 @@ RESTART_WINDOW = 60.0
 
 
 @dataclass(frozen=True)
-class Panel:
+class PanelAddress:
     """Where the panel listens, and the address that logs a browser in."""
 
     host: str
@@ -186,7 +186,7 @@ def _restart(child: Child, stop: threading.Event) -> bool:
 
 def run_stack(
     children: list[Child],
-    web: Panel | None,
+    web: PanelAddress | None,
     router: str,
     ready_tokens: list[str],
 ) -> int:

@@ -14,7 +14,7 @@ import msgspec
 
 from services.stt.audio import AudioError, frames, read_wav
 from services.stt.engine import Engine, Final
-from shared.messages import Doubt, Order, ParseError, ParseResult
+from shared.messages import Doubt, Order, ParseProblem, ParseResult
 
 MAX_FILE_SECONDS = 600.0
 
@@ -30,7 +30,7 @@ class Transcription(msgspec.Struct):
     confidence: float | None
     orders: list[Order]
     """What `voicectl parse` makes of the transcript (never dispatched if rejected)."""
-    errors: list[ParseError]
+    errors: list[ParseProblem]
     heard: str = ""
     """What an unconstrained decode heard: the person's words, command or not."""
     word_confidences: list[float] = msgspec.field(default_factory=list)

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import regex
 
-from shared.messages import Order, ParseError, ParseResult
+from shared.messages import Order, ParseProblem, ParseResult
 
 from .expand import SlotRef
 from .orders import SLOT_GROUP, Command, OrderSet
@@ -148,10 +148,10 @@ class Parser:
     def parse(self, text: str) -> ParseResult:
         if len(text) > MAX_TEXT_CHARS:
             reason = f"text too long: {len(text)} characters, at most {MAX_TEXT_CHARS}"
-            return ParseResult(errors=[ParseError(text=text[:80], reason=reason)])
+            return ParseResult(errors=[ParseProblem(text=text[:80], reason=reason)])
         clean = normalise(text)
         if not clean:
-            return ParseResult(errors=[ParseError(text="", reason="empty text")])
+            return ParseResult(errors=[ParseProblem(text="", reason="empty text")])
         result = ParseResult()
         deadline = time.monotonic() + PARSE_BUDGET
         for segment in self._separator.split(clean):
@@ -161,11 +161,11 @@ class Parser:
             try:
                 parsed = self._parse_segment(segment, suggest=True, deadline=deadline)
             except _TooSlow as exc:
-                parsed = ParseError(text=segment[:80], reason=str(exc))
+                parsed = ParseProblem(text=segment[:80], reason=str(exc))
             match parsed:
                 case Order() as order:
                     result.orders.append(order)
-                case ParseError() as error:
+                case ParseProblem() as error:
                     result.errors.append(error)
         return result
 
@@ -177,7 +177,7 @@ class Parser:
             return None
         return parsed if isinstance(parsed, Order) else None
 
-    def _parse_segment(self, segment: str, suggest: bool, deadline: float) -> Order | ParseError:
+    def _parse_segment(self, segment: str, suggest: bool, deadline: float) -> Order | ParseProblem:
         words = segment.split(" ")
         best: list[tuple[_Matcher, regex.Match[str]]] = []
         best_words = 0
@@ -194,7 +194,7 @@ class Parser:
             try:
                 made = matcher.command.to_order(spoken)
             except SlotValueError as exc:
-                return ParseError(text=segment, reason=str(exc))
+                return ParseProblem(text=segment, reason=str(exc))
             extra = [
                 word
                 for word in (segment[: found.start()] + " " + segment[found.end() :]).split()
@@ -202,7 +202,7 @@ class Parser:
             ]
             if extra:
                 said = found.group(0)
-                return ParseError(
+                return ParseProblem(
                     text=segment,
                     reason=f"words not understood: '{' '.join(extra)}'; did you mean: {said}?",
                     candidates=[said],
@@ -210,7 +210,7 @@ class Parser:
             return made
         if best:
             names = [m.command.name for m, _ in best]
-            return ParseError(
+            return ParseProblem(
                 text=segment,
                 reason="ambiguous: matches " + ", ".join(names),
                 candidates=names,
@@ -222,14 +222,14 @@ class Parser:
                 cases = ", ".join(order.example(case) for case in order.cases)
                 reason = f"'{order.description}' needs one of: {cases}"
                 if suggestions:
-                    return ParseError(
+                    return ParseProblem(
                         text=segment,
                         reason=f"{reason}; did you mean: {' or '.join(suggestions)}?",
                         candidates=suggestions,
                     )
-                return ParseError(
+                return ParseProblem(
                     text=segment,
                     reason=reason,
                     candidates=[f"{order.name}/{c.name}" for c in order.cases],
                 )
-        return ParseError(text=segment, reason="no order matches", candidates=suggestions)
+        return ParseProblem(text=segment, reason="no order matches", candidates=suggestions)

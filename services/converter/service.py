@@ -18,7 +18,7 @@ from shared.messages import (
     Grammar,
     Message,
     OrdersStatus,
-    ParseError,
+    ParseProblem,
     ParseReply,
     ParseRequest,
     Places,
@@ -106,7 +106,7 @@ class ConverterService:
             self._keys.all_transcripts, json_decoder(Transcript), self._on_transcript
         )
         self._publish_loaded()
-        self._bus.announce(self._keys.alive)
+        self._bus.announce(self._keys.alive())
         return self
 
     def __exit__(
@@ -177,13 +177,15 @@ class ConverterService:
                 reason = f"not a command: {reason}"
             proposal = Proposal(
                 transcript=transcript.text,
-                errors=[ParseError(text=transcript.text, reason=reason)],
+                errors=[ParseProblem(text=transcript.text, reason=reason)],
                 rejected=True,
                 session=transcript.session,
                 utterance=transcript.utterance,
             )
             _LOGGER.info("%s: %s rejected by the recogniser", robot, excerpt(transcript.text))
         else:
+            # The one parse of what was said. Speech must make whole orders: unlike typed
+            # text, a part that did not parse is a sign the rest was misheard too.
             result = self._loaded.parser.parse(transcript.text)
             _LOGGER.info(
                 "%s: %s -> %d order(s), %d error(s)",
@@ -192,12 +194,28 @@ class ConverterService:
                 len(result.orders),
                 len(result.errors),
             )
-            proposal = Proposal(
-                transcript=transcript.text,
-                orders=result.orders,
-                errors=result.errors,
-                session=transcript.session,
-                utterance=transcript.utterance,
-                doubts=transcript.doubts,
-            )
+            if result.errors or not result.orders:
+                problem = result.errors[0] if result.errors else None
+                why = f" ('{problem.text}': {problem.reason})" if problem else ""
+                proposal = Proposal(
+                    transcript=transcript.text,
+                    errors=[
+                        ParseProblem(
+                            text=transcript.text,
+                            reason=f"I heard '{transcript.text}': not a command{why}",
+                            candidates=problem.candidates if problem else [],
+                        )
+                    ],
+                    rejected=True,
+                    session=transcript.session,
+                    utterance=transcript.utterance,
+                )
+            else:
+                proposal = Proposal(
+                    transcript=transcript.text,
+                    orders=result.orders,
+                    session=transcript.session,
+                    utterance=transcript.utterance,
+                    doubts=transcript.doubts,
+                )
         self._bus.publish(RobotKeys(robot).proposal, proposal)

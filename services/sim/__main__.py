@@ -15,7 +15,7 @@ from shared.robot_options import add_robot_arguments, robot_options
 from shared.ros2 import CameraType, CmdVelType, Ros2Codec, RosDistro
 
 from .node import SimConfig, SimFault, SimNode
-from .robot import Bounds, Limits
+from .robot import Bounds, SpeedLimits
 
 _LOGGER = logging.getLogger(__name__)
 
@@ -94,7 +94,7 @@ def sim_node(bus: Bus, args: argparse.Namespace) -> SimNode:
         faults=frozenset(args.fault),
         time_scale=args.time_scale,
         bounds=args.bounds,
-        limits=Limits(max_linear=args.max_linear, max_angular=args.max_angular),
+        limits=SpeedLimits(max_linear=args.max_linear, max_angular=args.max_angular),
     )
     distro = robot.distro or RosDistro.JAZZY
     kind = robot.transport or TransportKind.BRIDGE

@@ -70,7 +70,7 @@ from shared.ros2 import (
     RosDistro,
 )
 
-from .robot import Bounds, GoToPose, Limits, Robot
+from .robot import Bounds, GoToPose, Robot, SpeedLimits
 from .world import floor_plan
 
 _LOGGER = logging.getLogger(__name__)
@@ -126,7 +126,7 @@ class SimConfig:
     time_scale: float = 1.0
     """Simulated seconds per wall second."""
     bounds: Bounds = field(default_factory=Bounds)
-    limits: Limits = field(default_factory=Limits)
+    limits: SpeedLimits = field(default_factory=SpeedLimits)
 
     def __post_init__(self) -> None:
         if not self.time_scale > 0:

@@ -18,7 +18,7 @@ CMD_VEL_TIMEOUT = 0.5
 
 
 @dataclass(frozen=True)
-class Limits:
+class SpeedLimits:
     max_linear: float = 0.5
     """Metres per second, forwards or backwards."""
     max_angular: float = 1.5
@@ -84,7 +84,7 @@ def _clamp(value: float, limit: float) -> float:
 class Robot:
     """A differential-drive base: a pose, the velocity it last moved at, a cmd_vel watchdog."""
 
-    def __init__(self, limits: Limits, pose: Pose2D | None = None) -> None:
+    def __init__(self, limits: SpeedLimits, pose: Pose2D | None = None) -> None:
         self.limits = limits
         self.pose = pose or Pose2D()
         self.linear = 0.0
@@ -141,7 +141,7 @@ class GoToPose:
     def __init__(
         self,
         target: Pose2D,
-        limits: Limits,
+        limits: SpeedLimits,
         position_tolerance: float = 0.02,
         yaw_tolerance: float = 0.01,
     ) -> None:

@@ -12,7 +12,7 @@ from shared.bus import Bus
 from shared.process import add_bus_arguments, bus_options, robot_name, setup_logging, wait_for_stop
 
 from .engine import ENGINES, EngineError, EngineOptions, load_engine
-from .service import Limits, SttService
+from .service import SessionLimits, SttService
 
 _LOGGER = logging.getLogger(__name__)
 
@@ -71,7 +71,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="voicectl stt", description=__doc__)
     parser.add_argument("--robot", type=robot_name, default="robot")
     add_engine_arguments(parser)
-    limits = Limits()
+    limits = SessionLimits()
     parser.add_argument(
         "--max-utterance",
         type=float,
@@ -104,7 +104,7 @@ async def main(argv: list[str] | None = None) -> int:
     except EngineError as exc:
         print(f"voicectl stt: {exc}", file=sys.stderr)
         return 2
-    limits = Limits(
+    limits = SessionLimits(
         max_utterance=args.max_utterance,
         max_sessions=args.max_sessions,
         idle_seconds=args.idle,

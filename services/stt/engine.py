@@ -61,14 +61,14 @@ class Final:
     doubts: list[Doubt] = field(default_factory=list)
 
 
-Event = SpeechStarted | Heard | Final
+RecognitionEvent = SpeechStarted | Heard | Final
 
 
 class Recogniser(Protocol):
-    def accept(self, pcm: bytes) -> list[Event]:
+    def accept(self, pcm: bytes) -> list[RecognitionEvent]:
         """Feed whole 16-bit samples; returns what happened in them."""
 
-    def finish(self) -> list[Event]:
+    def finish(self) -> list[RecognitionEvent]:
         """End of the stream: the utterance in progress, if any, ends now."""
 
     def close(self) -> None:

@@ -3,9 +3,9 @@
 Each session (``voice/<robot>/stt/audio/<session>``) gets its own recogniser, run on a
 thread of its own, so a slow session never delays another and decoding never blocks the
 event loop. A final transcript is rejected (never to become orders) when the engine finds
-no command in the speech or too little confidence, or when the converter cannot make
-whole orders of it: at least two signals, as a grammar-bound recogniser forces some
-command out of any speech.
+no command in the speech, or too little confidence, or its second opinion says it was not
+a command; the converter, which parses it once, rejects it too when it does not make whole
+orders: a grammar-bound recogniser forces some command out of any speech.
 """
 
 from __future__ import annotations
@@ -22,8 +22,6 @@ from dataclasses import dataclass
 from types import TracebackType
 
 from shared.bus import Bus, Latest, json_decoder
-from shared.client import Refused, VoicectlClient
-from shared.errors import BusError
 from shared.keys import ConverterKeys, RobotKeys, last_chunk
 from shared.messages import (
     AudioChunk,
@@ -39,13 +37,13 @@ from shared.messages import (
 )
 
 from .audio import BYTES_PER_SECOND
-from .engine import Engine, EngineError, Event, Final, Heard, Recogniser, SpeechStarted
+from .engine import Engine, EngineError, Final, Heard, Recogniser, RecognitionEvent, SpeechStarted
 
 _LOGGER = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
-class Limits:
+class SessionLimits:
     """What keeps one client from taking the service down."""
 
     max_utterance: float = 15.0
@@ -71,7 +69,7 @@ class Session:
         self._service = service
         self._loop = loop
         self._inbox: queue.SimpleQueue[bytes | None] = queue.SimpleQueue()
-        self._events: asyncio.Queue[Event | None] = asyncio.Queue()
+        self._events: asyncio.Queue[RecognitionEvent | None] = asyncio.Queue()
         self._next_seq = 0
         self._backlog = 0
         """Bytes in the inbox, not yet decoded (updated on both threads under the lock)."""
@@ -143,7 +141,7 @@ class Session:
                 _LOGGER.warning("session %s cannot be recognised: %s", self.name, exc)
             except Exception:
                 _LOGGER.exception("session %s: the recogniser failed; audio dropped", self.name)
-        events: list[Event | None] = []
+        events: list[RecognitionEvent | None] = []
         try:
             if recogniser is not None:
                 if not self._aborted:
@@ -155,7 +153,7 @@ class Session:
             _LOGGER.exception("session %s: the recogniser failed at the end", self.name)
         self._post([*events, None])  # None: the end of the session for the publisher
 
-    def _post(self, events: list[Event] | list[Event | None]) -> None:
+    def _post(self, events: list[RecognitionEvent] | list[RecognitionEvent | None]) -> None:
         for event in events:
             with contextlib.suppress(RuntimeError):  # the loop is closing
                 self._loop.call_soon_threadsafe(self._events.put_nowait, event)
@@ -180,7 +178,7 @@ class SttService:
     Use it as a context manager: entering subscribes and announces the service.
     """
 
-    def __init__(self, bus: Bus, robot: str, engine: Engine, limits: Limits) -> None:
+    def __init__(self, bus: Bus, robot: str, engine: Engine, limits: SessionLimits) -> None:
         self.bus = bus
         self.engine = engine
         self.limits = limits
@@ -200,7 +198,6 @@ class SttService:
         self._refused = _Recent(256)
         """Sessions refused or unknown, so that their audio is dropped without a line
         per chunk (the last few hundred names)."""
-        self._client = VoicectlClient(bus)
 
     def __enter__(self) -> SttService:
         self._status = self.bus.latest(self._keys.stt_status)
@@ -361,8 +358,8 @@ class SttService:
                 self.bus.publish, self._keys.stt_session(session), ended
             )
 
-    async def publish(self, session: str, event: Event) -> None:
-        """Put one recogniser event on the bus; a final one is checked against the orders."""
+    async def publish(self, session: str, event: RecognitionEvent) -> None:
+        """Put one recogniser event on the bus; a final one carries its verdict."""
         match event:
             case SpeechStarted():
                 pass
@@ -370,7 +367,7 @@ class SttService:
                 partial = PartialTranscript(session=session, utterance=utterance, text=text)
                 self.bus.publish(self._keys.partial, partial, superseded=True)
             case Final():
-                transcript = await self._judge(session, event)
+                transcript = self._judge(session, event)
                 _LOGGER.info(
                     "session %s utterance %d: %s%s",
                     session,
@@ -380,12 +377,10 @@ class SttService:
                 )
                 self.bus.publish(self._keys.transcript, transcript)
 
-    async def _judge(self, session: str, final: Final) -> Transcript:
+    def _judge(self, session: str, final: Final) -> Transcript:
         reason = final.rejection
         if not reason and not self._grammar:
             reason = "no grammar yet: is the converter running?"
-        if not reason:
-            reason = await self._parse_problem(final.text)
         return Transcript(
             text=final.text,
             confidence=final.confidence,
@@ -399,22 +394,6 @@ class SttService:
             word_confidences=final.confidences,
             doubts=[] if reason else final.doubts,
         )
-
-    async def _parse_problem(self, text: str) -> str:
-        """Why `text` does not make whole orders, or '' when it does (or when the
-        converter cannot tell now: it parses the transcript again anyway)."""
-        try:
-            result = await self._client.parse(text)
-        except Refused:
-            return ""
-        except BusError as exc:
-            _LOGGER.warning("could not check %s with the converter: %s", excerpt(text), exc)
-            return ""
-        if result.errors:
-            return f"not a command: {result.errors[0].reason}"
-        if not result.orders:
-            return "not a command"
-        return ""
 
 
 class _Recent:

@@ -45,7 +45,7 @@ import pocketsphinx
 from shared.messages import Grammar
 
 from .audio import NoiseFloor, seconds, whole
-from .engine import EngineError, Event, Final, Heard, SpeechStarted, logistic, rejection
+from .engine import EngineError, Final, Heard, RecognitionEvent, SpeechStarted, logistic, rejection
 from .judge import Thresholds, Verdict, Vocabulary, Word, filler, judge
 from .lexicon import pronunciations
 from .wordgraph import GrammarError, WordGraph, compile_jsgf
@@ -319,15 +319,15 @@ class SphinxRecogniser:
         """The cepstral mean of this stream's last utterance: where the next first pass
         starts, so that partial transcripts improve as the person goes on speaking."""
 
-    def accept(self, pcm: bytes) -> list[Event]:
-        events: list[Event] = []
+    def accept(self, pcm: bytes) -> list[RecognitionEvent]:
+        events: list[RecognitionEvent] = []
         self._pending += self._noise.add(pcm)
         for frame in whole(self._pending, self._vad.frame_bytes):
             self._frame(frame, events)
         return events
 
-    def finish(self) -> list[Event]:
-        events: list[Event] = []
+    def finish(self) -> list[RecognitionEvent]:
+        events: list[RecognitionEvent] = []
         if self._pending and self._utterance is not None:
             self._feed(bytes(self._pending), events)
         self._pending.clear()
@@ -345,7 +345,7 @@ class SphinxRecogniser:
 
     # --- per frame -------------------------------------------------------------------------
 
-    def _frame(self, frame: bytes, events: list[Event]) -> None:
+    def _frame(self, frame: bytes, events: list[RecognitionEvent]) -> None:
         start = self._clock
         self._clock += seconds(len(frame))
         self._recent.append((start, frame))
@@ -382,7 +382,7 @@ class SphinxRecogniser:
             _LOGGER.info("utterance %d cut at its maximum length", utterance.number)
             self._end(self._clock, events)
 
-    def _begin(self, speech_start: float, events: list[Event]) -> None:
+    def _begin(self, speech_start: float, events: list[RecognitionEvent]) -> None:
         compiled = self._engine.compiled()
         if self._decoder is None:
             self._decoder = self._engine.borrow()
@@ -399,7 +399,7 @@ class SphinxRecogniser:
             if begins >= speech_start - PRE_ROLL:
                 self._feed(frame, events)
 
-    def _feed(self, pcm: bytes, events: list[Event]) -> None:
+    def _feed(self, pcm: bytes, events: list[RecognitionEvent]) -> None:
         utterance = self._utterance
         assert utterance is not None
         assert self._decoder is not None
@@ -419,7 +419,7 @@ class SphinxRecogniser:
                 utterance.partial = text
                 events.append(Heard(utterance.number, text))
 
-    def _end(self, speech_end: float, events: list[Event]) -> None:
+    def _end(self, speech_end: float, events: list[RecognitionEvent]) -> None:
         """The final result: the early pass if the speech ended where it paused, else a
         final pass now. A blip too short to be a word ends without one."""
         utterance = self._utterance

@@ -22,7 +22,7 @@ import vosk
 from shared.messages import Doubt, Grammar
 
 from .audio import seconds, whole
-from .engine import EngineError, Event, Final, Heard, SpeechStarted, rejection
+from .engine import EngineError, Final, Heard, RecognitionEvent, SpeechStarted, rejection
 
 _LOGGER = logging.getLogger(__name__)
 
@@ -163,15 +163,15 @@ class VoskRecogniser:
         self._words: list[dict[str, Any]] = []
         """Whole-stream mode: the words of every result so far."""
 
-    def accept(self, pcm: bytes) -> list[Event]:
-        events: list[Event] = []
+    def accept(self, pcm: bytes) -> list[RecognitionEvent]:
+        events: list[RecognitionEvent] = []
         self._pending += pcm
         for chunk in whole(self._pending, CHUNK_BYTES):
             self._chunk(chunk, events)
         return events
 
-    def finish(self) -> list[Event]:
-        events: list[Event] = []
+    def finish(self) -> list[RecognitionEvent]:
+        events: list[RecognitionEvent] = []
         if self._pending:
             self._chunk(bytes(self._pending), events)
             self._pending.clear()
@@ -183,7 +183,7 @@ class VoskRecogniser:
             self._engine.give_back(self._version, self._recogniser)
             self._recogniser = None
 
-    def _chunk(self, chunk: bytes, events: list[Event]) -> None:
+    def _chunk(self, chunk: bytes, events: list[RecognitionEvent]) -> None:
         self._clock += seconds(len(chunk))
         if self._recogniser.AcceptWaveform(chunk):
             self._result(json.loads(self._recogniser.Result()), events)
@@ -201,7 +201,9 @@ class VoskRecogniser:
             self._recogniser.Reset()
             self._offset = self._clock
 
-    def _result(self, result: dict[str, Any], events: list[Event], force: bool = False) -> None:
+    def _result(
+        self, result: dict[str, Any], events: list[RecognitionEvent], force: bool = False
+    ) -> None:
         words = best_words(result)
         if not self._segment:
             self._words.extend(words)

@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Any
 
 from shared.messages import Grammar
 
-from .engine import EngineError, EngineOptions, Event, Recogniser, load_engine
+from .engine import EngineError, EngineOptions, Recogniser, RecognitionEvent, load_engine
 
 if TYPE_CHECKING:
     from multiprocessing.context import SpawnProcess
@@ -158,12 +158,12 @@ class _RemoteRecogniser:
         self._number = number
         self._closed = False
 
-    def accept(self, pcm: bytes) -> list[Event]:
-        events: list[Event] = self._worker.call(_Accept(self._number, pcm))
+    def accept(self, pcm: bytes) -> list[RecognitionEvent]:
+        events: list[RecognitionEvent] = self._worker.call(_Accept(self._number, pcm))
         return events
 
-    def finish(self) -> list[Event]:
-        events: list[Event] = self._worker.call(_Finish(self._number))
+    def finish(self) -> list[RecognitionEvent]:
+        events: list[RecognitionEvent] = self._worker.call(_Finish(self._number))
         return events
 
     def close(self) -> None:

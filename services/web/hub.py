@@ -59,7 +59,9 @@ class Labels(msgspec.Struct, tag="labels", tag_field="type"):
     labels: list[str]
 
 
-Event = StateUpdate | Proposal | PartialTranscript | Transcript | SttStatus | RobotPose | RobotMap
+PanelEvent = (
+    StateUpdate | Proposal | PartialTranscript | Transcript | SttStatus | RobotPose | RobotMap
+)
 
 
 class Hub:
@@ -97,7 +99,7 @@ class Hub:
         self._bus.subscribe(
             ConverterKeys().places, json_decoder(Places), self._on_places, history=True
         )
-        self._bus.watch(ConverterKeys().alive, self._on_converter)
+        self._bus.watch(ConverterKeys().alive(), self._on_converter)
         self._bus.watch(every.alive(ANY), self._on_alive)
         self._bus.watch(every.label(ANY), self._on_label)
 
@@ -164,7 +166,7 @@ class Hub:
                 queue.get_nowait()
             queue.put_nowait(frame)
 
-    def _on_event(self, key: str, message: Event) -> None:
+    def _on_event(self, key: str, message: PanelEvent) -> None:
         robot = robot_of(key)
         frame = self._frame(message)
         match message:

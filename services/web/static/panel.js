@@ -364,7 +364,11 @@ function showHeard(text, kind) {
 
 function propose(proposal) {
   if (proposal.rejected) {
-    showErrors(proposal.transcript, []); // the transcript line says why, next to the words
+    // Why, in plain words, on the line that showed what was heard ("I heard '…': not a
+    // command"); a suggestion, if the converter had one, below it.
+    const [why] = proposal.errors;
+    if (why) showHeard(why.reason, "rejected");
+    showErrors(proposal.transcript, (why && why.candidates.length) ? [{ ...why, reason: "— did you mean" }] : []);
     showDoubt(null);
     return;
   }
