@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import contextlib
 import sys
 from pathlib import Path
 
@@ -25,8 +24,7 @@ from services.executor.__main__ import executor_service, load_bindings  # noqa: 
 from services.executor.__main__ import parse_args as executor_args  # noqa: E402
 from services.sim.__main__ import parse_args as sim_args  # noqa: E402
 from services.sim.__main__ import sim_node  # noqa: E402
-from shared.bus import Bus  # noqa: E402
-from shared.process import bus_options, setup_logging, wait_for_stop  # noqa: E402
+from shared.process import Service, open_bus, serve, setup_logging  # noqa: E402
 from shared.robot import TransportKind  # noqa: E402
 
 
@@ -37,28 +35,14 @@ async def main() -> None:
     args = parser.parse_args()
     setup_logging(False)
     connect = ["--connect", args.connect]
-    options = bus_options(sim_args(connect))
-    with Bus.open(options, asyncio.get_running_loop()) as bus:
-        nodes = [sim_node(bus, sim_args(["--namespace", n, *connect])) for n in args.names]
-        services = []
+    with open_bus(sim_args(connect)) as bus:
+        services: list[Service] = []
         for name in args.names:
+            services.append(sim_node(bus, sim_args(["--namespace", name, *connect])))
             flags = executor_args(["--robot", name, "--namespace", name, *connect])
             bindings = load_bindings(flags)
             services.append(executor_service(bus, flags, bindings, TransportKind.BRIDGE))
-        ticking = [asyncio.create_task(node.run()) for node in nodes]
-        for service in services:
-            service.start()
-        try:
-            await wait_for_stop(*(s.end_stray_motion() for s in services), keep_running=True)
-        finally:
-            for service in services:
-                await service.shutdown()
-            for task in ticking:
-                task.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await asyncio.gather(*ticking)
-            for node in nodes:
-                await node.shutdown()
+        await serve(*services)
 
 
 if __name__ == "__main__":

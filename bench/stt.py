@@ -46,6 +46,7 @@ from speech_set import Utterance, generate  # noqa: E402
 from services.converter.grammar import build_grammar  # noqa: E402
 from services.converter.orders import OrderSet  # noqa: E402
 from services.converter.parser import Parser  # noqa: E402
+from services.stt.__main__ import add_engine_arguments, engine_options  # noqa: E402
 from services.stt.audio import NoiseFloor, frames, read_wav  # noqa: E402
 from services.stt.engine import EngineOptions, Final, load_engine  # noqa: E402
 from services.stt.judge import OFF  # noqa: E402
@@ -306,9 +307,7 @@ async def through_service(
         started.append(process)
         return process
 
-    engine = ["--engine", args.engine, "--min-confidence", str(args.min_confidence)]
-    if args.vosk_model:
-        engine += ["--vosk-model", str(args.vosk_model)]
+    engine = engine_options(args).argv()
     try:
         start("services.router", "--listen", router)
         start("services.converter", "--connect", router, "--orders", str(args.orders))
@@ -474,9 +473,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--set", type=Path, default=Path(tempfile.gettempdir()) / "voicectl-speech")
     parser.add_argument("--orders", type=Path, default=REPO / "orders")
-    parser.add_argument("--engine", default="pocketsphinx", choices=["pocketsphinx", "vosk"])
-    parser.add_argument("--vosk-model", type=Path)
-    parser.add_argument("--min-confidence", type=float, default=0.5)
+    add_engine_arguments(parser)
     parser.add_argument("--offline-only", action="store_true")
     parser.add_argument("--service-only", action="store_true")
     parser.add_argument("--threads", action="store_true", help="CPU of each service thread")
@@ -505,9 +502,8 @@ def main() -> None:
         f"{os.cpu_count()} cores, "
         f"Python {platform.python_version()}, pocketsphinx {version('pocketsphinx')}"
     )
-    options = EngineOptions(args.engine, args.vosk_model, args.min_confidence)
     if not args.service_only:
-        offline(options, orders, utterances, args.set)
+        offline(engine_options(args), orders, utterances, args.set)
     if not args.offline_only:
         asyncio.run(through_service(args, orders, utterances, args.set))
 

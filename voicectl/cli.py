@@ -215,7 +215,7 @@ def main(argv: list[str] | None = None) -> int:
 def _main(argv: list[str]) -> int:
     if argv and argv[0] in SERVICES:
         module = importlib.import_module(f"services.{argv[0]}.__main__")
-        result: int = asyncio.run(module.main(argv[1:]))
+        result: int = module.run(argv[1:])
         return result
     args = build_parser().parse_args(argv)
     match args.command:
@@ -284,10 +284,7 @@ def _up(args: argparse.Namespace) -> int:
         ),
     ]
     if not args.no_stt:
-        engine = ["--engine", args.engine, "--min-confidence", str(args.min_confidence)]
-        engine += ["--workers", str(args.workers)]
-        if args.vosk_model is not None:
-            engine += ["--vosk-model", str(args.vosk_model)]
+        engine = engine_options(args).argv()
         children.insert(3, Child("stt", ["services.stt", *robot, *engine, *connect]))
     web = None
     if not args.no_web:

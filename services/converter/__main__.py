@@ -8,9 +8,8 @@ import logging
 import sys
 from pathlib import Path
 
-from shared.bus import Bus
-from shared.errors import OrdersFileError
-from shared.process import add_bus_arguments, bus_options, setup_logging, wait_for_stop
+from shared.errors import OrdersFileError, ServiceError
+from shared.process import add_bus_arguments, open_bus, run_service, serve, setup_logging
 
 from .service import POLL_SECONDS, ConverterService, errors_of, load
 from .shipped import shipped_orders
@@ -39,7 +38,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
-async def main(argv: list[str] | None = None) -> int:
+async def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
     setup_logging(args.debug)
     try:
@@ -50,27 +49,14 @@ async def main(argv: list[str] | None = None) -> int:
         # has every problem with its line; the last line says the first one.
         for error in errors_of(exc):
             _LOGGER.error("%s", error)
-        print(f"voicectl converter: {exc}", file=sys.stderr)
-        return 2
-    loop = asyncio.get_running_loop()
-    with (
-        Bus.open(bus_options(args), loop) as bus,
-        ConverterService(bus, args.orders, loaded, args.poll) as service,
-    ):
-        _LOGGER.info(
-            "converter ready with %d orders from %s; grammar %s (%d phrases)",
-            len(loaded.orders.orders),
-            args.orders,
-            loaded.grammar.version,
-            len(loaded.grammar.phrases),
-        )
-        await wait_for_stop(service.watch())
-    return 0
+        raise ServiceError(str(exc)) from exc
+    with open_bus(args) as bus:
+        await serve(ConverterService(bus, args.orders, loaded, args.poll))
 
 
-def run(argv: list[str] | None = None) -> None:
-    sys.exit(asyncio.run(main(argv)))
+def run(argv: list[str] | None = None) -> int:
+    return run_service("voicectl converter", lambda: main(argv))
 
 
 if __name__ == "__main__":
-    run()
+    sys.exit(run())

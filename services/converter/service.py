@@ -68,8 +68,8 @@ class ConverterService:
     """Answers parse and grammar queries, turns final transcripts into proposals, and
     reloads the orders when their files change, keeping the last good ones on errors.
 
-    Use it as a context manager: entering starts it on the bus, leaving undeclares its
-    publishers.
+    A service (shared/process.py): entering starts it on the bus, `run()` watches the
+    files, leaving undeclares its publishers.
     """
 
     def __init__(
@@ -91,7 +91,7 @@ class ConverterService:
     def loaded(self) -> Loaded:
         return self._loaded
 
-    def __enter__(self) -> ConverterService:
+    async def __aenter__(self) -> ConverterService:
         self._grammar = self._closers.enter_context(
             contextlib.closing(self._bus.latest(self._keys.grammar))
         )
@@ -107,9 +107,17 @@ class ConverterService:
         )
         self._publish_loaded()
         self._bus.announce(self._keys.alive())
+        loaded = self._loaded
+        _LOGGER.info(
+            "converter ready with %d orders from %s; grammar %s (%d phrases)",
+            len(loaded.orders.orders),
+            self._path,
+            loaded.grammar.version,
+            len(loaded.grammar.phrases),
+        )
         return self
 
-    def __exit__(
+    async def __aexit__(
         self,
         kind: type[BaseException] | None,
         error: BaseException | None,
@@ -117,7 +125,7 @@ class ConverterService:
     ) -> None:
         self._closers.close()
 
-    async def watch(self) -> None:
+    async def run(self) -> None:
         """Reload whenever the files' signature changes; runs until cancelled."""
         while True:
             await asyncio.sleep(self._poll_seconds)

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import asyncio
 import logging
 import os
 import sys
@@ -11,8 +10,16 @@ from pathlib import Path
 
 from shared.bus import Bus
 from shared.config import data_dir
+from shared.errors import ServiceError
 from shared.keys import RobotKeys
-from shared.process import add_bus_arguments, bus_options, robot_name, setup_logging, wait_for_stop
+from shared.process import (
+    add_bus_arguments,
+    open_bus,
+    robot_name,
+    run_service,
+    serve,
+    setup_logging,
+)
 from shared.robot import TransportKind, detect_transport, open_transport
 from shared.robot_options import add_robot_arguments, robot_options
 
@@ -125,38 +132,17 @@ def executor_service(
     return service
 
 
-async def main(argv: list[str] | None = None) -> int:
+async def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
     setup_logging(args.debug)
     try:
         bindings = load_bindings(args)
     except BindingError as exc:
-        print(f"voicectl executor: {exc}", file=sys.stderr)
-        return 2
-    loop = asyncio.get_running_loop()
-    with Bus.open(bus_options(args), loop) as bus:
-        options = robot_options(args)
-        transport = options.transport
-        if transport is None:
-            transport = await detect_transport(bus, options.names, options.domain_id, DETECT_WAIT)
-            if transport is None:
-                transport = TransportKind.BRIDGE
-                _LOGGER.warning(
-                    "the robot announced nothing in %g s; reaching it through the bridge "
-                    "(see --transport)",
-                    DETECT_WAIT,
-                )
-            else:
-                _LOGGER.info("the robot's graph speaks %s", transport)
+        raise ServiceError(str(exc)) from exc
+    with open_bus(args) as bus:
+        transport = await choose_transport(bus, args)
         service = executor_service(bus, args, bindings, transport)
-        service.start()
-        labels = ", ".join(service.labels)
-        _LOGGER.info("executor ready for %s; labels: %s", args.robot, labels)
-        try:
-            # Inside the wait, so that a stop signal during the halt is still a clean stop.
-            await wait_for_stop(service.end_stray_motion(), keep_running=True)
-        finally:
-            await service.shutdown()
+        await serve(service)
     if service.abandoned:
         # asyncio.run would wait for these forever: an executor that ignores cancellation
         # must not keep the process alive once the bus is closed.
@@ -165,12 +151,28 @@ async def main(argv: list[str] | None = None) -> int:
         )
         logging.shutdown()
         os._exit(0)
-    return 0
 
 
-def run(argv: list[str] | None = None) -> None:
-    sys.exit(asyncio.run(main(argv)))
+async def choose_transport(bus: Bus, args: argparse.Namespace) -> TransportKind:
+    """The transport `--transport` names, or with `auto` the one the robot's graph
+    announces itself in (the bridge when it announces nothing)."""
+    options = robot_options(args)
+    if options.transport is not None:
+        return options.transport
+    found = await detect_transport(bus, options.names, options.domain_id, DETECT_WAIT)
+    if found is None:
+        _LOGGER.warning(
+            "the robot announced nothing in %g s; reaching it through the bridge (see --transport)",
+            DETECT_WAIT,
+        )
+        return TransportKind.BRIDGE
+    _LOGGER.info("the robot's graph speaks %s", found)
+    return found
+
+
+def run(argv: list[str] | None = None) -> int:
+    return run_service("voicectl executor", lambda: main(argv))
 
 
 if __name__ == "__main__":
-    run()
+    sys.exit(run())

@@ -13,6 +13,7 @@ import collections
 import contextlib
 import logging
 from collections.abc import Callable, Coroutine
+from types import TracebackType
 
 from shared.bus import Bus, Latest, json_decoder
 from shared.errors import OrderFailed
@@ -39,6 +40,7 @@ from shared.messages import (
     Rejected,
     Running,
 )
+from shared.process import forever
 
 from .framework import Bindings, ExecutionContext, Executor, ParamsMismatch, order_params
 from .robot import OrderRobot, RobotLink
@@ -71,7 +73,12 @@ class _Execution:
 
 
 class ExecutorService:
-    """Serves execute/cancel/halt for one robot."""
+    """Serves execute/cancel/halt for one robot.
+
+    A service (shared/process.py): entering serves its keys and starts the robot's link
+    and the loop's watchdog, `run()` ends stray motion and then says the executor is
+    online, leaving takes it offline and interrupts the order that runs.
+    """
 
     def __init__(
         self,
@@ -108,7 +115,7 @@ class ExecutorService:
         self._stalled: _Execution | None = None
         """The order halted because the loop stalled under it, until the loop runs again."""
 
-    def start(self) -> None:
+    async def __aenter__(self) -> ExecutorService:
         self._robot.start()
         self._bus.serve(self._keys.executor_execute, json_decoder(Execute), self.handle)
         self._bus.serve(self._keys.executor_control, json_decoder(ControlRequest), self.handle)
@@ -124,6 +131,13 @@ class ExecutorService:
         self._bus.watch(self._keys.alive("supervisor"), self._on_supervisor)
         self._info = self._bus.latest(self._keys.executor_info)
         self.publish_info()
+        labels = ", ".join(self.labels)
+        _LOGGER.info("executor ready for %s; labels: %s", self._keys.robot, labels)
+        return self
+
+    async def run(self) -> None:
+        await self.end_stray_motion()
+        await forever()
 
     def publish_info(self) -> None:
         """What a supervisor needs to stop the robot itself if this process dies; sent
@@ -304,7 +318,12 @@ class ExecutorService:
             self._tasks.add(task)
             task.add_done_callback(self._tasks.discard)
 
-    async def shutdown(self) -> None:
+    async def __aexit__(
+        self,
+        kind: type[BaseException] | None,
+        error: BaseException | None,
+        traceback: TracebackType | None,
+    ) -> None:
         # Offline first, so the supervisor holds its queue instead of sending the next order.
         self._withdraw()
         if self._watchdog is not None:

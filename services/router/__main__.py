@@ -3,14 +3,13 @@
 from __future__ import annotations
 
 import argparse
-import asyncio
 import logging
 import sys
 
 import zenoh
 
-from shared.errors import BusError
-from shared.process import add_bus_arguments, bus_options, setup_logging, wait_for_stop
+from shared.errors import BusError, ServiceError
+from shared.process import add_bus_arguments, bus_options, run_service, setup_logging, wait_for_stop
 
 _LOGGER = logging.getLogger(__name__)
 
@@ -21,7 +20,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
-async def main(argv: list[str] | None = None) -> int:
+async def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
     setup_logging(args.debug)
     options = bus_options(args, router=True)
@@ -30,19 +29,17 @@ async def main(argv: list[str] | None = None) -> int:
         session = zenoh.open(options.zenoh_config())
     except (zenoh.ZError, BusError) as exc:
         reason = str(exc).split(" at /", 1)[0]
-        print(f"voicectl router: cannot listen on {listen}: {reason}", file=sys.stderr)
-        return 2
+        raise ServiceError(f"cannot listen on {listen}: {reason}") from exc
     try:
         _LOGGER.info("router listening on %s", listen)
         await wait_for_stop()
     finally:
         session.close()
-    return 0
 
 
-def run(argv: list[str] | None = None) -> None:
-    sys.exit(asyncio.run(main(argv)))
+def run(argv: list[str] | None = None) -> int:
+    return run_service("voicectl router", lambda: main(argv))
 
 
 if __name__ == "__main__":
-    run()
+    sys.exit(run())

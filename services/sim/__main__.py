@@ -3,13 +3,11 @@
 from __future__ import annotations
 
 import argparse
-import asyncio
-import contextlib
 import logging
 import sys
 
 from shared.bus import Bus
-from shared.process import add_bus_arguments, bus_options, setup_logging, wait_for_stop
+from shared.process import add_bus_arguments, open_bus, run_service, serve, setup_logging
 from shared.robot import TransportKind, open_transport
 from shared.robot_options import add_robot_arguments, robot_options
 from shared.ros2 import CameraType, CmdVelType, Ros2Codec, RosDistro
@@ -99,33 +97,21 @@ def sim_node(bus: Bus, args: argparse.Namespace) -> SimNode:
     distro = robot.distro or RosDistro.JAZZY
     kind = robot.transport or TransportKind.BRIDGE
     transport = open_transport(bus, kind, NODE, robot.names.namespace, robot.domain_id, distro)
-    node = SimNode(transport, Ros2Codec(distro), config)
-    node.declare()
-    bus.announce(robot.names.simulator)
-    return node
+    return SimNode(
+        transport, Ros2Codec(distro), config, ready=lambda: bus.announce(robot.names.simulator)
+    )
 
 
-async def main(argv: list[str] | None = None) -> int:
+async def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
     setup_logging(args.debug)
-    loop = asyncio.get_running_loop()
-    with Bus.open(bus_options(args), loop) as bus:
-        node = sim_node(bus, args)
-        ticking = asyncio.create_task(node.run())
-        try:
-            await wait_for_stop()
-            _LOGGER.info("stopping")
-        finally:
-            ticking.cancel()
-            with contextlib.suppress(asyncio.CancelledError):
-                await ticking
-            await node.shutdown()
-    return 0
+    with open_bus(args) as bus:
+        await serve(sim_node(bus, args))
 
 
-def run(argv: list[str] | None = None) -> None:
-    sys.exit(asyncio.run(main(argv)))
+def run(argv: list[str] | None = None) -> int:
+    return run_service("voicectl sim", lambda: main(argv))
 
 
 if __name__ == "__main__":
-    run()
+    sys.exit(run())

@@ -47,6 +47,7 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from types import TracebackType
 
 import numpy as np
 from PIL import Image as PilImage
@@ -153,7 +154,12 @@ class _Goal:
 
 
 class SimNode:
-    """One simulated robot on the bus; `declare()` then `run()`, `shutdown()` at the end."""
+    """One simulated robot on the bus.
+
+    A service (shared/process.py): entering subscribes, serves and offers the robot's
+    interfaces, then calls `ready` (which announces the simulator); `run()` ticks the
+    model; leaving ends the active goal so that waiting queries get their answer.
+    """
 
     def __init__(
         self,
@@ -161,7 +167,9 @@ class SimNode:
         codec: Ros2Codec,
         config: SimConfig,
         clock: Callable[[], float] = time.monotonic,
+        ready: Callable[[], object] = lambda: None,
     ) -> None:
+        self._ready = ready
         self._transport = transport
         self._codec = codec
         self._config = config
@@ -179,8 +187,7 @@ class SimNode:
     def sim_time(self) -> float:
         return (self._clock() - self._epoch) * self._config.time_scale
 
-    def declare(self) -> None:
-        """Subscribe, serve and announce; call before `run()` so that odom means 'ready'."""
+    async def __aenter__(self) -> SimNode:
         names = self._names
         kind = self._config.cmd_vel_type
         transport = self._transport
@@ -213,6 +220,8 @@ class SimNode:
             self._config.time_scale,
             faults,
         )
+        self._ready()
+        return self
 
     async def run(self) -> None:
         """Tick at 20 Hz wall until cancelled."""
@@ -233,7 +242,12 @@ class SimNode:
                 delay = 0.0
             await asyncio.sleep(max(delay, 0.0))
 
-    async def shutdown(self) -> None:
+    async def __aexit__(
+        self,
+        kind: type[BaseException] | None,
+        error: BaseException | None,
+        traceback: TracebackType | None,
+    ) -> None:
         """End the active goal so that waiting get_result queries get their answer."""
         if self._active is not None:
             self._finish(self._active, GoalStatus.ABORTED, "the simulator is stopping")

@@ -6,10 +6,16 @@ import argparse
 import asyncio
 import logging
 import sys
-from pathlib import Path
 
-from shared.bus import Bus
-from shared.process import add_bus_arguments, bus_options, robot_name, setup_logging, wait_for_stop
+from shared.errors import ServiceError
+from shared.process import (
+    add_bus_arguments,
+    open_bus,
+    robot_name,
+    run_service,
+    serve,
+    setup_logging,
+)
 
 from .engine import ENGINES, EngineError, EngineOptions, load_engine
 from .service import SessionLimits, SttService
@@ -18,19 +24,21 @@ _LOGGER = logging.getLogger(__name__)
 
 
 def add_engine_arguments(parser: argparse.ArgumentParser) -> None:
-    """The engine flags `voicectl stt` and `voicectl transcribe` share."""
+    """The engine flags of every command that loads an engine, each engine's own among them."""
     parser.add_argument(
         "--engine",
-        choices=ENGINES,
+        choices=list(ENGINES),
         default="pocketsphinx",
         help="speech engine (default %(default)s)",
     )
-    parser.add_argument(
-        "--vosk-model",
-        type=Path,
-        metavar="DIR",
-        help="an unpacked Vosk model (https://alphacephei.com/vosk/models), with --engine vosk",
-    )
+    for kind in ENGINES.values():
+        for flag in kind.flags:
+            parser.add_argument(
+                f"--{flag.name}",
+                type=flag.type,
+                metavar=flag.metavar,
+                help=f"{flag.help}, with --engine {kind.name}",
+            )
     parser.add_argument(
         "--min-confidence",
         type=float,
@@ -61,9 +69,9 @@ def _count(text: str) -> int:
 def engine_options(args: argparse.Namespace) -> EngineOptions:
     return EngineOptions(
         name=args.engine,
-        vosk_model=args.vosk_model,
         min_confidence=args.min_confidence,
         workers=args.workers,
+        settings={flag.dest: getattr(args, flag.dest) for flag in ENGINES[args.engine].flags},
     )
 
 
@@ -96,35 +104,28 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
-async def main(argv: list[str] | None = None) -> int:
+async def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
     setup_logging(args.debug)
     try:
         engine = await asyncio.to_thread(load_engine, engine_options(args))
     except EngineError as exc:
-        print(f"voicectl stt: {exc}", file=sys.stderr)
-        return 2
+        raise ServiceError(str(exc)) from exc
     limits = SessionLimits(
         max_utterance=args.max_utterance,
         max_sessions=args.max_sessions,
         idle_seconds=args.idle,
     )
-    loop = asyncio.get_running_loop()
     try:
-        with (
-            Bus.open(bus_options(args), loop) as bus,
-            SttService(bus, args.robot, engine, limits) as service,
-        ):
-            _LOGGER.info("stt ready for robot %s with %s", args.robot, engine.name)
-            await wait_for_stop(service.run())
+        with open_bus(args) as bus:
+            await serve(SttService(bus, args.robot, engine, limits))
     finally:
         engine.close()
-    return 0
 
 
-def run(argv: list[str] | None = None) -> None:
-    sys.exit(asyncio.run(main(argv)))
+def run(argv: list[str] | None = None) -> int:
+    return run_service("voicectl stt", lambda: main(argv))
 
 
 if __name__ == "__main__":
-    run()
+    sys.exit(run())

@@ -6,22 +6,24 @@ It finds the end of an utterance in the audio itself, or ends it at `finish()` (
 session stopped) or at the maximum utterance length. Every call blocks: the service runs
 each session's recogniser on a thread of its own.
 
-Engines are imported lazily, so that a machine without a heavy engine still runs the
-others; `load_engine` names the extra to install.
+`ENGINES` is the one registry of engines: each entry names its module (imported only
+when that engine is loaded, so that a machine without a heavy engine still runs the
+others), the library and extra it needs, and its own options, which become command-line
+flags of every command that loads engines and are forwarded by `voicectl up`. A new engine
+is a module with a `load(options)` function and one entry here.
 """
 
 from __future__ import annotations
 
 import importlib
 import math
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Protocol
+from typing import Any, Protocol
 
 from shared.errors import VoicectlError
 from shared.messages import Doubt, Grammar
-
-ENGINES = ("pocketsphinx", "vosk")
 
 
 class EngineError(VoicectlError):
@@ -92,13 +94,74 @@ class Engine(Protocol):
 
 
 @dataclass(frozen=True)
+class EngineFlag:
+    """One option of one engine, given as `--<name>` on the command line."""
+
+    name: str
+    metavar: str
+    help: str
+    type: Callable[[str], Any] = str
+
+    @property
+    def dest(self) -> str:
+        """Its key in `EngineOptions.settings` (and argparse's attribute)."""
+        return self.name.replace("-", "_")
+
+
+@dataclass(frozen=True)
+class EngineKind:
+    """An engine voicectl can load."""
+
+    name: str
+    module: str
+    """Where its `load(options) -> Engine` is; imported when the engine is loaded."""
+    requires: str
+    """The library it runs on, and the pip extra that installs it."""
+    extra: str
+    flags: tuple[EngineFlag, ...] = ()
+
+
+ENGINES: dict[str, EngineKind] = {
+    kind.name: kind
+    for kind in (
+        EngineKind("pocketsphinx", "services.stt.sphinx", requires="pocketsphinx", extra="stt"),
+        EngineKind(
+            "vosk",
+            "services.stt.vosk_engine",
+            requires="vosk",
+            extra="vosk",
+            flags=(
+                EngineFlag(
+                    "vosk-model",
+                    "DIR",
+                    "an unpacked Vosk model (https://alphacephei.com/vosk/models)",
+                    Path,
+                ),
+            ),
+        ),
+    )
+}
+
+
+@dataclass(frozen=True)
 class EngineOptions:
     name: str = "pocketsphinx"
-    vosk_model: Path | None = None
     min_confidence: float = 0.5
     """Utterances whose confidence is lower are rejected."""
     workers: int = 0
     """Decode in this many worker processes (workers.py); 0: in the calling process."""
+    settings: Mapping[str, Any] = field(default_factory=dict)
+    """The engine's own options by `EngineFlag.dest`; None or absent when not given."""
+
+    def argv(self) -> list[str]:
+        """The same options as flags, for a `voicectl stt` this process starts."""
+        flags = ["--engine", self.name, "--min-confidence", str(self.min_confidence)]
+        flags += ["--workers", str(self.workers)]
+        for flag in ENGINES[self.name].flags if self.name in ENGINES else ():
+            value = self.settings.get(flag.dest)
+            if value is not None:
+                flags += [f"--{flag.name}", str(value)]
+        return flags
 
 
 def load_engine(options: EngineOptions) -> Engine:
@@ -107,32 +170,17 @@ def load_engine(options: EngineOptions) -> Engine:
         from .workers import ProcessEngine
 
         return ProcessEngine(options, options.workers)
-    match options.name:
-        case "pocketsphinx":
-            _require("pocketsphinx", "stt")
-            from .sphinx import PocketsphinxEngine
-
-            return PocketsphinxEngine(min_confidence=options.min_confidence)
-        case "vosk":
-            _require("vosk", "vosk")
-            from .vosk_engine import VoskEngine
-
-            if options.vosk_model is None:
-                raise EngineError(
-                    "--engine vosk needs --vosk-model DIR: "
-                    + "an unpacked model from https://alphacephei.com/vosk/models"
-                )
-            return VoskEngine(options.vosk_model, min_confidence=options.min_confidence)
-    raise EngineError(f"unknown engine {options.name!r}; engines: {', '.join(ENGINES)}")
-
-
-def _require(module: str, extra: str) -> None:
+    kind = ENGINES.get(options.name)
+    if kind is None:
+        raise EngineError(f"unknown engine {options.name!r}; engines: {', '.join(ENGINES)}")
     try:
-        importlib.import_module(module)
+        importlib.import_module(kind.requires)
     except ImportError as exc:
         raise EngineError(
-            f"the {module} engine is not installed: pip install 'voicectl[{extra}]' ({exc})"
+            f"the {kind.name} engine is not installed: pip install 'voicectl[{kind.extra}]' ({exc})"
         ) from exc
+    load: Callable[[EngineOptions], Engine] = importlib.import_module(kind.module).load
+    return load(options)
 
 
 def logistic(value: float, midpoint: float, width: float) -> float:

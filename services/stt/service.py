@@ -175,10 +175,12 @@ class Session:
 class SttService:
     """Serves one robot's audio sessions with one engine, following the converter's grammar.
 
-    Use it as a context manager: entering subscribes and announces the service.
+    A service (shared/process.py): entering subscribes and announces it, `run()` ends
+    sessions that went quiet, leaving aborts the sessions still open.
     """
 
     def __init__(self, bus: Bus, robot: str, engine: Engine, limits: SessionLimits) -> None:
+        self._robot = robot
         self.bus = bus
         self.engine = engine
         self.limits = limits
@@ -199,7 +201,7 @@ class SttService:
         """Sessions refused or unknown, so that their audio is dropped without a line
         per chunk (the last few hundred names)."""
 
-    def __enter__(self) -> SttService:
+    async def __aenter__(self) -> SttService:
         self._status = self.bus.latest(self._keys.stt_status)
         self._publish_status("waiting for the converter's grammar")
         self.bus.subscribe(
@@ -210,9 +212,10 @@ class SttService:
             self._keys.stt_audio_any, json_decoder(AudioMessage), self._on_audio, on_loop=False
         )
         self.bus.announce(self._keys.alive("stt"))
+        _LOGGER.info("stt ready for robot %s with %s", self._robot, self.engine.name)
         return self
 
-    def __exit__(
+    async def __aexit__(
         self,
         kind: type[BaseException] | None,
         error: BaseException | None,

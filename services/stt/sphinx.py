@@ -45,7 +45,16 @@ import pocketsphinx
 from shared.messages import Grammar
 
 from .audio import NoiseFloor, seconds, whole
-from .engine import EngineError, Final, Heard, RecognitionEvent, SpeechStarted, logistic, rejection
+from .engine import (
+    EngineError,
+    EngineOptions,
+    Final,
+    Heard,
+    RecognitionEvent,
+    SpeechStarted,
+    logistic,
+    rejection,
+)
 from .judge import Thresholds, Verdict, Vocabulary, Word, filler, judge
 from .lexicon import pronunciations
 from .wordgraph import GrammarError, WordGraph, compile_jsgf
@@ -192,6 +201,11 @@ class _Decoder:
 
 def _numbered(word: str, variant: int) -> str:
     return word if variant == 1 else f"{word}({variant})"
+
+
+def load(options: EngineOptions) -> PocketsphinxEngine:
+    """The engine registry's entry point (engine.py's ENGINES)."""
+    return PocketsphinxEngine(min_confidence=options.min_confidence)
 
 
 class PocketsphinxEngine:

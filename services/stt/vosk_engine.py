@@ -22,7 +22,15 @@ import vosk
 from shared.messages import Doubt, Grammar
 
 from .audio import seconds, whole
-from .engine import EngineError, Final, Heard, RecognitionEvent, SpeechStarted, rejection
+from .engine import (
+    EngineError,
+    EngineOptions,
+    Final,
+    Heard,
+    RecognitionEvent,
+    SpeechStarted,
+    rejection,
+)
 
 _LOGGER = logging.getLogger(__name__)
 
@@ -42,6 +50,14 @@ MAX_ALTERNATIVES = 5
 that has the same word at the same time, and a doubtful number offers the numbers the
 others heard there: Vosk gives either per-word confidences (`SetWords`) or alternatives
 (`SetMaxAlternatives`), not both, and only the alternatives can say "ten or two"."""
+
+
+def load(options: EngineOptions) -> VoskEngine:
+    """The engine registry's entry point (engine.py's ENGINES)."""
+    model: Path | None = options.settings.get("vosk_model")
+    if model is None:
+        raise EngineError(f"--engine vosk needs --vosk-model DIR: {HOW_TO_GET}")
+    return VoskEngine(model, min_confidence=options.min_confidence)
 
 
 class VoskEngine:

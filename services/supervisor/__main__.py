@@ -3,16 +3,22 @@
 from __future__ import annotations
 
 import argparse
-import asyncio
 import contextlib
 import logging
 import sqlite3
 import sys
 from pathlib import Path
 
-from shared.bus import Bus
 from shared.config import data_dir
-from shared.process import add_bus_arguments, bus_options, robot_name, setup_logging, wait_for_stop
+from shared.errors import ServiceError
+from shared.process import (
+    add_bus_arguments,
+    open_bus,
+    robot_name,
+    run_service,
+    serve,
+    setup_logging,
+)
 
 from .service import SupervisorService
 from .store import Durability, OrderStore, StoreInUse
@@ -53,7 +59,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
-async def main(argv: list[str] | None = None) -> int:
+async def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
     setup_logging(args.debug)
     db_path: Path = args.db or data_dir() / "supervisor.sqlite3"
@@ -61,28 +67,17 @@ async def main(argv: list[str] | None = None) -> int:
         try:
             store = closing.enter_context(OrderStore(db_path, args.durability))
         except StoreInUse as exc:
-            print(f"voicectl supervisor: {exc}", file=sys.stderr)
-            return 2
+            raise ServiceError(str(exc)) from exc
         except (sqlite3.Error, OSError) as exc:
-            print(f"voicectl supervisor: cannot open {db_path}: {exc}", file=sys.stderr)
-            return 2
-        bus = closing.enter_context(Bus.open(bus_options(args), asyncio.get_running_loop()))
-        service = SupervisorService(bus, store, continue_on_failure=args.continue_on_failure)
-        await service.start(args.robot)
-        _LOGGER.info("supervisor ready; history in %s", db_path)
-        try:
-            await wait_for_stop(service.conflict)
-        finally:
-            await service.stop()
-        if service.conflict.done() and not service.conflict.cancelled():
-            print(f"voicectl supervisor: {service.conflict.result()}", file=sys.stderr)
-            return 2
-    return 0
+            raise ServiceError(f"cannot open {db_path}: {exc}") from exc
+        bus = closing.enter_context(open_bus(args))
+        continues = args.continue_on_failure
+        await serve(SupervisorService(bus, store, args.robot, continue_on_failure=continues))
 
 
-def run(argv: list[str] | None = None) -> None:
-    sys.exit(asyncio.run(main(argv)))
+def run(argv: list[str] | None = None) -> int:
+    return run_service("voicectl supervisor", lambda: main(argv))
 
 
 if __name__ == "__main__":
-    run()
+    sys.exit(run())

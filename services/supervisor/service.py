@@ -13,9 +13,10 @@ import functools
 import logging
 import sqlite3
 import time
+from types import TracebackType
 
 from shared.bus import Bus, json_decoder
-from shared.errors import BusError
+from shared.errors import BusError, ServiceError
 from shared.keys import RobotKeys, last_chunk, robot_of
 from shared.messages import (
     Accepted,
@@ -512,17 +513,24 @@ class RobotSupervisor:
 
 
 class SupervisorService:
-    """Every robot's supervisor in one process, sharing one bus and one store."""
+    """Every robot's supervisor in one process, sharing one bus and one store.
+
+    A service (shared/process.py): entering restores the queues and serves them, `run()`
+    ends only when another supervisor already serves one of `robots` (ServiceError),
+    leaving stops each robot's dispatch.
+    """
 
     def __init__(
         self,
         bus: Bus,
         store: OrderStore,
+        robots: list[str],
         *,
         continue_on_failure: bool = False,
         history_in_memory: int = 50,
     ) -> None:
         self._bus = bus
+        self._announced = robots
         self._store = store
         self._continue_on_failure = continue_on_failure
         self._history = history_in_memory
@@ -535,7 +543,8 @@ class SupervisorService:
         """Set, saying why, when a supervisor that started earlier serves one of this
         one's robots: a robot has one supervisor, and this one must stop."""
 
-    async def start(self, robots: list[str]) -> None:
+    async def __aenter__(self) -> SupervisorService:
+        robots = self._announced
         saved = await self._store.call(self._store.load(self._history))
         for name, robot in saved.items():
             queue = self._new_queue(name)
@@ -562,8 +571,18 @@ class SupervisorService:
         )
         for name in robots:
             self._bus.announce(RobotKeys(name).alive("supervisor"))
+        _LOGGER.info("supervisor ready; history in %s", self._store.path)
+        return self
 
-    async def stop(self) -> None:
+    async def run(self) -> None:
+        raise ServiceError(await self.conflict)
+
+    async def __aexit__(
+        self,
+        kind: type[BaseException] | None,
+        error: BaseException | None,
+        traceback: TracebackType | None,
+    ) -> None:
         await asyncio.gather(*(r.stop() for r in self._robots.values()))
 
     def robot(self, name: str) -> RobotSupervisor:

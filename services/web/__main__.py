@@ -14,7 +14,15 @@ from pathlib import Path
 import uvicorn
 
 from shared.config import default_token_file, load_or_create_token
-from shared.process import add_bus_arguments, bus_options, robot_name, setup_logging, wait_for_stop
+from shared.errors import ServiceError
+from shared.process import (
+    add_bus_arguments,
+    bus_options,
+    robot_name,
+    run_service,
+    setup_logging,
+    wait_for_stop,
+)
 
 from .app import Access, create_app
 from .audio import MAX_MESSAGE
@@ -73,13 +81,12 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
-async def main(argv: list[str] | None = None) -> int:
+async def main(argv: list[str] | None = None) -> None:
     args = parse_args(argv)
     setup_logging(args.debug)
     problem = tls_problem(args)
     if problem:
-        print(f"voicectl web: {problem}", file=sys.stderr)
-        return 2
+        raise ServiceError(problem)
     token_file = args.token_file or default_token_file()
     access = Access(load_or_create_token(token_file), origins=args.allow_origin)
     config = uvicorn.Config(
@@ -95,11 +102,7 @@ async def main(argv: list[str] | None = None) -> int:
     try:
         listening = _bind(args.host, args.port)
     except OSError as exc:
-        print(
-            f"voicectl web: cannot serve on {args.host}:{args.port}: {exc.strerror}",
-            file=sys.stderr,
-        )
-        return 2
+        raise ServiceError(f"cannot serve on {args.host}:{args.port}: {exc.strerror}") from exc
     server = _QuietServer(config)
     serving = asyncio.create_task(server.serve(sockets=[listening]))
     stopping = asyncio.create_task(wait_for_stop())
@@ -111,12 +114,13 @@ async def main(argv: list[str] | None = None) -> int:
     await serving
     listening.close()
     await asyncio.gather(stopping, return_exceptions=True)
-    return 0 if server.started else 1
+    if not server.started:
+        raise ServiceError("the panel's server did not start (its log says why)")
 
 
-def run(argv: list[str] | None = None) -> None:
-    sys.exit(asyncio.run(main(argv)))
+def run(argv: list[str] | None = None) -> int:
+    return run_service("voicectl web", lambda: main(argv))
 
 
 if __name__ == "__main__":
-    run()
+    sys.exit(run())
