@@ -2,7 +2,7 @@
 
     sudo .venv/bin/python bench/cross_host.py [--stops 20] [--pings 200] [--delay-ms 100] [--loss 5]
 
-Two network namespaces joined by a veth pair (bench/netns.py): on the host, a router and
+Two network namespaces joined by a veth pair (harness/netns.py): on the host, a router and
 the supervisor; on the robot, a router connected to the host's, the executor, the
 simulator and a raw Zenoh echo. Every packet crossing the link, either way, is delayed by
 --delay-ms and lost with --loss % probability. Measured in the same run:
@@ -27,7 +27,6 @@ import tempfile
 import threading
 import time
 import uuid
-from collections.abc import Callable
 from pathlib import Path
 
 import zenoh
@@ -36,17 +35,11 @@ REPO = Path(__file__).resolve().parents[1]
 if str(REPO) not in sys.path:
     sys.path.insert(0, str(REPO))
 
-from bench.netns import (  # noqa: E402
-    LEASE,
-    LEASE_MS,
-    Side,
-    TwoHosts,
-    impairment_unavailable,
-    unavailable,
-)
+from harness.cross_host import ROBOT, RobotWatch, observer, start_stack  # noqa: E402
+from harness.netns import LEASE_MS, TwoHosts, impairment_unavailable, unavailable  # noqa: E402
 from shared.bus import Bus, BusOptions, json_decoder  # noqa: E402
 from shared.errors import BusError  # noqa: E402
-from shared.keys import RobotKeys, RobotNames  # noqa: E402
+from shared.keys import RobotKeys  # noqa: E402
 from shared.messages import (  # noqa: E402
     Done,
     EmergencyStop,
@@ -61,77 +54,8 @@ from shared.messages import (  # noqa: E402
     Submitted,
     SupervisorReply,
 )
-from shared.ros2 import Odometry, Ros2Codec  # noqa: E402
 
-ROBOT = "r1"
 PING, PONG = "bench/cross_host/ping", "bench/cross_host/pong"
-
-
-def start_stack(rig: TwoHosts, db: Path) -> None:
-    """Routers on both sides, the supervisor on the host; executor and simulator on the
-    robot. Every process has the short lease."""
-    rig.start_router("host")
-    rig.start_router("robot")
-    local = ("--connect", rig.local_router(), *LEASE)
-    supervisor = ("--robot", ROBOT, "--db", str(db))
-    rig.start("host", "services.supervisor", *local, *supervisor, name="supervisor")
-    rig.start("robot", "services.sim", *local, name="sim")
-    rig.start("robot", "services.executor", *local, "--robot", ROBOT, name="executor")
-
-
-def observer(rig: TwoHosts, side: Side) -> BusOptions:
-    """How a process outside both namespaces joins `side`'s router."""
-    return BusOptions(connect=[rig.socket(side)], lease_ms=LEASE_MS)
-
-
-class RobotWatch:
-    """The simulator's odometry as read on the robot's side, with the monotonic time each
-    message arrived."""
-
-    def __init__(self, bus: Bus) -> None:
-        self.odometry: list[tuple[float, Odometry]] = []
-        bus.subscribe(RobotNames().odom, Ros2Codec().read_odometry, self._on_odometry)
-
-    def _on_odometry(self, _key: str, odometry: Odometry) -> None:
-        self.odometry.append((time.monotonic(), odometry))
-
-    @property
-    def last(self) -> Odometry:
-        return self.odometry[-1][1]
-
-    @staticmethod
-    async def wait(condition: Callable[[], object], timeout: float, what: str) -> None:
-        deadline = time.monotonic() + timeout
-        while not condition():
-            if time.monotonic() > deadline:
-                raise TimeoutError(f"timed out after {timeout:g} s waiting for {what}")
-            await asyncio.sleep(0.01)
-
-    async def ready(self, timeout: float = 30.0) -> None:
-        await self.wait(lambda: self.odometry, timeout, "odometry from the simulator")
-
-    async def moving(self, timeout: float = 30.0) -> None:
-        await self.wait(
-            lambda: self.odometry and abs(self.last.linear_x) > 0.2, timeout, "the robot to drive"
-        )
-
-    def still_since(self, moment: float) -> float | None:
-        """When odometry first showed the robot standing after `moment`, or None."""
-        return next(
-            (
-                at
-                for at, odom in self.odometry
-                if at > moment and odom.linear_x == 0.0 and odom.angular_z == 0.0
-            ),
-            None,
-        )
-
-    async def stopped(self, moment: float, timeout: float) -> float:
-        """Seconds from `moment` until odometry showed the robot standing."""
-        await self.wait(lambda: self.still_since(moment), timeout, "the robot to stop")
-        stood = self.still_since(moment)
-        assert stood is not None
-        return stood - moment
 
 
 class Operator:

@@ -5,7 +5,7 @@
 Starts `voicectl up` (the simulator at real speed, a data directory of its own, free
 ports) and measures what a person waits for:
 
-1. **Speech**: spoken commands (Flite and espeak-ng voices, made with bench/speech_set.py)
+1. **Speech**: spoken commands (Flite and espeak-ng voices, made with harness/speech_set.py)
    streamed at real-time pace over the panel's /api/audio WebSocket in 20 ms frames;
    end of speech to the final transcript, and to the converter's proposal, both read on
    /api/events as the panel reads them.
@@ -49,9 +49,9 @@ sys.path.insert(0, str(REPO))
 import httpx  # noqa: E402
 import websockets  # noqa: E402
 from soak import children, start_up  # noqa: E402
-from speech_set import Utterance, Voice, speak  # noqa: E402
 from stt import cpu_seconds, raw_latency  # noqa: E402
 
+from harness.speech_set import Utterance, Voice, speak  # noqa: E402
 from services.stt.audio import frames, read_wav  # noqa: E402
 from shared.bus import Bus, BusOptions  # noqa: E402
 from shared.keys import RobotNames  # noqa: E402

@@ -2,7 +2,7 @@
 
     .venv/bin/python bench/stt.py [--split test|dev] [--set DIR] [--every N]
 
-The set is bench/speech_set.py's: people (pocketsphinx's own test recordings), espeak-ng,
+The set is harness/speech_set.py's: people (pocketsphinx's own test recordings), espeak-ng,
 Festival and Flite voices, clean, in noise, in babble and in a reverberant room; generated
 into --set when missing. Thresholds were tuned on its dev split; numbers are reported on
 its test split, which shares no voice and no sentence with dev.
@@ -41,8 +41,8 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 import pocketsphinx  # noqa: E402
-from speech_set import Utterance, generate  # noqa: E402
 
+from harness.speech_set import Utterance, generate  # noqa: E402
 from services.converter.grammar import build_grammar  # noqa: E402
 from services.converter.orders import OrderSet  # noqa: E402
 from services.converter.parser import Parser  # noqa: E402

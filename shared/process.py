@@ -2,16 +2,17 @@
 names them, with their environment variables), one logging setup, waiting for SIGINT or
 SIGTERM, and one lifecycle for every service.
 
-A service is an async context manager with a `run()` coroutine (`Service`). Entering it
-declares what it serves and announces it on the bus; `run()` does its ongoing work (a
-poll, a tick, a watch) and returns or raises only when the service must end by itself;
-leaving it withdraws, stops what runs and lets go of what it holds. `serve()` runs
+A service (`Service`) has three steps: `start()` declares what it serves and announces
+it on the bus; `run()` does its ongoing work (a poll, a tick, a watch) and returns or
+raises only when the service must end by itself; `stop()` withdraws, stops what runs and
+lets go of what it holds. It is an async context manager of those. `serve()` runs
 services until a stop signal; `run_service()` is every entry point's process: its exit
 code, and a `ServiceError` as one line on stderr.
 """
 
 from __future__ import annotations
 
+import abc
 import argparse
 import asyncio
 import contextlib
@@ -22,8 +23,7 @@ import signal
 import sys
 from collections.abc import Awaitable, Callable, Mapping
 from pathlib import Path
-from types import TracebackType
-from typing import Protocol, Self
+from typing import Self
 
 import zenoh
 
@@ -227,19 +227,28 @@ async def wait_for_stop(*tasks: Awaitable[object]) -> None:
         await asyncio.gather(stopper, *running, *beating, return_exceptions=True)
 
 
-class Service(Protocol):
-    """What every voicectl service is (the module's docstring says when each part runs)."""
+class Service(abc.ABC):
+    """What every voicectl service is (the module's docstring says when each part runs);
+    used as an async context manager, entering starts it and leaving stops it."""
 
-    async def __aenter__(self) -> Self: ...
+    async def __aenter__(self) -> Self:
+        await self.start()
+        return self
 
-    async def __aexit__(
-        self,
-        kind: type[BaseException] | None,
-        error: BaseException | None,
-        traceback: TracebackType | None,
-    ) -> None: ...
+    async def __aexit__(self, *_exc: object) -> None:
+        await self.stop()
 
-    async def run(self) -> None: ...
+    @abc.abstractmethod
+    async def start(self) -> None:
+        """Declare and announce what it serves."""
+
+    async def run(self) -> None:
+        """Its ongoing work; by default none: it answers the bus until it is stopped."""
+        await forever()
+
+    @abc.abstractmethod
+    async def stop(self) -> None:
+        """Withdraw, stop what runs and let go of what it holds."""
 
 
 def open_bus(args: argparse.Namespace) -> contextlib.AbstractContextManager[Bus]:
@@ -261,13 +270,16 @@ async def forever() -> None:
     await asyncio.get_running_loop().create_future()
 
 
-def run_service(prog: str, main: Callable[[], Awaitable[None]]) -> int:
-    """A service's process: runs `main()`; its exit code, 0 when it returns and 2 when it
-    raises ServiceError, said on one line after the program's name."""
+def run_service(
+    prog: str, args: argparse.Namespace, main: Callable[[argparse.Namespace], Awaitable[None]]
+) -> int:
+    """A service's process: logging as `args` say, then `main(args)`; the exit code, 0
+    when it returns and 2 when it raises ServiceError, said on one line after `prog`."""
+    setup_logging(args.debug)
 
     async def guarded() -> int:
         try:
-            await main()
+            await main(args)
         except ServiceError as exc:
             print(f"{prog}: {exc}", file=sys.stderr)
             return 2

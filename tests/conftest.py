@@ -20,7 +20,8 @@ from pathlib import Path
 import pytest
 import zenoh
 
-from bench.speech_set import Voice, real_recordings, speak
+from harness.processes import Processes
+from harness.speech_set import Voice, real_recordings, speak
 from shared.bus import BusOptions
 from shared.robot import TransportKind
 
@@ -80,64 +81,6 @@ def router() -> Iterator[str]:
         yield endpoint
     finally:
         session.close()
-
-
-class Processes:
-    """Starts `python -m <module>` children; every one is stopped at teardown."""
-
-    def __init__(self, logs: Path) -> None:
-        self._logs = logs
-        self.started: list[tuple[str, subprocess.Popen[bytes], Path]] = []
-
-    def start(self, module: str, *args: str, name: str | None = None) -> subprocess.Popen[bytes]:
-        name = name or module.rsplit(".", 1)[-1]
-        log = self._logs / f"{name}-{len(self.started)}.log"
-        # Each test's processes keep their files (the supervisor's database) in its tmp dir.
-        env = {**os.environ, "PYTHONUNBUFFERED": "1", "VOICECTL_DATA": str(self._logs / "data")}
-        with log.open("wb") as out:
-            process = subprocess.Popen(
-                [sys.executable, "-m", module, *args],
-                stdout=out,
-                stderr=subprocess.STDOUT,
-                cwd=REPO,
-                env=env,
-                start_new_session=True,
-            )
-        self.started.append((name, process, log))
-        return process
-
-    def log(self, process: subprocess.Popen[bytes]) -> str:
-        for _, candidate, log in self.started:
-            if candidate is process:
-                return log.read_text(errors="replace")
-        raise KeyError(process)
-
-    def stop(self, process: subprocess.Popen[bytes], timeout: float = 10.0) -> int:
-        """SIGTERM, wait, and SIGKILL if it does not stop; returns the exit code."""
-        if process.poll() is None:
-            process.send_signal(signal.SIGTERM)
-            try:
-                process.wait(timeout=timeout)
-            except subprocess.TimeoutExpired:
-                os.killpg(process.pid, signal.SIGKILL)
-                process.wait()
-        return process.returncode
-
-    def stop_all(self) -> list[str]:
-        """Stop everything; name the ones that did not exit 0 on SIGTERM."""
-        unclean = []
-        for name, process, _ in reversed(self.started):
-            was_running = process.poll() is None
-            code = self.stop(process)
-            if was_running and code != 0:
-                unclean.append(f"{name} exited {code}")
-        return unclean
-
-    def dump(self) -> str:
-        return "\n".join(
-            f"----- {name} -----\n{log.read_text(errors='replace')[-4000:]}"
-            for name, _, log in self.started
-        )
 
 
 @pytest.fixture

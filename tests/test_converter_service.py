@@ -5,7 +5,6 @@ previous orders and says why)."""
 from __future__ import annotations
 
 import asyncio
-import contextlib
 import os
 import shutil
 import time
@@ -31,7 +30,7 @@ from shared.messages import (
 )
 
 from .conftest import Processes, async_wait_until, wait_until
-from .support import on_bus
+from .support import on_bus, until_heard
 
 ORDERS = Path(__file__).resolve().parents[1] / "orders"
 KEYS = ConverterKeys()
@@ -172,12 +171,9 @@ def test_final_transcripts_become_proposals_per_robot(
         converter.bus.subscribe(
             robot.proposal, json_decoder(Proposal), lambda _k, p: proposals.append(p)
         )
-        deadline = time.monotonic() + WAIT
-        # Our subscription reaches the router at some point: publish until a proposal comes.
-        while not proposals and time.monotonic() < deadline:
-            converter.bus.publish(robot.transcript, Transcript(text="turn left then reach base"))
-            with contextlib.suppress(AssertionError):
-                await async_wait_until(lambda: proposals, 0.5, "a proposal")
+        await until_heard(converter.bus, robot.transcript)
+        converter.bus.publish(robot.transcript, Transcript(text="turn left then reach base"))
+        await async_wait_until(lambda: proposals, WAIT, "a proposal")
         proposal = proposals[0]
         assert proposal.transcript == "turn left then reach base"
         assert [o.case for o in proposal.orders] == ["left", "base"]

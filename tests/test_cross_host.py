@@ -1,4 +1,4 @@
-"""voicectl across two hosts: Linux network namespaces joined by a veth pair (bench/netns.py).
+"""voicectl across two hosts: Linux network namespaces joined by a veth pair (harness/netns.py).
 
 On the host: a router listening on the link, and the supervisor. On the robot: a router
 connected to the host's across the link, the executor and the simulator. Every process
@@ -17,8 +17,8 @@ from pathlib import Path
 
 import pytest
 
-from bench.cross_host import RobotWatch, observer, start_stack
-from bench.netns import LEASE_MS, TwoHosts, impairment_unavailable, unavailable
+from harness.cross_host import RobotWatch, observer, start_stack
+from harness.netns import LEASE_MS, TwoHosts, impairment_unavailable, unavailable
 from shared.bus import Bus
 from shared.messages import EmergencyStop, Order, OrderStatus, Stopped, TargetPose
 

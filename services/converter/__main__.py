@@ -9,7 +9,7 @@ import sys
 from pathlib import Path
 
 from shared.errors import OrdersFileError, ServiceError
-from shared.process import add_bus_arguments, open_bus, run_service, serve, setup_logging
+from shared.process import add_bus_arguments, open_bus, run_service, serve
 
 from .service import POLL_SECONDS, ConverterService, errors_of, load
 from .shipped import shipped_orders
@@ -38,9 +38,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
-async def main(argv: list[str] | None = None) -> None:
-    args = parse_args(argv)
-    setup_logging(args.debug)
+async def main(args: argparse.Namespace) -> None:
     try:
         before = await asyncio.to_thread(signature, args.orders)
         loaded = await asyncio.to_thread(load, args.orders, before)
@@ -55,7 +53,7 @@ async def main(argv: list[str] | None = None) -> None:
 
 
 def run(argv: list[str] | None = None) -> int:
-    return run_service("voicectl converter", lambda: main(argv))
+    return run_service("voicectl converter", parse_args(argv), main)
 
 
 if __name__ == "__main__":

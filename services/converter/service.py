@@ -7,7 +7,6 @@ import contextlib
 import logging
 from dataclasses import dataclass
 from pathlib import Path
-from types import TracebackType
 
 from shared.bus import Bus, Latest, json_decoder
 from shared.errors import OrdersFileError
@@ -26,6 +25,7 @@ from shared.messages import (
     Transcript,
     excerpt,
 )
+from shared.process import Service
 
 from .grammar import build_grammar
 from .orders import OrderSet, OrdersInvalid
@@ -64,12 +64,12 @@ def errors_of(exc: OrdersFileError) -> list[str]:
     return list(exc.errors) if isinstance(exc, OrdersInvalid) else [str(exc)]
 
 
-class ConverterService:
+class ConverterService(Service):
     """Answers parse and grammar queries, turns final transcripts into proposals, and
     reloads the orders when their files change, keeping the last good ones on errors.
 
-    A service (shared/process.py): entering starts it on the bus, `run()` watches the
-    files, leaving undeclares its publishers.
+    A service (shared/process.py): `start()` serves and announces it, `run()` watches the
+    files, `stop()` undeclares its publishers.
     """
 
     def __init__(
@@ -91,7 +91,7 @@ class ConverterService:
     def loaded(self) -> Loaded:
         return self._loaded
 
-    async def __aenter__(self) -> ConverterService:
+    async def start(self) -> None:
         self._grammar = self._closers.enter_context(
             contextlib.closing(self._bus.latest(self._keys.grammar))
         )
@@ -115,14 +115,8 @@ class ConverterService:
             loaded.grammar.version,
             len(loaded.grammar.phrases),
         )
-        return self
 
-    async def __aexit__(
-        self,
-        kind: type[BaseException] | None,
-        error: BaseException | None,
-        traceback: TracebackType | None,
-    ) -> None:
+    async def stop(self) -> None:
         self._closers.close()
 
     async def run(self) -> None:

@@ -12,14 +12,7 @@ from shared.bus import Bus
 from shared.config import data_dir
 from shared.errors import ServiceError
 from shared.keys import RobotKeys
-from shared.process import (
-    add_bus_arguments,
-    open_bus,
-    robot_name,
-    run_service,
-    serve,
-    setup_logging,
-)
+from shared.process import add_bus_arguments, open_bus, robot_name, run_service, serve
 from shared.robot import TransportKind, detect_transport, open_transport
 from shared.robot_options import add_robot_arguments, robot_options
 
@@ -132,9 +125,7 @@ def executor_service(
     return service
 
 
-async def main(argv: list[str] | None = None) -> None:
-    args = parse_args(argv)
-    setup_logging(args.debug)
+async def main(args: argparse.Namespace) -> None:
     try:
         bindings = load_bindings(args)
     except BindingError as exc:
@@ -171,7 +162,7 @@ async def choose_transport(bus: Bus, args: argparse.Namespace) -> TransportKind:
 
 
 def run(argv: list[str] | None = None) -> int:
-    return run_service("voicectl executor", lambda: main(argv))
+    return run_service("voicectl executor", parse_args(argv), main)
 
 
 if __name__ == "__main__":

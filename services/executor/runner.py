@@ -13,7 +13,6 @@ import collections
 import contextlib
 import logging
 from collections.abc import Callable, Coroutine
-from types import TracebackType
 
 from shared.bus import Bus, Latest, json_decoder
 from shared.errors import OrderFailed
@@ -40,7 +39,7 @@ from shared.messages import (
     Rejected,
     Running,
 )
-from shared.process import forever
+from shared.process import Service, forever
 
 from .framework import Bindings, ExecutionContext, Executor, ParamsMismatch, order_params
 from .robot import OrderRobot, RobotLink
@@ -72,12 +71,12 @@ class _Execution:
         loop): how it ended, whatever `execute` returns afterwards."""
 
 
-class ExecutorService:
+class ExecutorService(Service):
     """Serves execute/cancel/halt for one robot.
 
-    A service (shared/process.py): entering serves its keys and starts the robot's link
+    A service (shared/process.py): `start()` serves its keys and starts the robot's link
     and the loop's watchdog, `run()` ends stray motion and then says the executor is
-    online, leaving takes it offline and interrupts the order that runs.
+    online, `stop()` takes it offline and interrupts the order that runs.
     """
 
     def __init__(
@@ -115,7 +114,7 @@ class ExecutorService:
         self._stalled: _Execution | None = None
         """The order halted because the loop stalled under it, until the loop runs again."""
 
-    async def __aenter__(self) -> ExecutorService:
+    async def start(self) -> None:
         self._robot.start()
         self._bus.serve(self._keys.executor_execute, json_decoder(Execute), self.handle)
         self._bus.serve(self._keys.executor_control, json_decoder(ControlRequest), self.handle)
@@ -133,7 +132,6 @@ class ExecutorService:
         self.publish_info()
         labels = ", ".join(self.labels)
         _LOGGER.info("executor ready for %s; labels: %s", self._keys.robot, labels)
-        return self
 
     async def run(self) -> None:
         await self.end_stray_motion()
@@ -318,12 +316,7 @@ class ExecutorService:
             self._tasks.add(task)
             task.add_done_callback(self._tasks.discard)
 
-    async def __aexit__(
-        self,
-        kind: type[BaseException] | None,
-        error: BaseException | None,
-        traceback: TracebackType | None,
-    ) -> None:
+    async def stop(self) -> None:
         # Offline first, so the supervisor holds its queue instead of sending the next order.
         self._withdraw()
         if self._watchdog is not None:

@@ -9,7 +9,7 @@ import sys
 import zenoh
 
 from shared.errors import BusError, ServiceError
-from shared.process import add_bus_arguments, bus_options, run_service, setup_logging, wait_for_stop
+from shared.process import add_bus_arguments, bus_options, run_service, wait_for_stop
 
 _LOGGER = logging.getLogger(__name__)
 
@@ -20,9 +20,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
-async def main(argv: list[str] | None = None) -> None:
-    args = parse_args(argv)
-    setup_logging(args.debug)
+async def main(args: argparse.Namespace) -> None:
     options = bus_options(args, router=True)
     listen = ", ".join(options.listen) or f"the endpoints of {options.config_file}"
     try:
@@ -38,7 +36,7 @@ async def main(argv: list[str] | None = None) -> None:
 
 
 def run(argv: list[str] | None = None) -> int:
-    return run_service("voicectl router", lambda: main(argv))
+    return run_service("voicectl router", parse_args(argv), main)
 
 
 if __name__ == "__main__":

@@ -7,7 +7,7 @@ import logging
 import sys
 
 from shared.bus import Bus
-from shared.process import add_bus_arguments, open_bus, run_service, serve, setup_logging
+from shared.process import add_bus_arguments, open_bus, run_service, serve
 from shared.robot import TransportKind, open_transport
 from shared.robot_options import add_robot_arguments, robot_options
 from shared.ros2 import CameraType, CmdVelType, Ros2Codec, RosDistro
@@ -102,15 +102,13 @@ def sim_node(bus: Bus, args: argparse.Namespace) -> SimNode:
     )
 
 
-async def main(argv: list[str] | None = None) -> None:
-    args = parse_args(argv)
-    setup_logging(args.debug)
+async def main(args: argparse.Namespace) -> None:
     with open_bus(args) as bus:
         await serve(sim_node(bus, args))
 
 
 def run(argv: list[str] | None = None) -> int:
-    return run_service("voicectl sim", lambda: main(argv))
+    return run_service("voicectl sim", parse_args(argv), main)
 
 
 if __name__ == "__main__":

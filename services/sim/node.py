@@ -47,13 +47,13 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from types import TracebackType
 
 import numpy as np
 from PIL import Image as PilImage
 
 from shared.geometry import compose
 from shared.keys import RobotNames
+from shared.process import Service
 from shared.robot import Interface, RobotTransport, Role
 from shared.ros2 import (
     CANCEL_ALL,
@@ -153,12 +153,12 @@ class _Goal:
     ended: asyncio.Event = field(default_factory=asyncio.Event)
 
 
-class SimNode:
+class SimNode(Service):
     """One simulated robot on the bus.
 
-    A service (shared/process.py): entering subscribes, serves and offers the robot's
+    A service (shared/process.py): `start()` subscribes, serves and offers the robot's
     interfaces, then calls `ready` (which announces the simulator); `run()` ticks the
-    model; leaving ends the active goal so that waiting queries get their answer.
+    model; `stop()` ends the active goal so that waiting queries get their answer.
     """
 
     def __init__(
@@ -187,7 +187,7 @@ class SimNode:
     def sim_time(self) -> float:
         return (self._clock() - self._epoch) * self._config.time_scale
 
-    async def __aenter__(self) -> SimNode:
+    async def start(self) -> None:
         names = self._names
         kind = self._config.cmd_vel_type
         transport = self._transport
@@ -221,7 +221,6 @@ class SimNode:
             faults,
         )
         self._ready()
-        return self
 
     async def run(self) -> None:
         """Tick at 20 Hz wall until cancelled."""
@@ -242,12 +241,7 @@ class SimNode:
                 delay = 0.0
             await asyncio.sleep(max(delay, 0.0))
 
-    async def __aexit__(
-        self,
-        kind: type[BaseException] | None,
-        error: BaseException | None,
-        traceback: TracebackType | None,
-    ) -> None:
+    async def stop(self) -> None:
         """End the active goal so that waiting get_result queries get their answer."""
         if self._active is not None:
             self._finish(self._active, GoalStatus.ABORTED, "the simulator is stopping")

@@ -8,14 +8,7 @@ import logging
 import sys
 
 from shared.errors import ServiceError
-from shared.process import (
-    add_bus_arguments,
-    open_bus,
-    robot_name,
-    run_service,
-    serve,
-    setup_logging,
-)
+from shared.process import add_bus_arguments, open_bus, robot_name, run_service, serve
 
 from .engine import ENGINES, EngineError, EngineOptions, load_engine
 from .service import SessionLimits, SttService
@@ -104,9 +97,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
-async def main(argv: list[str] | None = None) -> None:
-    args = parse_args(argv)
-    setup_logging(args.debug)
+async def main(args: argparse.Namespace) -> None:
     try:
         engine = await asyncio.to_thread(load_engine, engine_options(args))
     except EngineError as exc:
@@ -124,7 +115,7 @@ async def main(argv: list[str] | None = None) -> None:
 
 
 def run(argv: list[str] | None = None) -> int:
-    return run_service("voicectl stt", lambda: main(argv))
+    return run_service("voicectl stt", parse_args(argv), main)
 
 
 if __name__ == "__main__":

@@ -25,7 +25,7 @@ that, one from outside the grammar and one from inside it:
 Requiring the open decode to hear the command words as well (its "support") rejected most
 commands in noise and in voices it cannot transcribe, for no fewer wrong orders than the
 lattice posteriors. The thresholds are tuned on the development split of
-bench/speech_set.py and reported on its test split (docs/benchmarks.md).
+harness/speech_set.py and reported on its test split (docs/benchmarks.md).
 """
 
 from __future__ import annotations

@@ -19,7 +19,6 @@ import queue
 import threading
 import time
 from dataclasses import dataclass
-from types import TracebackType
 
 from shared.bus import Bus, Latest, json_decoder
 from shared.keys import ConverterKeys, RobotKeys, last_chunk
@@ -35,6 +34,7 @@ from shared.messages import (
     Transcript,
     excerpt,
 )
+from shared.process import Service
 
 from .audio import BYTES_PER_SECOND
 from .engine import Engine, EngineError, Final, Heard, Recogniser, RecognitionEvent, SpeechStarted
@@ -172,11 +172,11 @@ class Session:
                 self.finished.set_result(None)
 
 
-class SttService:
+class SttService(Service):
     """Serves one robot's audio sessions with one engine, following the converter's grammar.
 
-    A service (shared/process.py): entering subscribes and announces it, `run()` ends
-    sessions that went quiet, leaving aborts the sessions still open.
+    A service (shared/process.py): `start()` subscribes and announces it, `run()` ends
+    sessions that went quiet, `stop()` aborts the sessions still open.
     """
 
     def __init__(self, bus: Bus, robot: str, engine: Engine, limits: SessionLimits) -> None:
@@ -201,7 +201,7 @@ class SttService:
         """Sessions refused or unknown, so that their audio is dropped without a line
         per chunk (the last few hundred names)."""
 
-    async def __aenter__(self) -> SttService:
+    async def start(self) -> None:
         self._status = self.bus.latest(self._keys.stt_status)
         self._publish_status("waiting for the converter's grammar")
         self.bus.subscribe(
@@ -213,14 +213,8 @@ class SttService:
         )
         self.bus.announce(self._keys.alive("stt"))
         _LOGGER.info("stt ready for robot %s with %s", self._robot, self.engine.name)
-        return self
 
-    async def __aexit__(
-        self,
-        kind: type[BaseException] | None,
-        error: BaseException | None,
-        traceback: TracebackType | None,
-    ) -> None:
+    async def stop(self) -> None:
         with self._sessions_lock:
             sessions = list(self._sessions.values())
             self._sessions.clear()

@@ -78,7 +78,7 @@ PARTIAL_EVERY = 0.1
 """Seconds of audio between two looks at the partial hypothesis."""
 CONFIDENCE_MIDPOINT = -5.3
 """Acoustic score per 10 ms frame, in nats below the best senone, that maps to confidence
-0.5. Tuned on bench/speech_set.py's generated speech (docs/benchmarks.md)."""
+0.5. Tuned on harness/speech_set.py's generated speech (docs/benchmarks.md)."""
 CONFIDENCE_WIDTH = 0.4
 POOL_SIZE = 1
 """Idle decoders kept for the next sessions (each holds the acoustic model and the open

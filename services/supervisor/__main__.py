@@ -11,14 +11,7 @@ from pathlib import Path
 
 from shared.config import data_dir
 from shared.errors import ServiceError
-from shared.process import (
-    add_bus_arguments,
-    open_bus,
-    robot_name,
-    run_service,
-    serve,
-    setup_logging,
-)
+from shared.process import add_bus_arguments, open_bus, robot_name, run_service, serve
 
 from .service import SupervisorService
 from .store import Durability, OrderStore, StoreInUse
@@ -59,9 +52,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
-async def main(argv: list[str] | None = None) -> None:
-    args = parse_args(argv)
-    setup_logging(args.debug)
+async def main(args: argparse.Namespace) -> None:
     db_path: Path = args.db or data_dir() / "supervisor.sqlite3"
     with contextlib.ExitStack() as closing:
         try:
@@ -76,7 +67,7 @@ async def main(argv: list[str] | None = None) -> None:
 
 
 def run(argv: list[str] | None = None) -> int:
-    return run_service("voicectl supervisor", lambda: main(argv))
+    return run_service("voicectl supervisor", parse_args(argv), main)
 
 
 if __name__ == "__main__":

@@ -13,7 +13,6 @@ import functools
 import logging
 import sqlite3
 import time
-from types import TracebackType
 
 from shared.bus import Bus, json_decoder
 from shared.errors import BusError, ServiceError
@@ -53,6 +52,7 @@ from shared.messages import (
     Submitted,
     SupervisorRequest,
 )
+from shared.process import Service
 from shared.robot.stop import Cancelled, RobotStop, prepare
 from shared.ros2 import NAVIGATE_FEEDBACK
 
@@ -512,12 +512,12 @@ class RobotSupervisor:
         )
 
 
-class SupervisorService:
+class SupervisorService(Service):
     """Every robot's supervisor in one process, sharing one bus and one store.
 
-    A service (shared/process.py): entering restores the queues and serves them, `run()`
+    A service (shared/process.py): `start()` restores the queues and serves them, `run()`
     ends only when another supervisor already serves one of `robots` (ServiceError),
-    leaving stops each robot's dispatch.
+    `stop()` stops each robot's dispatch.
     """
 
     def __init__(
@@ -543,7 +543,7 @@ class SupervisorService:
         """Set, saying why, when a supervisor that started earlier serves one of this
         one's robots: a robot has one supervisor, and this one must stop."""
 
-    async def __aenter__(self) -> SupervisorService:
+    async def start(self) -> None:
         robots = self._announced
         saved = await self._store.call(self._store.load(self._history))
         for name, robot in saved.items():
@@ -572,17 +572,11 @@ class SupervisorService:
         for name in robots:
             self._bus.announce(RobotKeys(name).alive("supervisor"))
         _LOGGER.info("supervisor ready; history in %s", self._store.path)
-        return self
 
     async def run(self) -> None:
         raise ServiceError(await self.conflict)
 
-    async def __aexit__(
-        self,
-        kind: type[BaseException] | None,
-        error: BaseException | None,
-        traceback: TracebackType | None,
-    ) -> None:
+    async def stop(self) -> None:
         await asyncio.gather(*(r.stop() for r in self._robots.values()))
 
     def robot(self, name: str) -> RobotSupervisor:

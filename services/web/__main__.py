@@ -15,14 +15,7 @@ import uvicorn
 
 from shared.config import default_token_file, load_or_create_token
 from shared.errors import ServiceError
-from shared.process import (
-    add_bus_arguments,
-    bus_options,
-    robot_name,
-    run_service,
-    setup_logging,
-    wait_for_stop,
-)
+from shared.process import add_bus_arguments, bus_options, robot_name, run_service, wait_for_stop
 
 from .app import Access, create_app
 from .audio import MAX_MESSAGE
@@ -81,9 +74,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
-async def main(argv: list[str] | None = None) -> None:
-    args = parse_args(argv)
-    setup_logging(args.debug)
+async def main(args: argparse.Namespace) -> None:
     problem = tls_problem(args)
     if problem:
         raise ServiceError(problem)
@@ -119,7 +110,7 @@ async def main(argv: list[str] | None = None) -> None:
 
 
 def run(argv: list[str] | None = None) -> int:
-    return run_service("voicectl web", lambda: main(argv))
+    return run_service("voicectl web", parse_args(argv), main)
 
 
 if __name__ == "__main__":

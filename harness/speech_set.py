@@ -16,7 +16,7 @@ Two splits. **dev** is where thresholds and weights are tuned; **test** is where
 reported. They share no voice and no sentence: test has other phrasings, other numbers,
 other chatter, and every real recording.
 
-    python bench/speech_set.py DIR      # writes DIR/<split>/*.wav and DIR/index.json
+    python -m harness.speech_set DIR      # writes DIR/<split>/*.wav and DIR/index.json
 
 Files are cached: a second run writes nothing.
 """
@@ -502,8 +502,8 @@ def _babble(like: Path, talkers: list[Path]) -> Path:
         )
         looped.append(str(part))
     subprocess.run(["sox", "-D", "-m", *looped, str(babble)], check=True)
-    for part in looped:
-        Path(part).unlink()
+    for name in looped:
+        Path(name).unlink()
     return babble
 
 

@@ -11,11 +11,11 @@ of tests/test_cross_host.py would not lose the executor if they did).
 
 The kernels here have no netem, so delay and loss are made by this module's own shaper:
 iptables hands every packet leaving a side through the veth to an NFQUEUE, and a small
-process (`python -m bench.netns shape`) gives each its verdict after the delay, or drops
+process (`python -m harness.netns shape`) gives each its verdict after the delay, or drops
 it with the loss probability: netem's `delay D loss L` on both ends of the link.
 
-    python -m bench.netns shape --queue N --delay-ms 100 --loss 5   (inside a namespace)
-    python -m bench.netns clean      (remove what runs of killed tests left behind)
+    python -m harness.netns shape --queue N --delay-ms 100 --loss 5   (inside a namespace)
+    python -m harness.netns clean      (remove what runs of killed tests left behind)
 """
 
 from __future__ import annotations
@@ -40,7 +40,8 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Literal
 
-REPO = Path(__file__).resolve().parents[1]
+from .processes import Processes
+
 HOST_ADDR = "10.213.0.1"
 ROBOT_ADDR = "10.213.0.2"
 PORT = 7447
@@ -113,7 +114,7 @@ class TwoHosts:
         """Namespace names, the same as the names of their ends of the veth."""
         # Unix socket paths must stay under 108 bytes: a directory of its own in /tmp.
         self._sockets = Path(tempfile.mkdtemp(prefix=f"{tag}-"))
-        self.started: list[tuple[str, subprocess.Popen[bytes], Path]] = []
+        self.processes = Processes(logs)
         self._shapers: list[subprocess.Popen[bytes]] = []
         self._pdeathsig = (
             # Children die with this process even when it is SIGKILLed (a timed-out test).
@@ -158,21 +159,9 @@ class TwoHosts:
 
     def start(self, side: Side, module: str, *args: str, name: str) -> subprocess.Popen[bytes]:
         """`python -m module args` inside `side`'s namespace; its output goes to a log."""
-        log = self.logs / f"{name}.log"
-        env = {**os.environ, "PYTHONUNBUFFERED": "1", "VOICECTL_DATA": str(self.logs / "data")}
-        command = ["ip", "netns", "exec", self.namespaces[side], *self._pdeathsig]
-        with log.open("wb") as out:
-            # `ip netns exec` and setpriv exec the next program: the child is Python itself.
-            process = subprocess.Popen(
-                [*command, sys.executable, "-m", module, *args],
-                stdout=out,
-                stderr=subprocess.STDOUT,
-                cwd=REPO,
-                env=env,
-                start_new_session=True,
-            )
-        self.started.append((name, process, log))
-        return process
+        # `ip netns exec` and setpriv exec the next program: the child is Python itself.
+        prefix = ["ip", "netns", "exec", self.namespaces[side], *self._pdeathsig]
+        return self.processes.start(module, *args, name=name, prefix=prefix)
 
     def start_router(self, side: Side) -> subprocess.Popen[bytes]:
         """`voicectl router` on `side`, listening on its loopback, its Unix socket and (the
@@ -186,31 +175,10 @@ class TwoHosts:
         return self.start(side, "services.router", *args, *LEASE, name=f"{side}-router")
 
     def log(self, name: str) -> str:
-        return (self.logs / f"{name}.log").read_text(errors="replace")
+        return self.processes.log(name)
 
     def dump(self) -> str:
-        return "\n".join(
-            f"----- {name} -----\n{log.read_text(errors='replace')[-4000:]}"
-            for name, _, log in self.started
-        )
-
-    @staticmethod
-    def kill(process: subprocess.Popen[bytes]) -> None:
-        process.send_signal(signal.SIGKILL)
-        process.wait()
-
-    @staticmethod
-    def stop(process: subprocess.Popen[bytes], timeout: float = 10.0) -> int:
-        """SIGTERM, wait, and SIGKILL its whole session if it does not stop."""
-        if process.poll() is None:
-            process.send_signal(signal.SIGTERM)
-            try:
-                process.wait(timeout=timeout)
-            except subprocess.TimeoutExpired:
-                with contextlib.suppress(ProcessLookupError):
-                    os.killpg(process.pid, signal.SIGKILL)
-                process.wait()
-        return process.returncode
+        return self.processes.dump()
 
     # --- the link ---------------------------------------------------------------------------
 
@@ -234,7 +202,7 @@ class TwoHosts:
                 name = self.namespaces[side]
                 shaper = self.start(
                     side,
-                    "bench.netns",
+                    "harness.netns",
                     *("shape", "--queue", str(queue), "--delay-ms", str(delay_ms)),
                     *("--loss", str(loss_percent)),
                     name=f"shaper-{name}",
@@ -249,7 +217,7 @@ class TwoHosts:
             for name, rule in rules:
                 _run("ip", "netns", "exec", name, "iptables", "-D", "OUTPUT", *rule)
             while self._shapers:  # each lets its held packets go before it exits
-                self.stop(self._shapers.pop())
+                Processes.stop(self._shapers.pop())
 
     def _wait_ready(self, process: subprocess.Popen[bytes], name: str) -> None:
         deadline = time.monotonic() + 30.0
@@ -260,21 +228,11 @@ class TwoHosts:
 
     # --- teardown -----------------------------------------------------------------------------
 
-    def stop_all(self) -> list[str]:
-        """Stop every process, newest first; name those that did not exit 0 on SIGTERM."""
-        unclean = []
-        for name, process, _ in reversed(self.started):
-            was_running = process.poll() is None
-            code = self.stop(process)
-            if was_running and code != 0:
-                unclean.append(f"{name} exited {code}")
-        return unclean
-
     def close(self) -> list[str]:
         """Stop everything and delete both namespaces (with the veth); what did not stop
         cleanly."""
         try:
-            unclean = self.stop_all()
+            unclean = self.processes.stop_all()
         finally:
             for name in self.namespaces.values():
                 subprocess.run(["ip", "netns", "del", name], capture_output=True, timeout=30)
@@ -388,7 +346,7 @@ def shape(queue: int, delay: float, loss: float) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m bench.netns", description=__doc__)
+    parser = argparse.ArgumentParser(prog="python -m harness.netns", description=__doc__)
     commands = parser.add_subparsers(dest="command", required=True)
     shaper = commands.add_parser("shape", help="delay and drop the packets of one NFQUEUE")
     shaper.add_argument("--queue", type=int, required=True)
