@@ -103,15 +103,13 @@ def pytest_runtest_makereport(item: pytest.Item, call: pytest.CallInfo[None]):  
     return report
 
 
-def voicectl(*args: str, timeout: float = 120.0) -> subprocess.CompletedProcess[str]:
+def voicectl(
+    *args: str, timeout: float = 120.0, env: dict[str, str] | None = None
+) -> subprocess.CompletedProcess[str]:
     """Run `voicectl ARGS...` from the repository and capture what it says."""
+    command = [sys.executable, "-m", "voicectl", *args]
     return subprocess.run(
-        [sys.executable, "-m", "voicectl", *args],
-        capture_output=True,
-        text=True,
-        cwd=REPO,
-        timeout=timeout,
-        check=False,
+        command, capture_output=True, text=True, cwd=REPO, timeout=timeout, env=env, check=False
     )
 
 
@@ -150,15 +148,7 @@ class Stack:
     """How the simulated robot shows its graph."""
 
     def voicectl(self, *args: str) -> subprocess.CompletedProcess[str]:
-        return subprocess.run(
-            [sys.executable, "-m", "voicectl", *args],
-            capture_output=True,
-            text=True,
-            timeout=60,
-            env=self.env,
-            cwd=REPO,
-            check=False,
-        )
+        return voicectl(*args, timeout=60, env=self.env)
 
 
 @pytest.fixture

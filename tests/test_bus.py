@@ -26,7 +26,7 @@ from shared.messages import (
 )
 
 from .conftest import async_wait_until
-from .support import until_heard
+from .support import on_bus, until_heard
 
 
 def options(router: str) -> BusOptions:
@@ -36,10 +36,9 @@ def options(router: str) -> BusOptions:
 def test_publish_subscribe_decodes_and_drops_junk(
     router: str, caplog: pytest.LogCaptureFixture
 ) -> None:
-    async def scenario() -> list[tuple[str, Transcript]]:
-        loop = asyncio.get_running_loop()
+    async def scenario(sub: Bus) -> list[tuple[str, Transcript]]:
         received: list[tuple[str, Transcript]] = []
-        with Bus.open(options(router), loop) as sub, Bus.open(options(router), loop) as pub:
+        with Bus.open(options(router), asyncio.get_running_loop()) as pub:
             sub.subscribe(
                 "voice/*/stt/transcript",
                 json_decoder(Transcript),
@@ -53,7 +52,7 @@ def test_publish_subscribe_decodes_and_drops_junk(
         return received
 
     with caplog.at_level(logging.WARNING, logger="shared.bus"):
-        received = asyncio.run(scenario())
+        received = on_bus(router, scenario)
     assert received == [("voice/r1/stt/transcript", Transcript(text="turn left"))]
     dropped = [r.getMessage() for r in caplog.records if "undecodable" in r.getMessage()]
     assert len(dropped) == 2
@@ -61,26 +60,23 @@ def test_publish_subscribe_decodes_and_drops_junk(
 
 
 def test_json_on_the_wire_is_readable_by_any_tool(router: str) -> None:
-    async def scenario() -> tuple[bytes, str]:
-        loop = asyncio.get_running_loop()
+    async def scenario(bus: Bus) -> tuple[bytes, str]:
         got: list[zenoh.Sample] = []
-        with Bus.open(options(router), loop) as bus:
-            subscriber = bus.session.declare_subscriber("voice/**", got.append)  # same session
-            bus.publish("voice/r1/stt/transcript", Transcript(text="hi"))
-            await async_wait_until(lambda: got, 5.0, "the raw sample")
-            subscriber.undeclare()
+        subscriber = bus.session.declare_subscriber("voice/**", got.append)  # same session
+        bus.publish("voice/r1/stt/transcript", Transcript(text="hi"))
+        await async_wait_until(lambda: got, 5.0, "the raw sample")
+        subscriber.undeclare()
         return got[0].payload.to_bytes(), str(got[0].encoding)
 
-    payload, encoding = asyncio.run(scenario())
+    payload, encoding = on_bus(router, scenario)
     assert payload.startswith(b'{"type":"transcript","text":"hi",')
     assert json.loads(payload)["rejected"] is False
     assert encoding == "application/json"
 
 
 def test_request_reply_and_errors(router: str) -> None:
-    async def scenario() -> None:
-        loop = asyncio.get_running_loop()
-        with Bus.open(options(router), loop) as server, Bus.open(options(router), loop) as client:
+    async def scenario(server: Bus) -> None:
+        with Bus.open(options(router), asyncio.get_running_loop()) as client:
 
             async def handle(request: SupervisorRequest) -> Message:
                 match request:
@@ -111,22 +107,20 @@ def test_request_reply_and_errors(router: str) -> None:
             with pytest.raises(BusError, match="no service answered"):
                 await client.request("voice/r2/supervisor/request", GetState(), decode, 1.0)
 
-    asyncio.run(scenario())
+    on_bus(router, scenario)
 
 
 def test_liveliness_tokens_come_and_go(router: str) -> None:
-    async def scenario() -> list[bool]:
-        loop = asyncio.get_running_loop()
+    async def scenario(watcher: Bus) -> list[bool]:
         seen: list[bool] = []
-        with Bus.open(options(router), loop) as watcher:
-            watcher.watch("voice/r1/alive/executor", lambda _key, alive: seen.append(alive))
-            with Bus.open(options(router), loop) as service:
-                service.announce("voice/r1/alive/executor")
-                await async_wait_until(lambda: seen == [True], 5.0, "the token")
-            await async_wait_until(lambda: seen == [True, False], 5.0, "the token to go")
+        watcher.watch("voice/r1/alive/executor", lambda _key, alive: seen.append(alive))
+        with Bus.open(options(router), asyncio.get_running_loop()) as service:
+            service.announce("voice/r1/alive/executor")
+            await async_wait_until(lambda: seen == [True], 5.0, "the token")
+        await async_wait_until(lambda: seen == [True, False], 5.0, "the token to go")
         return seen
 
-    assert asyncio.run(scenario()) == [True, False]
+    assert on_bus(router, scenario) == [True, False]
 
 
 def test_an_order_cannot_finish_as_queued_or_running() -> None:

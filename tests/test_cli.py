@@ -5,8 +5,6 @@ from __future__ import annotations
 
 import json
 import socket
-import subprocess
-import sys
 from pathlib import Path
 
 from shared.bus import Bus, json_decoder
@@ -14,7 +12,7 @@ from shared.keys import RobotKeys, RobotNames
 from shared.messages import Failed, GetState, StateReply, SupervisorReply
 from shared.ros2 import Pose2D, Ros2Codec, RosDistro, new_goal_id
 
-from .conftest import REPO, Processes, voicectl, wait_until
+from .conftest import Processes, voicectl, wait_until
 from .support import Client, client_wait_ready, on_bus
 
 
@@ -56,28 +54,14 @@ def test_parse_with_a_bad_file_exits_2_in_one_line(tmp_path: Path) -> None:
 def test_converter_refuses_to_start_with_half_a_config(tmp_path: Path, router: str) -> None:
     bad = tmp_path / "bad.yaml"
     bad.write_text("orders:\n  ok: {voice_alias: go, label: x}\n  broken: {label: x}\n")
-    done = subprocess.run(
-        [sys.executable, "-m", "services.converter", "--orders", str(bad), "--connect", router],
-        capture_output=True,
-        text=True,
-        cwd=REPO,
-        timeout=60,
-        check=False,
-    )
+    done = voicectl("converter", "--orders", str(bad), "--connect", router, timeout=60)
     assert done.returncode == 2
     lines = done.stderr.strip().splitlines()
     assert lines[-1].endswith(f"{bad}: order 'broken': missing mandatory key 'voice_alias'")
 
 
 def test_executor_refuses_a_bad_binding() -> None:
-    done = subprocess.run(
-        [sys.executable, "-m", "services.executor", "--executor", "no_such_module:X"],
-        capture_output=True,
-        text=True,
-        cwd=REPO,
-        timeout=60,
-        check=False,
-    )
+    done = voicectl("executor", "--executor", "no_such_module:X", timeout=60)
     assert done.returncode == 2
     assert "cannot import no_such_module" in done.stderr
 

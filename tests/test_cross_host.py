@@ -22,7 +22,7 @@ from harness.netns import LEASE_MS, TwoHosts, impairment_unavailable, unavailabl
 from shared.bus import Bus
 from shared.messages import EmergencyStop, Order, OrderStatus, Stopped, TargetPose
 
-from .support import Client, client_wait_ready, order
+from .support import Client, client_wait_ready, on_bus, order
 
 WHY_NOT = unavailable()
 pytestmark = pytest.mark.skipif(WHY_NOT is not None, reason=f"two hosts: {WHY_NOT}")
@@ -57,18 +57,14 @@ def run(rig: TwoHosts, body: Callable[[Client, RobotWatch], Awaitable[None]]) ->
     """Run `body` with the supervisor's client on the host and the robot's odometry read
     on the robot, once the supervisor sees the executor across the link."""
 
-    async def main() -> None:
-        loop = asyncio.get_running_loop()
-        with (
-            Bus.open(observer(rig, "host"), loop) as host,
-            Bus.open(observer(rig, "robot"), loop) as robot,
-        ):
+    async def main(host: Bus) -> None:
+        with Bus.open(observer(rig, "robot"), asyncio.get_running_loop()) as robot:
             client, watch = Client(host, "r1"), RobotWatch(robot)
             await client_wait_ready(client)
             await watch.ready()
             await body(client, watch)
 
-    asyncio.run(main())
+    on_bus(observer(rig, "host"), main)
 
 
 def test_orders_run_across_the_link(rig: TwoHosts) -> None:

@@ -87,6 +87,12 @@ def words(text: str, posterior: float = 0.9) -> list[Word]:
     return [Word(w, 30 * i, 30 * i + 29, posterior) for i, w in enumerate(text.split())]
 
 
+def timed(*ends: tuple[str, int]) -> list[Word]:
+    """Words heard surely (posterior 1), each from the frame after the last one's end."""
+    starts = [0] + [end + 1 for _, end in ends[:-1]]
+    return [Word(w, start, end, 1.0) for (w, end), start in zip(ends, starts, strict=True)]
+
+
 def test_the_judge_accepts_what_both_decodes_heard() -> None:
     verdict = judge(
         words("go forward ten meters"), words("go forward ten meters"), VOCABULARY, Thresholds()
@@ -135,12 +141,7 @@ def test_foreign_words_that_sound_like_the_command_weigh_little() -> None:
         _sounds,
     )
     grammar = words("reach the dumpster")
-    heard = [
-        Word("reach", 0, 29, 1.0),
-        Word("the", 30, 59, 1.0),
-        Word("dumps", 60, 79, 1.0),
-        Word("there", 80, 89, 1.0),
-    ]
+    heard = timed(("reach", 29), ("the", 59), ("dumps", 79), ("there", 89))
     verdict = judge(grammar, heard, vocabulary, Thresholds())
     assert verdict.rejection == ""
     # Two foreign words, each of posterior 1: counted in full they would weigh 2.0. The
@@ -148,13 +149,7 @@ def test_foreign_words_that_sound_like_the_command_weigh_little() -> None:
     assert verdict.foreign == pytest.approx(0.75)
     # "turn on the lights" is not "turn a left": its foreign words sound unlike "a left".
     grammar = words("turn a left")
-    heard = [
-        Word("turn", 0, 29, 1.0),
-        Word("on", 30, 44, 1.0),
-        Word("the", 45, 59, 1.0),
-        Word("lights", 60, 89, 1.0),
-        Word("[NOISE]", 90, 99, 1.0),
-    ]
+    heard = timed(("turn", 29), ("on", 44), ("the", 59), ("lights", 89), ("[NOISE]", 99))
     verdict = judge(grammar, heard, vocabulary, Thresholds(max_foreign=1.0))
     assert verdict.rejection == "I heard 'turn on the lights': not a command"
     assert verdict.heard == "turn on the lights"  # markers are no words

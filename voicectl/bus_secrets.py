@@ -16,7 +16,6 @@ Everything but the certificates is readable by its owner only.
 
 from __future__ import annotations
 
-import datetime
 import ipaddress
 import json
 import secrets
@@ -25,11 +24,11 @@ from pathlib import Path
 from cryptography import x509
 from cryptography.hazmat.primitives import hashes, serialization
 from cryptography.hazmat.primitives.asymmetric import ec
-from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
+from cryptography.x509.oid import NameOID
 
 from shared.errors import VoicectlError
 
-from .cert import alt_names, key_pem, write_file
+from .cert import certificate_builder, key_pem, server_certificate, write_file
 
 ROUTER_TEMPLATE = Path(__file__).with_name("secure-router.json5")
 CONTAINER_DIR = "/etc/voicectl/bus"
@@ -93,15 +92,8 @@ def write_bus_secrets(directory: Path, hosts: list[str], port: int = PORT) -> li
 def _authority() -> tuple[ec.EllipticCurvePrivateKey, x509.Certificate]:
     key = ec.generate_private_key(ec.SECP256R1())
     name = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, "voicectl bus CA")])
-    now = datetime.datetime.now(datetime.UTC)
     certificate = (
-        x509.CertificateBuilder()
-        .subject_name(name)
-        .issuer_name(name)
-        .public_key(key.public_key())
-        .serial_number(x509.random_serial_number())
-        .not_valid_before(now - datetime.timedelta(minutes=5))
-        .not_valid_after(now + datetime.timedelta(days=VALID_DAYS))
+        certificate_builder(name, name, key, VALID_DAYS)
         .add_extension(x509.BasicConstraints(ca=True, path_length=0), critical=True)
         .add_extension(
             x509.KeyUsage(
@@ -129,18 +121,8 @@ def _signed(
     ca_key: ec.EllipticCurvePrivateKey,
     ca_certificate: x509.Certificate,
 ) -> x509.Certificate:
-    now = datetime.datetime.now(datetime.UTC)
     return (
-        x509.CertificateBuilder()
-        .subject_name(x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, hosts[0])]))
-        .issuer_name(ca_certificate.subject)
-        .public_key(key.public_key())
-        .serial_number(x509.random_serial_number())
-        .not_valid_before(now - datetime.timedelta(minutes=5))
-        .not_valid_after(now + datetime.timedelta(days=VALID_DAYS))
-        .add_extension(x509.SubjectAlternativeName(alt_names(hosts)), critical=False)
-        .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
-        .add_extension(x509.ExtendedKeyUsage([ExtendedKeyUsageOID.SERVER_AUTH]), critical=False)
+        server_certificate(hosts, key, issuer=ca_certificate.subject, days=VALID_DAYS)
         .add_extension(
             x509.AuthorityKeyIdentifier.from_issuer_public_key(ca_key.public_key()),
             critical=False,

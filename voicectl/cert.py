@@ -24,27 +24,45 @@ VALID_DAYS = 825
 def write_certificate(hosts: list[str], certfile: Path, keyfile: Path) -> None:
     """A P-256 key and a self-signed certificate naming every host (a name or an address)."""
     key = ec.generate_private_key(ec.SECP256R1())
-    subject = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, hosts[0])])
+    certificate = server_certificate(hosts, key, issuer=host_name(hosts)).sign(key, hashes.SHA256())
+    certfile.parent.mkdir(parents=True, exist_ok=True)
+    keyfile.parent.mkdir(parents=True, exist_ok=True)
+    write_file(keyfile, key_pem(key), private=True)
+    write_file(certfile, certificate.public_bytes(serialization.Encoding.PEM))
+
+
+def certificate_builder(
+    subject: x509.Name, issuer: x509.Name, key: ec.EllipticCurvePrivateKey, days: int
+) -> x509.CertificateBuilder:
+    """A certificate for `key` valid from five minutes ago (clocks differ) for `days`."""
     now = datetime.datetime.now(datetime.UTC)
-    certificate = (
+    return (
         x509.CertificateBuilder()
         .subject_name(subject)
-        .issuer_name(subject)
+        .issuer_name(issuer)
         .public_key(key.public_key())
         .serial_number(x509.random_serial_number())
         .not_valid_before(now - datetime.timedelta(minutes=5))
-        .not_valid_after(now + datetime.timedelta(days=VALID_DAYS))
+        .not_valid_after(now + datetime.timedelta(days=days))
+    )
+
+
+def server_certificate(
+    hosts: list[str], key: ec.EllipticCurvePrivateKey, issuer: x509.Name, days: int = VALID_DAYS
+) -> x509.CertificateBuilder:
+    """A TLS server's certificate for every host, still to be signed by `issuer`."""
+    return (
+        certificate_builder(host_name(hosts), issuer, key, days)
         .add_extension(x509.SubjectAlternativeName(alt_names(hosts)), critical=False)
         .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
         .add_extension(
             x509.ExtendedKeyUsage([x509.oid.ExtendedKeyUsageOID.SERVER_AUTH]), critical=False
         )
-        .sign(key, hashes.SHA256())
     )
-    certfile.parent.mkdir(parents=True, exist_ok=True)
-    keyfile.parent.mkdir(parents=True, exist_ok=True)
-    write_file(keyfile, key_pem(key), private=True)
-    write_file(certfile, certificate.public_bytes(serialization.Encoding.PEM))
+
+
+def host_name(hosts: list[str]) -> x509.Name:
+    return x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, hosts[0])])
 
 
 def alt_names(hosts: list[str]) -> list[x509.GeneralName]:

@@ -25,7 +25,8 @@ from collections.abc import Iterable
 from shared.messages import Grammar
 
 from .expand import SlotRef, Template
-from .orders import Command, OrderSet
+from .model import Command
+from .orders import OrderSet
 from .slots import say_number
 from .text import normalise
 

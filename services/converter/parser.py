@@ -20,7 +20,9 @@ import regex
 from shared.messages import Order, ParseProblem, ParseResult
 
 from .expand import SlotRef
-from .orders import SLOT_GROUP, Command, OrderSet
+from .model import Command
+from .orders import OrderSet
+from .patterns import SLOT_GROUP
 from .slots import NUMBER_WORDS, SIGN_WORDS, SlotValueError
 from .suggest import Suggester
 from .text import normalise, whole_words

@@ -24,7 +24,7 @@ from rapidfuzz import fuzz, process
 from shared.messages import Order
 
 from .expand import SlotRef
-from .orders import Command
+from .model import Command
 from .slots import NUMBER_PATTERN, SlotValueError
 from .text import whole_words
 

@@ -1,23 +1,8 @@
 """What a user writes to add a behaviour: an `Executor` subclass with one async method.
 
-A minimal executor::
-
-    import msgspec
-
-    from services.executor import ExecutionContext, Executor
-
-    class Numbers(msgspec.Struct):
-        first: float
-        second: float
-
-    class Multiply(Executor):
-        labels = ("mul",)
-        params_type = Numbers
-
-        async def execute(self, order, ctx):
-            numbers: Numbers = ctx.params
-            ctx.progress(f"multiplying {numbers.first} by {numbers.second}")
-            return f"{numbers.first} x {numbers.second} = {numbers.first * numbers.second}"
+The smallest one is `builtin/mul.py`: a msgspec Struct for its parameters, the labels
+it serves, and `execute`, which reads `ctx.params`, reports with `ctx.progress(...)` and
+returns what it did.
 
 Returning ends the order as succeeded (the returned text is its message); raising
 `OrderFailed` ends it as failed; any other exception is a failed order too, with the

@@ -73,26 +73,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--robot", type=robot_name, default="robot")
     add_engine_arguments(parser)
     limits = SessionLimits()
-    parser.add_argument(
-        "--max-utterance",
-        type=float,
-        default=limits.max_utterance,
-        metavar="SECONDS",
-        help="cut an utterance that goes on longer (default %(default)s)",
-    )
-    parser.add_argument(
-        "--max-sessions",
-        type=int,
-        default=limits.max_sessions,
-        help="audio sessions open at once (default %(default)s)",
-    )
-    parser.add_argument(
-        "--idle",
-        type=float,
-        default=limits.idle_seconds,
-        metavar="SECONDS",
-        help="end a session that sends no audio for this long (default %(default)s)",
-    )
+    for flag, kind, default, metavar, text in (
+        ("--max-utterance", float, limits.max_utterance, "SECONDS", "cut longer utterances"),
+        ("--max-sessions", int, limits.max_sessions, "N", "audio sessions open at once"),
+        ("--idle", float, limits.idle_seconds, "SECONDS", "end a session silent this long"),
+    ):
+        help_text = f"{text} (default %(default)s)"
+        parser.add_argument(flag, type=kind, default=default, metavar=metavar, help=help_text)
     add_bus_arguments(parser)
     return parser.parse_args(argv)
 

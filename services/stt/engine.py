@@ -22,6 +22,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
 
+from msgspec import Struct
+
 from shared.errors import VoicectlError
 from shared.messages import Doubt, Grammar
 
@@ -30,23 +32,20 @@ class EngineError(VoicectlError):
     """An engine that cannot start or cannot use a grammar; the text says how to fix it."""
 
 
-@dataclass(frozen=True)
-class SpeechStarted:
+class SpeechStarted(Struct, frozen=True, tag=True):
     utterance: int
     at: float
     """Seconds from the start of the stream."""
 
 
-@dataclass(frozen=True)
-class Heard:
+class Heard(Struct, frozen=True, tag=True):
     """A partial transcript of the utterance in progress."""
 
     utterance: int
     text: str
 
 
-@dataclass(frozen=True)
-class Final:
+class Final(Struct, frozen=True, tag=True):
     """The result of one utterance."""
 
     utterance: int
@@ -58,9 +57,9 @@ class Final:
     speech_end: float
     heard: str = ""
     """What an unconstrained decode heard: the person's words, command or not."""
-    confidences: list[float] = field(default_factory=list)
+    confidences: list[float] = []
     """Per word of `text`, 0..1: how surely the engine heard it (judge.py's Verdict)."""
-    doubts: list[Doubt] = field(default_factory=list)
+    doubts: list[Doubt] = []
 
 
 RecognitionEvent = SpeechStarted | Heard | Final

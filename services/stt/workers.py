@@ -19,9 +19,11 @@ import logging
 import multiprocessing
 import signal
 import threading
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from multiprocessing.connection import Connection
 from typing import TYPE_CHECKING, Any
+
+from msgspec import Struct
 
 from shared.messages import Grammar
 
@@ -36,38 +38,40 @@ START_TIMEOUT = 120.0
 """Seconds a worker may take to load its engine (models from disk, a cold cache)."""
 
 
-@dataclass(frozen=True)
-class _UseGrammar:
+# What the parent asks of a worker, one Struct per engine call; the worker keeps its
+# recognisers by number.
+
+
+class _UseGrammar(Struct, frozen=True, tag=True):
     grammar: Grammar
 
 
-@dataclass(frozen=True)
-class _Open:
+class _Open(Struct, frozen=True, tag=True):
+    """A new recogniser; the reply is its number."""
+
     max_utterance: float
     segment: bool
 
 
-@dataclass(frozen=True)
-class _Accept:
+class _Accept(Struct, frozen=True, tag=True):
     recogniser: int
     pcm: bytes
 
 
-@dataclass(frozen=True)
-class _Finish:
+class _Finish(Struct, frozen=True, tag=True):
     recogniser: int
 
 
-@dataclass(frozen=True)
-class _Close:
+class _Close(Struct, frozen=True, tag=True):
+    """The recogniser's decoder goes back to the worker's pool."""
+
     recogniser: int
 
 
 _Call = _UseGrammar | _Open | _Accept | _Finish | _Close
 
 
-@dataclass(frozen=True)
-class _Reply:
+class _Reply(Struct, frozen=True):
     value: Any = None
     error: str = ""
     """An EngineError's text; the caller raises it again."""

@@ -15,7 +15,7 @@ from typing import TypeVar
 from ..bus import Bus
 from ..keys import BRIDGE_TOKENS, BridgeKind, BridgeToken
 from .kinds import TransportKind
-from .transport import Interface, RobotTransport, Role
+from .transport import Decode, Handle, Interface, RobotTransport, Role, Unsubscribe
 
 T = TypeVar("T")
 
@@ -40,13 +40,8 @@ class BridgeTransport(RobotTransport):
         self._bus.publish_bytes(name, payload, urgent=urgent)
 
     def subscribe(
-        self,
-        name: str,
-        ros_type: str,
-        decode: Callable[[bytes], T],
-        handler: Callable[[T], None],
-        latched: bool = False,
-    ) -> Callable[[], None]:
+        self, name: str, ros_type: str, decode: Decode[T], handler: Handle[T], latched: bool = False
+    ) -> Unsubscribe:
         return self._bus.subscribe(
             name, decode, lambda _key, message: handler(message), history=latched
         )

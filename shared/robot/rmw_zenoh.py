@@ -45,7 +45,16 @@ from ..keys import (
 )
 from ..ros2 import NO_TYPE_HASH, RosDistro, dds_type_name, ros_type_of, type_hash
 from .kinds import TransportKind
-from .transport import Interface, RobotTransport, Role, action_members, action_of
+from .transport import (
+    Decode,
+    Handle,
+    Interface,
+    RobotTransport,
+    Role,
+    Unsubscribe,
+    action_members,
+    action_of,
+)
 
 _LOGGER = logging.getLogger(__name__)
 
@@ -185,13 +194,8 @@ class RmwZenohTransport(RobotTransport):
         )
 
     def subscribe(
-        self,
-        name: str,
-        ros_type: str,
-        decode: Callable[[bytes], T],
-        handler: Callable[[T], None],
-        latched: bool = False,
-    ) -> Callable[[], None]:
+        self, name: str, ros_type: str, decode: Decode[T], handler: Handle[T], latched: bool = False
+    ) -> Unsubscribe:
         # A transient local publisher of rmw_zenoh is Zenoh's advanced publisher with a
         # cache: a subscriber with history gets what it keeps.
         self.entity(RmwKind.SUBSCRIBER, name, ros_type)

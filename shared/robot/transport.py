@@ -24,6 +24,10 @@ from ..keys import ACTION_MEMBERS, action_member
 from .kinds import TransportKind
 
 T = TypeVar("T")
+Decode = Callable[[bytes], T]
+"""One sample's bytes to a message; raises on bytes it cannot read (the sample is dropped)."""
+Handle = Callable[[T], None]
+Unsubscribe = Callable[[], None]
 
 
 class Role(enum.StrEnum):
@@ -63,13 +67,8 @@ class RobotTransport(abc.ABC):
 
     @abc.abstractmethod
     def subscribe(
-        self,
-        name: str,
-        ros_type: str,
-        decode: Callable[[bytes], T],
-        handler: Callable[[T], None],
-        latched: bool = False,
-    ) -> Callable[[], None]:
+        self, name: str, ros_type: str, decode: Decode[T], handler: Handle[T], latched: bool = False
+    ) -> Unsubscribe:
         """Call `handler(message)` on the loop for every sample on a topic that decodes;
         returns the function that ends the subscription. A `latched` topic (ROS's
         transient local: a map) also gives what its publishers keep for late subscribers."""

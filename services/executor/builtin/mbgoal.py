@@ -57,29 +57,29 @@ def motion_words(order: Order, target: TargetPose) -> str:
     """Where the order goes, in words: 'kitchen', 'left 90°', '2 m forward'."""
     if target.frame != ROBOT_FRAME:
         return order.case or f"({target.x:g}, {target.y:g})"
-    parts = []
-    distance = math.hypot(target.x, target.y)
-    if distance >= TURN_ONLY:
-        parts.append(f"{distance:g} m {'forward' if target.x >= 0 else 'back'}")
-    if abs(target.yaw) > math.radians(1):
-        degrees = round(math.degrees(abs(target.yaw)))
-        parts.append("around" if degrees == 180 else f"{_side(target.yaw)} {degrees}°")
-    return " then ".join(parts) or "where it stands"
+    move, turn = _relative_words(target)
+    return " then ".join(part for part in (move, turn) if part) or "where it stands"
 
 
 def done_words(order: Order, target: TargetPose) -> str:
     """What the order did, in words: 'reached kitchen', 'turned left 90°', 'moved 2 m forward'."""
     if target.frame != ROBOT_FRAME:
-        return f"reached {order.case}" if order.case else f"reached ({target.x:g}, {target.y:g})"
-    said = []
-    distance = math.hypot(target.x, target.y)
-    if distance >= TURN_ONLY:
-        said.append(f"moved {distance:g} m {'forward' if target.x >= 0 else 'back'}")
-    if abs(target.yaw) > math.radians(1):
-        degrees = round(math.degrees(abs(target.yaw)))
-        turn = "around" if degrees == 180 else f"{_side(target.yaw)} {degrees}°"
-        said.append(f"turned {turn}")
+        return f"reached {motion_words(order, target)}"
+    move, turn = _relative_words(target)
+    said = [f"moved {move}"] if move else []
+    said += [f"turned {turn}"] if turn else []
     return ", then ".join(said) or "stayed where it stood"
+
+
+def _relative_words(target: TargetPose) -> tuple[str, str]:
+    """A base_link target's move ('2 m forward') and turn ('left 90°'); '' for none."""
+    distance = math.hypot(target.x, target.y)
+    way = "forward" if target.x >= 0 else "back"
+    move = f"{distance:g} m {way}" if distance >= TURN_ONLY else ""
+    degrees = round(math.degrees(abs(target.yaw)))
+    if abs(target.yaw) <= math.radians(1):
+        return move, ""
+    return move, "around" if degrees == 180 else f"{_side(target.yaw)} {degrees}°"
 
 
 def _side(yaw: float) -> str:

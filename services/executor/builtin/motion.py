@@ -24,6 +24,8 @@ from ..framework import ExecutionContext, Executor
 
 STALL_S = 3.0
 """No progress for this long while commanding motion: the robot is blocked."""
+TOLERANCE = 0.02
+"""Close enough: metres of a drive, radians of a turn."""
 
 
 class Straight(msgspec.Struct):
@@ -47,22 +49,13 @@ class Drive(Executor):
     async def execute(self, order: Order, ctx: ExecutionContext) -> str | None:
         params: Straight = ctx.params
         distance = _relative_target(order, params.distance, "distance", "x")
-        speed = params.speed
         start = await ctx.robot.next_pose()
 
         def travelled(pose: Pose2D) -> float:
-            return (pose.x - start.x) * math.cos(start.yaw) + (pose.y - start.y) * math.sin(
-                start.yaw
-            )
+            dx, dy = pose.x - start.x, pose.y - start.y
+            return dx * math.cos(start.yaw) + dy * math.sin(start.yaw)
 
-        def command(velocity: float, remaining: float) -> None:
-            ctx.robot.drive(velocity, 0.0)
-            done = 100.0 * (1.0 - abs(remaining) / abs(distance)) if distance else None
-            ctx.progress(
-                f"{abs(remaining):.1f} m to go", distance_linear=abs(remaining), percent=done
-            )
-
-        await _close_loop(ctx, distance, travelled, command, speed, gain=1.5, tolerance=0.02)
+        await _close_loop(ctx, distance, travelled, params.speed, gain=1.5, angular=False)
         return f"drove {distance:g} m"
 
 
@@ -75,19 +68,8 @@ class Rotate(Executor):
     async def execute(self, order: Order, ctx: ExecutionContext) -> str | None:
         params: Turn = ctx.params
         angle = _relative_target(order, params.angle, "angle", "yaw")
-        speed = params.angular_speed
         turned = _Unwrapped((await ctx.robot.next_pose()).yaw)
-
-        def command(velocity: float, remaining: float) -> None:
-            ctx.robot.drive(0.0, velocity)
-            done = 100.0 * (1.0 - abs(remaining) / abs(angle)) if angle else None
-            ctx.progress(
-                f"{math.degrees(abs(remaining)):.0f}° to turn",
-                distance_angular=abs(remaining),
-                percent=done,
-            )
-
-        await _close_loop(ctx, angle, turned.update, command, speed, gain=2.0, tolerance=0.02)
+        await _close_loop(ctx, angle, turned.update, params.angular_speed, gain=2.0, angular=True)
         side = "left" if angle > 0 else "right"
         return f"turned {side} {math.degrees(abs(angle)):.0f}° ({angle:g} rad)"
 
@@ -96,27 +78,36 @@ async def _close_loop(
     ctx: ExecutionContext,
     goal: float,
     measure: Callable[[Pose2D], float],
-    command: Callable[[float, float], None],
     max_speed: float,
     gain: float,
-    tolerance: float,
+    angular: bool,
 ) -> None:
-    """Command a proportional, capped velocity until `measure` reaches `goal`; always
-    leave the robot stopped, whether it arrived, failed or was cancelled."""
+    """Command a proportional, capped velocity (angular: a turn in place) until `measure`
+    reaches `goal`, reporting what is left; always leave the robot stopped, whether it
+    arrived, failed or was cancelled."""
     best = math.inf
     last_progress = asyncio.get_running_loop().time()
     try:
         while True:
             remaining = goal - measure(await ctx.robot.next_pose())
-            if abs(remaining) <= tolerance:
+            if abs(remaining) <= TOLERANCE:
                 return
             now = asyncio.get_running_loop().time()
-            if abs(remaining) < best - tolerance / 2:
+            if abs(remaining) < best - TOLERANCE / 2:
                 best, last_progress = abs(remaining), now
             elif now - last_progress > STALL_S:
                 raise OrderFailed(f"no progress for {STALL_S:g} s, {abs(remaining):.2f} short")
             speed = max(min(max_speed, gain * abs(remaining)), 0.05 * max_speed)
-            command(math.copysign(speed, remaining), remaining)
+            velocity = math.copysign(speed, remaining)
+            left = abs(remaining)
+            done = 100.0 * (1.0 - left / abs(goal)) if goal else None
+            if angular:
+                ctx.robot.drive(0.0, velocity)
+                words = f"{math.degrees(left):.0f}° to turn"
+                ctx.progress(words, distance_angular=left, percent=done)
+            else:
+                ctx.robot.drive(velocity, 0.0)
+                ctx.progress(f"{left:.1f} m to go", distance_linear=left, percent=done)
     finally:
         ctx.robot.drive(0.0, 0.0)
 

@@ -1,0 +1,370 @@
+"""Reading an orders file: YAML with line numbers in, checked orders and commands out.
+
+Checked by hand rather than decoded into a schema: any key of an order or case that is
+not one of RESERVED_KEYS is a parameter of the order, so the set of keys is open, and
+each problem must name its file, order, case and YAML line in one line a person can
+act on.
+"""
+
+from __future__ import annotations
+
+import re
+from collections.abc import Iterator
+from dataclasses import dataclass
+from typing import Any
+
+import yaml
+
+from shared.errors import OrdersFileError
+from shared.messages import ParamValue
+
+from .expand import SlotRef, expand
+from .model import POSE_KEYS, CaseSpec, Command, OrderSpec
+from .patterns import PLACEHOLDER, SLOT_GROUP, SLOT_STUB, check_regex, combined, with_slots
+from .slots import SlotSpec
+from .text import normalise
+
+RESERVED_KEYS = frozenset({"voice_alias", "label", "description", "cases", "slots"})
+DEFAULT_SEPARATOR = "then"
+DEFAULT_SKIP_WORDS = ("a", "the", "to", "please", "now")
+"""Words people add around and inside commands ("please reach the kitchen now"): the
+parser ignores them there and the recogniser's grammar makes them optional there."""
+
+Problem = tuple[str, int | None]
+"""One thing wrong, as 'FILE: order NAME: what' and its YAML line when known."""
+
+
+class OrdersInvalid(OrdersFileError):
+    """Orders files that do not validate, with every problem found.
+
+    Its text is the first problem (the one line the CLI prints); `errors` lists them all
+    with their YAML lines, for the status a running converter publishes.
+    """
+
+    def __init__(self, problems: list[Problem]) -> None:
+        self.problems = tuple(problems)
+        more = f" (and {len(problems) - 1} more)" if len(problems) > 1 else ""
+        super().__init__(problems[0][0] + more)
+
+    @property
+    def errors(self) -> tuple[str, ...]:
+        return tuple(f"{message}{_at(line)}" for message, line in self.problems)
+
+
+@dataclass(frozen=True)
+class OrdersFile:
+    """One file's orders and commands, checked."""
+
+    orders: tuple[OrderSpec, ...]
+    commands: list[Command]
+    separator: str
+    skip_words: tuple[str, ...] | None
+    """None when the file does not say."""
+
+
+def read_yaml(text: str, source: str) -> Any:
+    """The YAML document, its mappings carrying their lines; one-line error otherwise."""
+    try:
+        return yaml.load(text, Loader=_LineLoader)  # a SafeLoader that adds line numbers
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f"{source}:{mark.line + 1}" if mark is not None else source
+        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+        raise OrdersFileError(f"{where}: invalid YAML: {problem}") from exc
+
+
+def check_file(data: Any, source: str) -> OrdersFile:
+    """The orders of one file's document; OrdersInvalid lists every order that is wrong."""
+    if isinstance(data, dict) and "orders_list" in data:
+        data = data["orders_list"]
+    if not isinstance(data, dict) or not isinstance(data.get("orders"), dict):
+        raise OrdersFileError(f"{source}: expected a mapping with an 'orders' mapping")
+    unknown = set(data) - {"orders", "separator", "skip_words"}
+    if unknown:
+        raise OrdersFileError(
+            f"{source}: unknown top-level key(s) {', '.join(sorted(map(str, unknown)))}; "
+            "allowed: orders, separator, skip_words"
+        )
+    separator = data.get("separator", DEFAULT_SEPARATOR)
+    if not isinstance(separator, str) or not separator.strip():
+        raise OrdersFileError(f"{source}: 'separator' must be a non-empty string (regex)")
+    try:
+        check_regex(separator)
+    except ValueError as exc:
+        where = f"{source}: separator: {exc}"
+        raise OrdersInvalid([(where, _line(data, "separator"))]) from exc
+    skip_words = _skip_words(data, source)
+    orders: list[OrderSpec] = []
+    commands: list[Command] = []
+    problems: list[Problem] = []
+    for name, spec in data["orders"].items():
+        try:
+            order = _order_from_dict(str(name), spec, source)
+            commands.extend(_commands(order))
+            orders.append(order)
+        except _Problem as exc:
+            line = exc.line or _line(data["orders"], name)
+            problems.append((f"{source}: order '{name}'{exc.where}: {exc}", line))
+    if problems:
+        raise OrdersInvalid(problems)
+    if not orders:
+        raise OrdersFileError(f"{source}: 'orders' is empty")
+    return OrdersFile(tuple(orders), commands, separator, skip_words)
+
+
+class _Problem(Exception):
+    """One thing wrong inside an order; the caller adds the file and order names."""
+
+    def __init__(self, message: str, line: int | None = None, where: str = "") -> None:
+        super().__init__(message)
+        self.line = line
+        self.where = where
+        """' case NAME' when the problem is inside a case."""
+
+
+def _at(line: int | None) -> str:
+    return f" (line {line})" if line else ""
+
+
+def _order_from_dict(name: str, spec: Any, source: str) -> OrderSpec:
+    if not isinstance(spec, dict):
+        raise _Problem(f"expected a mapping, got {type(spec).__name__}")
+    alias = _required_str(spec, "voice_alias")
+    label = _required_str(spec, "label")
+    description = spec.get("description", alias)
+    if not isinstance(description, str):
+        raise _Problem("'description' must be a string", _line(spec, "description"))
+    slots = _slots(spec)
+    values = _values(spec)
+    raw_cases = spec.get("cases", {})
+    if raw_cases is None:
+        raw_cases = {}
+    if not isinstance(raw_cases, dict):
+        raise _Problem("'cases' must be a mapping of case name to case", _line(spec, "cases"))
+    cases = []
+    for case_name, case_spec in raw_cases.items():
+        try:
+            cases.append(_case_from_dict(str(case_name), case_spec))
+        except _Problem as exc:
+            line = exc.line or _line(raw_cases, case_name)
+            raise _Problem(str(exc), line, f" case '{case_name}'") from exc
+    order = OrderSpec(
+        name=name,
+        alias=alias,
+        label=label,
+        description=description,
+        values=values,
+        cases=tuple(cases),
+        source=source,
+        slots=slots,
+        line=_line(spec),
+    )
+    for case in order.cases or (None,):
+        at = f" case '{case.name}'" if case else ""
+        line = case.line if case else order.line
+        merged = order.merged_values(case)
+        if "frame" in merged:
+            for key in POSE_KEYS:
+                value = merged.get(key, 0.0)
+                if isinstance(value, bool) or not isinstance(value, int | float):
+                    raise _Problem(f"'{key}' must be a number, got {value!r}", line, at)
+    return order
+
+
+def _case_from_dict(name: str, spec: Any) -> CaseSpec:
+    if not isinstance(spec, dict):
+        raise _Problem(f"expected a mapping, got {type(spec).__name__}")
+    if "cases" in spec:
+        raise _Problem("cases cannot have cases of their own", _line(spec, "cases"))
+    if "label" in spec:
+        raise _Problem("'label' belongs to the order, not to a case", _line(spec, "label"))
+    alias = _required_str(spec, "voice_alias")
+    description = spec.get("description", alias)
+    if not isinstance(description, str):
+        raise _Problem("'description' must be a string", _line(spec, "description"))
+    return CaseSpec(
+        name=name,
+        alias=alias,
+        description=description,
+        values=_values(spec),
+        slots=_slots(spec),
+        line=_line(spec),
+    )
+
+
+def _required_str(spec: dict[str, Any], key: str) -> str:
+    if key not in spec:
+        raise _Problem(f"missing mandatory key '{key}'", _line(spec))
+    value = spec[key]
+    if not isinstance(value, str) or not value.strip():
+        raise _Problem(f"'{key}' must be a non-empty string, got {value!r}", _line(spec, key))
+    if key == "voice_alias":
+        names = PLACEHOLDER.findall(value)
+        for name in names:
+            if names.count(name) > 1:
+                raise _Problem(f"slot '{{{name}}}' appears twice in one command", _line(spec, key))
+        try:
+            check_regex(with_slots(value, SLOT_STUB))
+        except ValueError as exc:
+            raise _Problem(f"'voice_alias': {exc}", _line(spec, key)) from exc
+    return value.strip()
+
+
+def _slots(spec: dict[str, Any]) -> dict[str, SlotSpec]:
+    raw = spec.get("slots") or {}
+    if not isinstance(raw, dict):
+        raise _Problem("'slots' must be a mapping of slot name to slot", _line(spec, "slots"))
+    slots: dict[str, SlotSpec] = {}
+    for name, slot in raw.items():
+        try:
+            slots[str(name)] = SlotSpec.from_dict(str(name), slot)
+        except ValueError as exc:
+            raise _Problem(str(exc), _line(raw, name)) from exc
+    return slots
+
+
+def _values(spec: dict[str, Any]) -> dict[str, ParamValue]:
+    values: dict[str, ParamValue] = {}
+    for key, value in spec.items():
+        if key in RESERVED_KEYS:
+            continue
+        if not isinstance(key, str):
+            raise _Problem(f"parameter names must be strings, got {key!r}", _line(spec, key))
+        if not isinstance(value, str | int | float | bool):
+            raise _Problem(
+                f"parameter '{key}' must be a string, number or boolean, "
+                f"got {type(value).__name__}",
+                _line(spec, key),
+            )
+        values[key] = value
+    return values
+
+
+def _skip_words(data: dict[str, Any], source: str) -> tuple[str, ...] | None:
+    """The file's `skip_words`: a list of single words in normal form, or None if absent."""
+    if "skip_words" not in data:
+        return None
+    words = data["skip_words"]
+    line = _line(data, "skip_words")
+    if words is None:
+        words = []
+    if not isinstance(words, list):
+        raise OrdersInvalid([(f"{source}: 'skip_words' must be a list of words", line)])
+    for word in words:
+        if not isinstance(word, str) or not word or normalise(word) != word or " " in word:
+            raise OrdersInvalid(
+                [
+                    (
+                        f"{source}: skip_words: {word!r} must be one lower-case word "
+                        "without punctuation",
+                        line,
+                    )
+                ]
+            )
+    return tuple(dict.fromkeys(words))
+
+
+def _commands(order: OrderSpec) -> list[Command]:
+    """The order's commands: itself, or its alias alone and with each case."""
+    order_used = set(PLACEHOLDER.findall(order.alias))
+    case_used: set[str] = set()
+    commands = [_command(order, None)]
+    for case in order.cases:
+        commands.append(_command(order, case))
+        case_used.update(PLACEHOLDER.findall(case.alias))
+        unused = set(case.slots) - order_used - set(PLACEHOLDER.findall(case.alias))
+        if unused:
+            raise _Problem(
+                f"slot(s) {', '.join(sorted(unused))} declared but not in any alias",
+                case.line,
+                f" case '{case.name}'",
+            )
+    unused = set(order.slots) - order_used - case_used
+    if unused:
+        raise _Problem(
+            f"slot(s) {', '.join(sorted(unused))} declared but not in any alias", order.line
+        )
+    return commands
+
+
+def _command(order: OrderSpec, case: CaseSpec | None) -> Command:
+    at = f" case '{case.name}'" if case else ""
+    line = case.line if case else order.line
+    available = {**order.slots, **(case.slots if case else {})}
+    aliases = [order.alias, *([case.alias] if case else [])]
+    used = [name for alias in aliases for name in PLACEHOLDER.findall(alias)]
+    for name in used:
+        if used.count(name) > 1:
+            raise _Problem(f"slot '{{{name}}}' appears twice in one command", line, at)
+        if name not in available:
+            declared = ", ".join(sorted(available)) or "none"
+            raise _Problem(f"slot '{{{name}}}' is not declared; declared: {declared}", line, at)
+    slots = {name: available[name] for name in used}
+    targets = [slot.to for slot in slots.values()]
+    for target in targets:
+        if targets.count(target) > 1:
+            raise _Problem(f"two slots write to '{target}'", line, at)
+
+    try:
+        expansion = expand(
+            combined(tuple(aliases), SLOT_STUB, ()), {f"{SLOT_GROUP}{n}": n for n in slots}
+        )
+    except re.error as exc:  # each alias compiled alone: e.g. a group name in both
+        raise _Problem(f"the aliases do not combine into one regex: {exc}", line, at) from exc
+    for template in expansion.templates:
+        for word in template:
+            if isinstance(word, SlotRef) or normalise(word) == word:
+                continue
+            raise _Problem(
+                f"alias can never match '{word}': text is matched without punctuation "
+                f"(write '{normalise(word)}')",
+                line,
+                at,
+            )
+    return Command(order, case, tuple(aliases), slots, expansion)
+
+
+def _line(mapping: Any, key: Any = None) -> int | None:
+    """The YAML line of `mapping` or of its `key`, when it was read from YAML."""
+    if not isinstance(mapping, _LineMapping):
+        return None
+    if key is None:
+        return mapping.line
+    return mapping.key_lines.get(key, mapping.line)
+
+
+class _LineMapping(dict[Any, Any]):
+    """A YAML mapping that remembers the line it starts on and the lines of its keys."""
+
+    line: int | None = None
+    key_lines: dict[Any, int]
+
+
+class _LineLoader(getattr(yaml, "CSafeLoader", yaml.SafeLoader)):  # type: ignore[misc]
+    """yaml's safe loader (libyaml's when installed), with line numbers on mappings."""
+
+
+def _construct_mapping(loader: yaml.SafeLoader, node: yaml.MappingNode) -> Iterator[_LineMapping]:
+    mapping = _LineMapping()
+    mapping.line = node.start_mark.line + 1
+    mapping.key_lines = {}
+    yield mapping
+    mapping.update(loader.construct_mapping(node))
+    for key_node, _ in node.value:
+        key = loader.construct_object(key_node)
+        line = key_node.start_mark.line + 1
+        try:
+            first = mapping.key_lines.setdefault(key, line)
+        except TypeError:  # an unhashable key; construct_mapping has refused it already
+            continue
+        if first != line:
+            # YAML would keep the last silently: an order defined twice is a mistake.
+            raise yaml.constructor.ConstructorError(
+                None,
+                None,
+                f"'{key}' is defined twice, at lines {first} and {line}",
+                key_node.start_mark,
+            )
+
+
+_LineLoader.add_constructor(yaml.resolver.BaseResolver.DEFAULT_MAPPING_TAG, _construct_mapping)
