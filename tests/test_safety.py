@@ -13,12 +13,15 @@ from pathlib import Path
 
 import pytest
 
-from shared.bus import Bus, json_decoder
+from shared.bus import Bus, BusOptions, json_decoder
 from shared.keys import RobotKeys, RobotNames
 from shared.messages import (
+    ControlRequest,
     Done,
     EmergencyStop,
+    Execute,
     Failed,
+    Message,
     Order,
     OrderFinished,
     OrderProgress,
@@ -193,6 +196,53 @@ def test_a_lost_executor_stops_a_remapped_stamped_robot_too(remapped_robot: Robo
         # The zero velocity went out as the TwistStamped this robot takes.
         assert sent
         assert all(CODEC.read_twist_stamped(raw) == (0.0, 0.0) for raw in sent)
+
+    robot.run(body)
+
+
+def test_an_executor_killed_before_it_answers_leaves_no_motion_behind(robot: Robot) -> None:
+    """An executor that set the robot moving and died before its answer reached the
+    supervisor: the dispatch fails without saying whether the order started, so the
+    supervisor stops the robot itself. (The executor is played here, on a session of its
+    own, to die at exactly that moment; a killed process did so one run in a few.)"""
+    robot.start_supervisor()
+
+    async def body(bus: Bus, client: Client) -> None:
+        await client_wait_ready(client, executor=False)
+        keys = RobotKeys("r1")
+        loop = asyncio.get_running_loop()
+        started = asyncio.Event()
+
+        async def execute(request: Execute) -> Message:
+            reply = await executor.request_bytes(
+                RobotNames().action("navigate_to_pose", "send_goal"),
+                CODEC.send_goal_request(new_goal_id(), "map", Pose2D(x=8.0, y=0.0, yaw=0.0)),
+                timeout=WAIT,
+            )
+            assert CODEC.read_send_goal_response(reply)
+            started.set()
+            await asyncio.Event().wait()  # dies before it answers
+            raise AssertionError("unreachable")
+
+        async def control(request: ControlRequest) -> Message:
+            return Failed(reason="not running here")
+
+        with Bus.open(BusOptions(connect=[robot.router]), loop) as executor:
+            executor.serve(keys.executor_execute, json_decoder(Execute), execute)
+            executor.serve(keys.executor_control, json_decoder(ControlRequest), control)
+            executor.announce(keys.alive("executor"))
+            await client.wait_state(lambda s: s.executor_online, "the executor to be online")
+            (moving,) = await client.submit(FAR)
+            await asyncio.wait_for(started.wait(), WAIT)
+            await robot.driving()
+            lost = loop.time()
+        stopped = await robot.standing(lost)
+        assert stopped.x < 7.0
+        record = await client.finished(moving)
+        assert record.status == OrderStatus.FAILED
+        assert record.message.startswith("executor did not take it"), record.message
+        await asyncio.sleep(1.0)
+        assert abs(robot.odometry[-1][1].pose.x - stopped.x) < 0.01, "it moved again"
 
     robot.run(body)
 

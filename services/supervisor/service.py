@@ -369,7 +369,11 @@ class RobotSupervisor:
                 self._keys.executor_execute, execute, self._reply_decode, EXECUTOR_TIMEOUT
             )
         except BusError as exc:
-            # It may have started anyway: make sure it does not run unaccounted for.
+            # It may have started anyway (an executor killed before it could answer had
+            # the robot moving): stop the robot here at once, and tell the executor, if it
+            # still listens, to drop the order.
+            loop = asyncio.get_running_loop()
+            self._tasks.append(loop.create_task(self._halt_after_loss("an order was sent")))
             await self._send_control(CancelOrder(order_id=order_id))
             self._finish(order_id, OrderStatus.FAILED, f"executor did not take it: {exc}")
             return
@@ -437,11 +441,12 @@ class RobotSupervisor:
             return
         # Nobody is in charge of that motion any more: the robot must not go on with it.
         self._finish(order_id, OrderStatus.FAILED, "executor lost; halting the robot")
-        self._tasks.append(asyncio.get_running_loop().create_task(self._halt_after_loss()))
+        loop = asyncio.get_running_loop()
+        self._tasks.append(loop.create_task(self._halt_after_loss("an order ran")))
 
-    async def _halt_after_loss(self) -> None:
+    async def _halt_after_loss(self, when: str) -> None:
         what = await self._halt_robot()
-        _LOGGER.warning("%s: executor lost while an order ran: %s", self.robot, what)
+        _LOGGER.warning("%s: executor lost while %s: %s", self.robot, when, what)
 
     async def _verify(self, order_id: str, restarted: str = "the supervisor") -> None:
         """After a restart (of `restarted`): resume the current order if the executor
