@@ -8,6 +8,7 @@ from __future__ import annotations
 import asyncio
 import json
 import shlex
+import socket
 import stat
 import subprocess
 import sys
@@ -25,7 +26,7 @@ from shared.messages import Execute, ExecutorReply, GetRunning
 from shared.ros2 import Odometry, Ros2Codec
 from voicectl.bus_secrets import ROUTER_TEMPLATE, USERS, SecretsExist, write_bus_secrets
 
-from .conftest import REPO, Processes, async_wait_until, free_port, voicectl
+from .conftest import REPO, Processes, async_wait_until, free_port, voicectl, wait_until
 from .support import Client, client_wait_ready, on_bus, order
 
 CODEC = Ros2Codec()
@@ -62,7 +63,17 @@ def site(processes: Processes, tmp_path: Path) -> SecureSite:
     processes.start(
         "services.router", "--config", str(secrets / "router.json5"), "--listen", site.endpoint
     )
+    # A client that finds no router gives up at once (Zenoh's CLI among them).
+    wait_until(lambda: listening(port), 30.0, "the secured router to listen")
     return site
+
+
+def listening(port: int) -> bool:
+    try:
+        socket.create_connection(("127.0.0.1", port), timeout=1.0).close()
+    except OSError:
+        return False
+    return True
 
 
 def start_robot(site: SecureSite) -> None:
