@@ -48,6 +48,12 @@ Speak = Callable[..., Path]
 
 
 @pytest.fixture(scope="session")
+def anyio_backend() -> str:
+    """Async tests run on asyncio, as the services do (anyio's plugin, in auto mode)."""
+    return "asyncio"
+
+
+@pytest.fixture(scope="session")
 def speech(tmp_path_factory: pytest.TempPathFactory) -> Speak:
     """`speech(text, voice="flite:awb", speed=0)`: a WAV file of `text` spoken by a
     synthesizer (`flite:<voice>`, `festival:<voice>` or `espeak:<voice>` with `speed` in words

@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import uuid
-from collections.abc import Callable, Coroutine
+from collections.abc import AsyncIterator, Callable, Coroutine
 from pathlib import Path
 from typing import Any, TypeVar
 
@@ -40,14 +41,20 @@ from .conftest import Processes, async_wait_until
 T = TypeVar("T")
 
 
+def joined(where: str | BusOptions) -> Bus:
+    """A bus joined to `where` (a router's endpoint, or options) on the running loop, to
+    use as `with joined(router) as bus:` in an async test; closed whatever happens."""
+    options = BusOptions(connect=[where]) if isinstance(where, str) else where
+    return Bus.open(options, asyncio.get_running_loop())
+
+
 def on_bus(where: str | BusOptions, body: Callable[[Bus], Coroutine[Any, Any, T]]) -> T:
-    """Run `body` with a bus joined to `where` (a router's endpoint, or options), in an
-    event loop of its own; the bus is closed whatever happens. The tests' one entry
-    from synchronous test functions to the bus."""
+    """Run `body` with a bus joined to `where`, in an event loop of its own: for the few
+    synchronous places (a fixture, a helper class) that need one exchange on the bus.
+    Tests themselves are async and use `joined`."""
 
     async def main() -> T:
-        options = BusOptions(connect=[where]) if isinstance(where, str) else where
-        with Bus.open(options, asyncio.get_running_loop()) as bus:
+        with joined(where) as bus:
             return await body(bus)
 
     return asyncio.run(main())
@@ -222,21 +229,15 @@ class ExecutorHarness:
         return [odom for at, odom in self.odometry if at > moment]
 
 
-def run_harness(
-    router: str,
-    body: Callable[[ExecutorHarness], Coroutine[Any, Any, None]],
-    names: RobotNames | None = None,
-    transport: TransportKind = TransportKind.BRIDGE,
-) -> None:
-    """Run `body` with a harness on a bus connected to `router`, once the executor and
-    the robot are up."""
-
-    async def main(bus: Bus) -> None:
+@contextlib.asynccontextmanager
+async def harness_on(
+    router: str, names: RobotNames | None = None, transport: TransportKind = TransportKind.BRIDGE
+) -> AsyncIterator[ExecutorHarness]:
+    """A harness on a bus connected to `router`, once the executor and the robot are up."""
+    with joined(router) as bus:
         harness = ExecutorHarness(bus, names=names, transport=transport)
         await harness.ready()
-        await body(harness)
-
-    on_bus(router, main)
+        yield harness
 
 
 def start_robot(

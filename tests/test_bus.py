@@ -11,7 +11,7 @@ import msgspec
 import pytest
 import zenoh
 
-from shared.bus import Bus, BusOptions, json_decoder
+from shared.bus import BusOptions, json_decoder
 from shared.errors import BusError
 from shared.messages import (
     Done,
@@ -26,101 +26,93 @@ from shared.messages import (
 )
 
 from .conftest import async_wait_until
-from .support import on_bus, until_heard
+from .support import joined, until_heard
 
 
 def options(router: str) -> BusOptions:
     return BusOptions(connect=[router])
 
 
-def test_publish_subscribe_decodes_and_drops_junk(
+async def test_publish_subscribe_decodes_and_drops_junk(
     router: str, caplog: pytest.LogCaptureFixture
 ) -> None:
-    async def scenario(sub: Bus) -> list[tuple[str, Transcript]]:
-        received: list[tuple[str, Transcript]] = []
-        with Bus.open(options(router), asyncio.get_running_loop()) as pub:
-            sub.subscribe(
-                "voice/*/stt/transcript",
-                json_decoder(Transcript),
-                lambda key, msg: received.append((key, msg)),
-            )
-            await until_heard(pub, "voice/r1/stt/transcript")
-            pub.session.put("voice/r1/stt/transcript", b"\xff not json")
-            pub.session.put("voice/r1/stt/transcript", b'{"type": "transcript"}')
-            pub.publish("voice/r1/stt/transcript", Transcript(text="turn left"))
-            await async_wait_until(lambda: received, 5.0, "a transcript")
-        return received
-
-    with caplog.at_level(logging.WARNING, logger="shared.bus"):
-        received = on_bus(router, scenario)
+    received: list[tuple[str, Transcript]] = []
+    with (
+        caplog.at_level(logging.WARNING, logger="shared.bus"),
+        joined(router) as sub,
+        joined(router) as pub,
+    ):
+        sub.subscribe(
+            "voice/*/stt/transcript",
+            json_decoder(Transcript),
+            lambda key, msg: received.append((key, msg)),
+        )
+        await until_heard(pub, "voice/r1/stt/transcript")
+        pub.session.put("voice/r1/stt/transcript", b"\xff not json")
+        pub.session.put("voice/r1/stt/transcript", b'{"type": "transcript"}')
+        pub.publish("voice/r1/stt/transcript", Transcript(text="turn left"))
+        await async_wait_until(lambda: received, 5.0, "a transcript")
     assert received == [("voice/r1/stt/transcript", Transcript(text="turn left"))]
     dropped = [r.getMessage() for r in caplog.records if "undecodable" in r.getMessage()]
     assert len(dropped) == 2
     assert all("voice/r1/stt/transcript" in line for line in dropped)
 
 
-def test_json_on_the_wire_is_readable_by_any_tool(router: str) -> None:
-    async def scenario(bus: Bus) -> tuple[bytes, str]:
-        got: list[zenoh.Sample] = []
+async def test_json_on_the_wire_is_readable_by_any_tool(router: str) -> None:
+    got: list[zenoh.Sample] = []
+    with joined(router) as bus:
         subscriber = bus.session.declare_subscriber("voice/**", got.append)  # same session
         bus.publish("voice/r1/stt/transcript", Transcript(text="hi"))
         await async_wait_until(lambda: got, 5.0, "the raw sample")
         subscriber.undeclare()
-        return got[0].payload.to_bytes(), str(got[0].encoding)
-
-    payload, encoding = on_bus(router, scenario)
+    payload, encoding = got[0].payload.to_bytes(), str(got[0].encoding)
     assert payload.startswith(b'{"type":"transcript","text":"hi",')
     assert json.loads(payload)["rejected"] is False
     assert encoding == "application/json"
 
 
-def test_request_reply_and_errors(router: str) -> None:
-    async def scenario(server: Bus) -> None:
-        with Bus.open(options(router), asyncio.get_running_loop()) as client:
+async def test_request_reply_and_errors(router: str) -> None:
+    with joined(router) as server, joined(router) as client:
 
-            async def handle(request: SupervisorRequest) -> Message:
-                match request:
-                    case GetState():
-                        return Done(detail="state")
-                    case _:
-                        raise RuntimeError("boom")
+        async def handle(request: SupervisorRequest) -> Message:
+            match request:
+                case GetState():
+                    return Done(detail="state")
+                case _:
+                    raise RuntimeError("boom")
 
-            server.serve("voice/r1/supervisor/request", json_decoder(SupervisorRequest), handle)
-            decode = json_decoder(Done | Failed)
-            replies: list[Done | Failed] = []
-            for _ in range(100):  # until the queryable has reached the router
-                with contextlib.suppress(BusError):
-                    replies.append(
-                        await client.request("voice/r1/supervisor/request", GetState(), decode)
-                    )
-                    break
-                await asyncio.sleep(0.05)
-            assert replies == [Done(detail="state")]
-            raw = await client.request_bytes("voice/r1/supervisor/request", b"junk", 5.0)
-            assert b"undecodable request" in raw
-            failed = await client.request(
-                "voice/r1/supervisor/request",
-                Transcript(text="not a request"),
-                decode,
-            )
-            assert isinstance(failed, Failed)
-            with pytest.raises(BusError, match="no service answered"):
-                await client.request("voice/r2/supervisor/request", GetState(), decode, 1.0)
-
-    on_bus(router, scenario)
+        server.serve("voice/r1/supervisor/request", json_decoder(SupervisorRequest), handle)
+        decode = json_decoder(Done | Failed)
+        replies: list[Done | Failed] = []
+        for _ in range(100):  # until the queryable has reached the router
+            with contextlib.suppress(BusError):
+                replies.append(
+                    await client.request("voice/r1/supervisor/request", GetState(), decode)
+                )
+                break
+            await asyncio.sleep(0.05)
+        assert replies == [Done(detail="state")]
+        raw = await client.request_bytes("voice/r1/supervisor/request", b"junk", 5.0)
+        assert b"undecodable request" in raw
+        failed = await client.request(
+            "voice/r1/supervisor/request",
+            Transcript(text="not a request"),
+            decode,
+        )
+        assert isinstance(failed, Failed)
+        with pytest.raises(BusError, match="no service answered"):
+            await client.request("voice/r2/supervisor/request", GetState(), decode, 1.0)
 
 
-def test_liveliness_tokens_come_and_go(router: str) -> None:
-    async def scenario(watcher: Bus) -> list[bool]:
-        seen: list[bool] = []
+async def test_liveliness_tokens_come_and_go(router: str) -> None:
+    seen: list[bool] = []
+    with joined(router) as watcher:
         watcher.watch("voice/r1/alive/executor", lambda _key, alive: seen.append(alive))
-        with Bus.open(options(router), asyncio.get_running_loop()) as service:
+        with joined(router) as service:
             service.announce("voice/r1/alive/executor")
             await async_wait_until(lambda: seen == [True], 5.0, "the token")
         await async_wait_until(lambda: seen == [True, False], 5.0, "the token to go")
-        return seen
-
-    assert on_bus(router, scenario) == [True, False]
+    assert seen == [True, False]
 
 
 def test_an_order_cannot_finish_as_queued_or_running() -> None:

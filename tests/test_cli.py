@@ -3,17 +3,18 @@ refuse a bad configuration in one line, junk on the bus answered and survived.""
 
 from __future__ import annotations
 
+import asyncio
 import json
 import socket
 from pathlib import Path
 
-from shared.bus import Bus, json_decoder
+from shared.bus import json_decoder
 from shared.keys import RobotKeys, RobotNames
 from shared.messages import Failed, GetState, StateReply, SupervisorReply
 from shared.ros2 import Pose2D, Ros2Codec, RosDistro, new_goal_id
 
-from .conftest import Processes, voicectl, wait_until
-from .support import Client, client_wait_ready, on_bus
+from .conftest import Processes, async_wait_until, voicectl, wait_until
+from .support import Client, client_wait_ready, joined
 
 
 def test_parse_prints_one_json_object() -> None:
@@ -66,11 +67,11 @@ def test_executor_refuses_a_bad_binding() -> None:
     assert "cannot import no_such_module" in done.stderr
 
 
-def test_supervisor_answers_junk_and_keeps_serving(router: str, processes: Processes) -> None:
+async def test_supervisor_answers_junk_and_keeps_serving(router: str, processes: Processes) -> None:
     supervisor = processes.start("services.supervisor", "--connect", router, "--robot", "r1")
     key = RobotKeys("r1").supervisor
 
-    async def scenario(bus: Bus) -> None:
+    with joined(router) as bus:
         decode = json_decoder(SupervisorReply)
         await client_wait_ready(Client(bus, "r1"), executor=False)
         for junk in (b"", b"\x00\xff", b'{"type": "submit"}', b'{"type": "launch"}'):
@@ -80,10 +81,8 @@ def test_supervisor_answers_junk_and_keeps_serving(router: str, processes: Proce
         bus.session.put(RobotKeys("r1").executor_events, b"garbage")
         state = await bus.request(key, GetState(), decode, timeout=5.0)
         assert isinstance(state, StateReply)
-
-    on_bus(router, scenario)
     assert supervisor.poll() is None
-    wait_until(
+    await async_wait_until(
         lambda: (
             "dropped undecodable message on voice/r1/executor/events" in processes.log(supervisor)
         ),
@@ -115,7 +114,7 @@ def test_web_on_a_busy_port_says_so_in_one_line(router: str, tmp_path: Path) -> 
     assert "Traceback" not in result.stderr
 
 
-def test_a_stop_navigation_refuses_is_said_to_be_unconfirmed(
+async def test_a_stop_navigation_refuses_is_said_to_be_unconfirmed(
     router: str, processes: Processes
 ) -> None:
     """`voicectl stop` never reports a stop nothing confirmed as done: exit status 4 and
@@ -128,9 +127,9 @@ def test_a_stop_navigation_refuses_is_said_to_be_unconfirmed(
         state = voicectl("state", "--robot", "r1", "--connect", router, timeout=30.0)
         return state.returncode == 0 and json.loads(state.stdout)["executor_online"]
 
-    wait_until(executor_online, 60.0, "the executor")
+    await asyncio.to_thread(wait_until, executor_online, 60.0, "the executor")
 
-    async def navigate(bus: Bus) -> None:  # a goal of somebody else's, which the fault keeps
+    with joined(router) as bus:
         codec = Ros2Codec(RosDistro.JAZZY)
         reply = await bus.request_bytes(
             RobotNames().navigate("send_goal"),
@@ -138,9 +137,7 @@ def test_a_stop_navigation_refuses_is_said_to_be_unconfirmed(
             timeout=10.0,
         )
         assert codec.read_send_goal_response(reply)
-
-    on_bus(router, navigate)
-    stopped = voicectl("stop", "--robot", "r1", "--connect", router, timeout=30.0)
+    stopped = await asyncio.to_thread(voicectl, "stop", "--robot", "r1", "--connect", router)
     assert stopped.returncode == 4, stopped
     answer = json.loads(stopped.stdout)
     assert answer["type"] == "stopped"

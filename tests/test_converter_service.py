@@ -4,17 +4,16 @@ previous orders and says why)."""
 
 from __future__ import annotations
 
-import asyncio
+import contextlib
 import os
 import shutil
 import time
-from collections.abc import Callable, Coroutine
+from collections.abc import AsyncIterator, Callable
 from pathlib import Path
-from typing import Any
 
 import pytest
 
-from shared.bus import Bus, BusOptions, json_decoder
+from shared.bus import Bus, json_decoder
 from shared.errors import BusError
 from shared.keys import ConverterKeys, RobotKeys
 from shared.messages import (
@@ -30,7 +29,7 @@ from shared.messages import (
 )
 
 from .conftest import Processes, async_wait_until, wait_until
-from .support import on_bus, until_heard
+from .support import joined, until_heard
 
 ORDERS = Path(__file__).resolve().parents[1] / "orders"
 KEYS = ConverterKeys()
@@ -108,18 +107,13 @@ class Converter:
         return reply.result
 
 
-def scenario(
-    router: str,
-    processes: Processes,
-    orders: Path,
-    body: Callable[[Converter], Coroutine[Any, Any, None]],
-) -> None:
-    async def run(bus: Bus) -> None:
+@contextlib.asynccontextmanager
+async def scenario(router: str, processes: Processes, orders: Path) -> AsyncIterator[Converter]:
+    """A converter serving `orders`, started, and the test's side of it."""
+    with joined(router) as bus:
         converter = Converter(bus, processes, router, orders)
         await converter.started()
-        await body(converter)
-
-    on_bus(router, run)
+        yield converter
 
 
 def write(path: Path, text: str) -> None:
@@ -129,21 +123,20 @@ def write(path: Path, text: str) -> None:
     os.replace(temporary, path)
 
 
-def test_queries_answer_a_recogniser_that_starts_late(
+async def test_queries_answer_a_recogniser_that_starts_late(
     router: str, processes: Processes, tmp_path: Path
 ) -> None:
     orders = tmp_path / "orders"
     shutil.copytree(ORDERS, orders)
 
-    async def body(converter: Converter) -> None:
+    async with scenario(router, processes, orders) as converter:
         status = converter.statuses[0]
         assert status.ok
         assert status.errors == []
         assert status.orders == 8
         assert len(status.sources) == 3
         await async_wait_until(lambda: converter.grammars, WAIT, "the grammar at start")
-        loop = asyncio.get_running_loop()
-        with Bus.open(BusOptions(connect=[router]), loop) as late:
+        with joined(router) as late:
             grammar = await late.request(
                 KEYS.parse, GetGrammar(), json_decoder(ConverterReply), timeout=10.0
             )
@@ -159,13 +152,11 @@ def test_queries_answer_a_recogniser_that_starts_late(
         junk = await converter.bus.request_bytes(KEYS.parse, b"\xff\x00junk", 10.0)
         assert b"undecodable request" in junk
 
-    scenario(router, processes, orders, body)
 
-
-def test_final_transcripts_become_proposals_per_robot(
+async def test_final_transcripts_become_proposals_per_robot(
     router: str, processes: Processes, tmp_path: Path
 ) -> None:
-    async def body(converter: Converter) -> None:
+    async with scenario(router, processes, ORDERS / "demo.yaml") as converter:
         proposals: list[Proposal] = []
         robot = RobotKeys("r1")
         converter.bus.subscribe(
@@ -191,16 +182,14 @@ def test_final_transcripts_become_proposals_per_robot(
         assert "'turn lift'" in partial.errors[0].reason
         assert partial.errors[0].candidates == ["turn left"]
 
-    scenario(router, processes, ORDERS / "demo.yaml", body)
 
-
-def test_a_valid_edit_applies_within_a_second(
+async def test_a_valid_edit_applies_within_a_second(
     router: str, processes: Processes, tmp_path: Path
 ) -> None:
     orders = tmp_path / "orders.yaml"
     shutil.copy(ORDERS / "demo.yaml", orders)
 
-    async def body(converter: Converter) -> None:
+    async with scenario(router, processes, orders) as converter:
         await async_wait_until(lambda: converter.grammars, WAIT, "the grammar at start")
         assert (await converter.ask("wave")).orders == []
         seen = len(converter.statuses)
@@ -219,17 +208,15 @@ def test_a_valid_edit_applies_within_a_second(
         await converter.grammar(lambda g: "wave goodbye" in g.phrases)
         assert (await converter.ask("wave goodbye")).errors == []
 
-    scenario(router, processes, orders, body)
 
-
-def test_an_invalid_edit_keeps_the_previous_orders_and_says_why(
+async def test_an_invalid_edit_keeps_the_previous_orders_and_says_why(
     router: str, processes: Processes, tmp_path: Path
 ) -> None:
     orders = tmp_path / "orders.yaml"
     shutil.copy(ORDERS / "spoken.yaml", orders)
     good = orders.read_text()
 
-    async def body(converter: Converter) -> None:
+    async with scenario(router, processes, orders) as converter:
         await async_wait_until(lambda: converter.grammars, WAIT, "the grammar at start")
         seen = len(converter.statuses)
         broken = good.replace("wait {duration}", "wait ({duration}").replace(
@@ -266,17 +253,15 @@ def test_an_invalid_edit_keeps_the_previous_orders_and_says_why(
         await converter.status(seen, lambda s: s.ok)
         assert (await converter.ask("wait ninety seconds")).errors == []
 
-    scenario(router, processes, orders, body)
 
-
-def test_a_directory_reports_duplicate_names_and_reloads_when_files_come_and_go(
+async def test_a_directory_reports_duplicate_names_and_reloads_when_files_come_and_go(
     router: str, processes: Processes, tmp_path: Path
 ) -> None:
     directory = tmp_path / "orders"
     directory.mkdir()
     shutil.copy(ORDERS / "demo.yaml", directory / "a.yaml")
 
-    async def body(converter: Converter) -> None:
+    async with scenario(router, processes, directory) as converter:
         seen = len(converter.statuses)
         (directory / "b.yaml").write_text(
             "orders:\n  stop: {voice_alias: stop, label: x}\n  goal: {voice_alias: go, label: x}\n"
@@ -294,8 +279,6 @@ def test_a_directory_reports_duplicate_names_and_reloads_when_files_come_and_go(
         (directory / "b.yaml").unlink()
         await converter.status(seen, lambda s: s.ok and s.orders == 3)
         assert (await converter.ask("stop")).errors[0].reason == "no order matches"
-
-    scenario(router, processes, directory, body)
 
 
 def test_a_bad_file_at_start_is_fatal_in_one_line(
@@ -316,9 +299,6 @@ def test_a_bad_file_at_start_is_fatal_in_one_line(
     )
 
 
-def test_no_converter_means_no_answer(router: str) -> None:
-    async def run(bus: Bus) -> None:
-        with pytest.raises(BusError):
-            await bus.request(KEYS.parse, GetGrammar(), json_decoder(ConverterReply), 1.0)
-
-    on_bus(router, run)
+async def test_no_converter_means_no_answer(router: str) -> None:
+    with joined(router) as bus, pytest.raises(BusError):
+        await bus.request(KEYS.parse, GetGrammar(), json_decoder(ConverterReply), 1.0)

@@ -11,18 +11,18 @@ even while the link is down.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import time
-from collections.abc import Awaitable, Callable, Iterator
+from collections.abc import AsyncIterator, Iterator
 from pathlib import Path
 
 import pytest
 
 from harness.cross_host import RobotWatch, observer, start_stack
 from harness.netns import LEASE_MS, TwoHosts, impairment_unavailable, unavailable
-from shared.bus import Bus
 from shared.messages import EmergencyStop, Order, OrderStatus, Stopped, TargetPose
 
-from .support import Client, client_wait_ready, on_bus, order
+from .support import Client, client_wait_ready, joined, order
 
 WHY_NOT = unavailable()
 pytestmark = pytest.mark.skipif(WHY_NOT is not None, reason=f"two hosts: {WHY_NOT}")
@@ -53,22 +53,19 @@ def rig(tmp_path: Path, request: pytest.FixtureRequest) -> Iterator[TwoHosts]:
     assert not unclean, f"processes did not stop cleanly: {unclean}\n{hosts.dump()}"
 
 
-def run(rig: TwoHosts, body: Callable[[Client, RobotWatch], Awaitable[None]]) -> None:
-    """Run `body` with the supervisor's client on the host and the robot's odometry read
-    on the robot, once the supervisor sees the executor across the link."""
-
-    async def main(host: Bus) -> None:
-        with Bus.open(observer(rig, "robot"), asyncio.get_running_loop()) as robot:
-            client, watch = Client(host, "r1"), RobotWatch(robot)
-            await client_wait_ready(client)
-            await watch.ready()
-            await body(client, watch)
-
-    on_bus(observer(rig, "host"), main)
+@contextlib.asynccontextmanager
+async def session(rig: TwoHosts) -> AsyncIterator[tuple[Client, RobotWatch]]:
+    """The supervisor's client on the host and the robot's odometry read on the robot,
+    once the supervisor sees the executor across the link."""
+    with joined(observer(rig, "host")) as host, joined(observer(rig, "robot")) as robot:
+        client, watch = Client(host, "r1"), RobotWatch(robot)
+        await client_wait_ready(client)
+        await watch.ready()
+        yield client, watch
 
 
-def test_orders_run_across_the_link(rig: TwoHosts) -> None:
-    async def body(client: Client, watch: RobotWatch) -> None:
+async def test_orders_run_across_the_link(rig: TwoHosts) -> None:
+    async with session(rig) as (client, watch):
         (product,) = await client.submit(order("mul", first=6, second=7))
         assert (await client.finished(product)).message == "6 x 7 = 42"
         start = watch.last.pose.x
@@ -77,11 +74,9 @@ def test_orders_run_across_the_link(rig: TwoHosts) -> None:
         assert (record.status, record.message) == (OrderStatus.SUCCEEDED, "drove 0.5 m")
         assert watch.last.pose.x - start == pytest.approx(0.5, abs=0.05)
 
-    run(rig, body)
 
-
-def test_a_link_down_past_the_lease_stops_the_robot_and_loses_no_order(rig: TwoHosts) -> None:
-    async def body(client: Client, watch: RobotWatch) -> None:
+async def test_a_link_down_past_the_lease_stops_the_robot_and_loses_no_order(rig: TwoHosts) -> None:
+    async with session(rig) as (client, watch):
         moving, sibling = await client.submit(FAR, order("mul", first=2, second=2))
         (after,) = await client.submit(order("mul", first=3, second=3))
         await watch.moving()
@@ -118,12 +113,10 @@ def test_a_link_down_past_the_lease_stops_the_robot_and_loses_no_order(rig: TwoH
         assert log.count(f"supervisor lost while order {moving}") == 1
         assert "supervisor back" in log
 
-    run(rig, body)
-
 
 @pytest.mark.skipif(impairment_unavailable() is not None, reason=f"{impairment_unavailable()}")
-def test_a_slow_lossy_link_still_runs_orders_and_stops_the_robot(rig: TwoHosts) -> None:
-    async def body(client: Client, watch: RobotWatch) -> None:
+async def test_a_slow_lossy_link_still_runs_orders_and_stops_the_robot(rig: TwoHosts) -> None:
+    async with session(rig) as (client, watch):
         with rig.impaired(delay_ms=100, loss_percent=5):
             ids = await client.submit(
                 order("mul", first=1, second=2),
@@ -148,5 +141,3 @@ def test_a_slow_lossy_link_still_runs_orders_and_stops_the_robot(rig: TwoHosts) 
             assert (await client.state()).stopped
             await asyncio.sleep(1.0)  # a window to watch it stand
             assert abs(watch.last.pose.x - stood.x) < 0.01, "it moved again"
-
-    run(rig, body)

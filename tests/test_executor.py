@@ -28,7 +28,7 @@ from shared.messages import (
 from shared.ros2 import Ros2Codec, RosDistro
 
 from .conftest import Processes, async_wait_until
-from .support import ExecutorHarness, order, run_harness, start_robot
+from .support import harness_on, order, start_robot
 
 
 @pytest.fixture
@@ -39,8 +39,8 @@ def robot(router: str, processes: Processes, tmp_path: Path) -> tuple[str, Path]
     return router, photos
 
 
-def test_drive_and_rotate_close_the_loop_on_odometry(robot: tuple[str, Path]) -> None:
-    async def body(harness: ExecutorHarness) -> None:
+async def test_drive_and_rotate_close_the_loop_on_odometry(robot: tuple[str, Path]) -> None:
+    async with harness_on(robot[0]) as harness:
         start = harness.pose().pose
         result = await harness.finished(await harness.execute(order("drive", distance=0.6)))
         assert (result.status, result.message) == (OrderStatus.SUCCEEDED, "drove 0.6 m")
@@ -68,11 +68,9 @@ def test_drive_and_rotate_close_the_loop_on_odometry(robot: tuple[str, Path]) ->
         assert bad.status == OrderStatus.FAILED
         assert "needs a 'distance' parameter or a base_link target pose" in bad.message
 
-    run_harness(robot[0], body)
 
-
-def test_pic_saves_the_next_camera_frame_as_png(robot: tuple[str, Path]) -> None:
-    async def body(harness: ExecutorHarness) -> None:
+async def test_pic_saves_the_next_camera_frame_as_png(robot: tuple[str, Path]) -> None:
+    async with harness_on(robot[0]) as harness:
         result = await harness.finished(await harness.execute(order("pic", wait=1)))
         assert result.status == OrderStatus.SUCCEEDED, result.message
         (photo,) = robot[1].glob("*.png")
@@ -83,13 +81,11 @@ def test_pic_saves_the_next_camera_frame_as_png(robot: tuple[str, Path]) -> None
         progress = [e for e in harness.events[result.order_id] if isinstance(e, OrderProgress)]
         assert progress[0].progress.text == "photo in 1 s"
 
-    run_harness(robot[0], body)
 
-
-def test_mbgoal_reports_remaining_distance_and_cancel_stops_the_robot_fast(
+async def test_mbgoal_reports_remaining_distance_and_cancel_stops_the_robot_fast(
     robot: tuple[str, Path],
 ) -> None:
-    async def body(harness: ExecutorHarness) -> None:
+    async with harness_on(robot[0]) as harness:
         far = Order(
             order="goal",
             label="mbgoal",
@@ -122,11 +118,9 @@ def test_mbgoal_reports_remaining_distance_and_cancel_stops_the_robot_fast(
         result = await harness.finished(order_id)
         assert (result.status, result.message) == (OrderStatus.CANCELLED, "cancelled")
 
-    run_harness(robot[0], body)
 
-
-def test_halt_stops_a_driving_robot_outside_any_order(robot: tuple[str, Path]) -> None:
-    async def body(harness: ExecutorHarness) -> None:
+async def test_halt_stops_a_driving_robot_outside_any_order(robot: tuple[str, Path]) -> None:
+    async with harness_on(robot[0]) as harness:
         order_id = await harness.execute(order("drive", distance=5.0))
         await async_wait_until(lambda: harness.pose().linear_x > 0.2, 10.0, "driving")
         assert isinstance(await harness.control(Halt()), Done)
@@ -136,22 +130,18 @@ def test_halt_stops_a_driving_robot_outside_any_order(robot: tuple[str, Path]) -
         await asyncio.sleep(0.3)
         assert all(odom.linear_x == 0.0 for t, odom in harness.odometry if t > halted_at + 0.1)
 
-    run_harness(robot[0], body)
 
-
-def test_executor_announces_its_labels(robot: tuple[str, Path]) -> None:
-    async def body(harness: ExecutorHarness) -> None:
+async def test_executor_announces_its_labels(robot: tuple[str, Path]) -> None:
+    async with harness_on(robot[0]) as harness:
         replies = harness.bus.session.liveliness().get("voice/r1/labels/*", timeout=2)
         labels = sorted(str(r.ok.key_expr).rsplit("/", 1)[1] for r in replies if r.ok)
         assert labels == ["drive", "mbgoal", "mul", "pic", "rotate", "runaway", "wait"]
         simulator = harness.bus.session.liveliness().get(RobotNames().simulator, timeout=2)
         assert [str(r.ok.key_expr) for r in simulator if r.ok] == ["voicectl_sim/alive"]
 
-    run_harness(robot[0], body)
 
-
-def test_sim_publishes_tf_that_agrees_with_odometry(robot: tuple[str, Path]) -> None:
-    async def body(harness: ExecutorHarness) -> None:
+async def test_sim_publishes_tf_that_agrees_with_odometry(robot: tuple[str, Path]) -> None:
+    async with harness_on(robot[0]) as harness:
         codec = Ros2Codec(RosDistro.JAZZY)
         transforms: list[list[tuple[str, str, object]]] = []
         harness.bus.subscribe(
@@ -164,11 +154,9 @@ def test_sim_publishes_tf_that_agrees_with_odometry(robot: tuple[str, Path]) -> 
         odom = harness.pose().pose
         assert pose == odom  # the robot stands still: the latest of each agree exactly
 
-    run_harness(robot[0], body)
 
-
-def test_wait_pauses_for_the_spoken_seconds(robot: tuple[str, Path]) -> None:
-    async def body(harness: ExecutorHarness) -> None:
+async def test_wait_pauses_for_the_spoken_seconds(robot: tuple[str, Path]) -> None:
+    async with harness_on(robot[0]) as harness:
         loop = asyncio.get_running_loop()
         started = loop.time()
         result = await harness.finished(await harness.execute(order("wait", seconds=1.5)))
@@ -180,16 +168,14 @@ def test_wait_pauses_for_the_spoken_seconds(robot: tuple[str, Path]) -> None:
             reason="'do wait' (wait): parameter 'seconds': Expected `float` >= 0.0",
         )
 
-    run_harness(robot[0], body)
 
-
-def test_an_executor_that_outlives_its_order_cannot_move_the_robot(
+async def test_an_executor_that_outlives_its_order_cannot_move_the_robot(
     robot: tuple[str, Path],
 ) -> None:
     """`runaway` swallows its cancel and keeps calling drive: once cut off, its robot
     handle is revoked, the robot stops and stays stopped, and no order runs beside it."""
 
-    async def body(harness: ExecutorHarness) -> None:
+    async with harness_on(robot[0]) as harness:
         order_id = await harness.execute(order("runaway"))
         await async_wait_until(lambda: harness.pose().linear_x > 0.2, 10.0, "driving")
         assert isinstance(await harness.control(CancelOrder(order_id=order_id)), Done)
@@ -211,11 +197,9 @@ def test_an_executor_that_outlives_its_order_cannot_move_the_robot(
             "no new order until it ends (restarting the executor ends it)"
         )
 
-    run_harness(robot[0], body)
 
-
-def test_each_executor_key_takes_only_its_own_requests(robot: tuple[str, Path]) -> None:
-    async def body(harness: ExecutorHarness) -> None:
+async def test_each_executor_key_takes_only_its_own_requests(robot: tuple[str, Path]) -> None:
+    async with harness_on(robot[0]) as harness:
         decode = json_decoder(ExecutorReply)
         keys = harness.keys
         wrong_key = await harness.bus.request(keys.executor_execute, Halt(), decode)
@@ -226,5 +210,3 @@ def test_each_executor_key_takes_only_its_own_requests(robot: tuple[str, Path]) 
         assert isinstance(wrong_key, Failed)
         assert wrong_key.reason.startswith("undecodable request")
         assert pytest.approx(0.0) == harness.pose().linear_x  # and nothing moved
-
-    run_harness(robot[0], body)

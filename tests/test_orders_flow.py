@@ -4,15 +4,15 @@ policy, cancel, emergency stop, an executor that dies, user executors."""
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import signal
-from collections.abc import Callable, Coroutine
+from collections.abc import AsyncIterator
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import pytest
 
-from shared.bus import Bus
 from shared.messages import (
     Cancel,
     Done,
@@ -23,7 +23,7 @@ from shared.messages import (
 )
 
 from .conftest import Processes
-from .support import Client, client_wait_ready, on_bus, order
+from .support import Client, client_wait_ready, joined, order
 
 USER_EXECUTORS = [
     "--executor",
@@ -80,17 +80,17 @@ def robot(router: str, processes: Processes, tmp_path: Path) -> Robot:
     return bot
 
 
-def scenario(robot: Robot, body: Callable[[Client], Coroutine[Any, Any, None]]) -> None:
-    async def run(bus: Bus) -> None:
+@contextlib.asynccontextmanager
+async def scenario(robot: Robot) -> AsyncIterator[Client]:
+    """A client of the robot's supervisor, once the supervisor and its executor are up."""
+    with joined(robot.router) as bus:
         client = Client(bus, robot.name)
         await client_wait_ready(client)
-        await body(client)
-
-    on_bus(robot.router, run)
+        yield client
 
 
-def test_results_of_builtin_and_user_executors(robot: Robot) -> None:
-    async def body(client: Client) -> None:
+async def test_results_of_builtin_and_user_executors(robot: Robot) -> None:
+    async with scenario(robot) as client:
         ids = await client.submit(order("mul", first=6, second=7))
         ok = await client.finished(ids[0])
         assert (ok.status, ok.message) == (OrderStatus.SUCCEEDED, "6 x 7 = 42")
@@ -115,11 +115,9 @@ def test_results_of_builtin_and_user_executors(robot: Robot) -> None:
         (again,) = await client.submit(order("mul", first=2, second=3))
         assert (await client.finished(again)).status == OrderStatus.SUCCEEDED
 
-    scenario(robot, body)
 
-
-def test_a_failure_cancels_the_rest_of_the_utterance(robot: Robot) -> None:
-    async def body(client: Client) -> None:
+async def test_a_failure_cancels_the_rest_of_the_utterance(robot: Robot) -> None:
+    async with scenario(robot) as client:
         refused, after = await client.submit(order("refuse"), order("mul", first=1, second=1))
         first = await client.finished(refused)
         assert (first.status, first.message) == (OrderStatus.FAILED, "door is closed")
@@ -127,11 +125,9 @@ def test_a_failure_cancels_the_rest_of_the_utterance(robot: Robot) -> None:
         assert rest.status == OrderStatus.CANCELLED
         assert refused in rest.message
 
-    scenario(robot, body)
 
-
-def test_duplicate_submit_is_a_no_op(robot: Robot) -> None:
-    async def body(client: Client) -> None:
+async def test_duplicate_submit_is_a_no_op(robot: Robot) -> None:
+    async with scenario(robot) as client:
         first = await client.submit(order("slow", seconds=0.5), request_id="same")
         again = await client.submit(order("slow", seconds=0.5), request_id="same")
         assert first == again
@@ -140,11 +136,9 @@ def test_duplicate_submit_is_a_no_op(robot: Robot) -> None:
         assert [r.id for r in state.history].count(first[0]) == 1
         assert not state.queue
 
-    scenario(robot, body)
 
-
-def test_cancel_running_and_queued_orders(robot: Robot) -> None:
-    async def body(client: Client) -> None:
+async def test_cancel_running_and_queued_orders(robot: Robot) -> None:
+    async with scenario(robot) as client:
         running, queued = await client.submit(order("slow"), order("slow2"))
         await client.wait_state(
             lambda s: s.current is not None and s.current.progress is not None,
@@ -158,11 +152,9 @@ def test_cancel_running_and_queued_orders(robot: Robot) -> None:
         assert isinstance(unknown, Failed)
         assert "'nope' is neither queued nor running" in unknown.reason
 
-    scenario(robot, body)
 
-
-def test_an_executor_that_ignores_cancel_is_cut_off_and_runs_alone(robot: Robot) -> None:
-    async def body(client: Client) -> None:
+async def test_an_executor_that_ignores_cancel_is_cut_off_and_runs_alone(robot: Robot) -> None:
+    async with scenario(robot) as client:
         (stubborn,) = await client.submit(order("stubborn", seconds=4))
         await client.wait_state(
             lambda s: s.current is not None and s.current.progress is not None,
@@ -185,11 +177,9 @@ def test_an_executor_that_ignores_cancel_is_cut_off_and_runs_alone(robot: Robot)
         else:
             raise AssertionError("orders stayed refused after the stubborn executor ended")
 
-    scenario(robot, body)
 
-
-def test_orders_are_checked_against_the_executors_parameter_types(robot: Robot) -> None:
-    async def body(client: Client) -> None:
+async def test_orders_are_checked_against_the_executors_parameter_types(robot: Robot) -> None:
+    async with scenario(robot) as client:
         (fits,) = await client.submit(order("strict", metres_per_second=1))
         assert (await client.finished(fits)).message == "1 m/s for cruise"
         for params, why in (
@@ -211,11 +201,9 @@ def test_orders_are_checked_against_the_executors_parameter_types(robot: Robot) 
         (wrong,) = await client.submit(order("mul", first=True, second=2))
         assert (await client.finished(wrong)).status == OrderStatus.REJECTED
 
-    scenario(robot, body)
 
-
-def test_emergency_stop_clears_everything(robot: Robot) -> None:
-    async def body(client: Client) -> None:
+async def test_emergency_stop_clears_everything(robot: Robot) -> None:
+    async with scenario(robot) as client:
         ids = await client.submit(
             order("slow"), order("mul", first=1, second=1), order("mul", first=2, second=2)
         )
@@ -227,11 +215,9 @@ def test_emergency_stop_clears_everything(robot: Robot) -> None:
         assert [r.status for r in records] == [OrderStatus.CANCELLED] * 3
         assert records[0].message == "emergency stop"
 
-    scenario(robot, body)
 
-
-def test_executor_lost_mid_order_pauses_the_queue(robot: Robot) -> None:
-    async def body(client: Client) -> None:
+async def test_executor_lost_mid_order_pauses_the_queue(robot: Robot) -> None:
+    async with scenario(robot) as client:
         running, waiting = await client.submit(
             order("slow"), order("mul", first=3, second=3), request_id="a"
         )
@@ -255,5 +241,3 @@ def test_executor_lost_mid_order_pauses_the_queue(robot: Robot) -> None:
         robot.start_executor()
         record = await client.finished(other)
         assert (record.status, record.message) == (OrderStatus.SUCCEEDED, "4 x 4 = 16")
-
-    scenario(robot, body)

@@ -11,12 +11,9 @@ No ROS 2 runs here: what these values are checked against is that source, not a 
 
 from __future__ import annotations
 
-import asyncio
-
 import zenoh
 from zenoh.ext import Int64, z_serialize
 
-from shared.bus import Bus, BusOptions
 from shared.keys import RMW_QOS_DEFAULT, RmwKind, RmwToken, RmwZenohKeys
 from shared.robot import Interface, Role, TransportKind, open_transport
 from shared.robot.rmw_zenoh import Attachment, RmwZenohTransport, gid_of
@@ -34,7 +31,7 @@ from shared.ros2 import (
 )
 
 from .conftest import async_wait_until
-from .support import on_bus
+from .support import joined
 
 ZID = "1f2e3d4c5b6a79880123456789abcdef"
 TWIST_HASH = "RIHS01_9c45bf16fe0983d80e3cfe750d6835843d265a9a6c46bd2e609fcddde6fb8d2a"
@@ -178,8 +175,8 @@ def test_the_attachment_and_the_gid() -> None:
 # --- on a real router ------------------------------------------------------------------------
 
 
-def test_a_publication_and_a_service_call_carry_what_rmw_zenoh_needs(router: str) -> None:
-    async def body(bus: Bus) -> None:
+async def test_a_publication_and_a_service_call_carry_what_rmw_zenoh_needs(router: str) -> None:
+    with joined(router) as bus:
         session = bus.session
         seen: list[zenoh.Sample] = []
         asked: list[tuple[bytes, bytes]] = []
@@ -247,54 +244,48 @@ def test_a_publication_and_a_service_call_carry_what_rmw_zenoh_needs(router: str
             subscriber.undeclare()
             queryable.undeclare()
 
-    on_bus(router, body)
 
-
-def test_a_served_service_echoes_the_client_in_its_reply_and_discovery_sees_both(
+async def test_a_served_service_echoes_the_client_in_its_reply_and_discovery_sees_both(
     router: str,
 ) -> None:
-    async def body(bus: Bus) -> None:
-        loop = asyncio.get_running_loop()
-        with Bus.open(BusOptions(connect=[router]), loop) as robot_bus:
-            robot = open_transport(robot_bus, TransportKind.RMW_ZENOH, "voicectl_sim", "")
-            codec = Ros2Codec()
+    with joined(router) as bus, joined(router) as robot_bus:
+        robot = open_transport(robot_bus, TransportKind.RMW_ZENOH, "voicectl_sim", "")
+        codec = Ros2Codec()
 
-            async def cancel(_raw: bytes) -> bytes:
-                return codec.cancel_goal_response(0)
+        async def cancel(_raw: bytes) -> bytes:
+            return codec.cancel_goal_response(0)
 
-            robot.serve("navigate_to_pose/_action/cancel_goal", CANCEL_GOAL, cancel)
-            robot.offer(Interface(Role.SUBSCRIBER, "cmd_vel", "geometry_msgs/msg/TwistStamped"))
-            executor = open_transport(bus, TransportKind.RMW_ZENOH, "voicectl_executor", "")
-            found: list[Interface] = []
-            executor.discover(lambda interface, present: found.append(interface))
-            await async_wait_until(
-                lambda: any(i.role is Role.SUBSCRIBER for i in found), 5.0, "the robot's tokens"
+        robot.serve("navigate_to_pose/_action/cancel_goal", CANCEL_GOAL, cancel)
+        robot.offer(Interface(Role.SUBSCRIBER, "cmd_vel", "geometry_msgs/msg/TwistStamped"))
+        executor = open_transport(bus, TransportKind.RMW_ZENOH, "voicectl_executor", "")
+        found: list[Interface] = []
+        executor.discover(lambda interface, present: found.append(interface))
+        await async_wait_until(
+            lambda: any(i.role is Role.SUBSCRIBER for i in found), 5.0, "the robot's tokens"
+        )
+        assert (
+            Interface(
+                Role.SUBSCRIBER,
+                "cmd_vel",
+                "geometry_msgs/msg/TwistStamped",
+                type_hash(RosDistro.JAZZY, "geometry_msgs/msg/TwistStamped"),
             )
-            assert (
-                Interface(
-                    Role.SUBSCRIBER,
-                    "cmd_vel",
-                    "geometry_msgs/msg/TwistStamped",
-                    type_hash(RosDistro.JAZZY, "geometry_msgs/msg/TwistStamped"),
-                )
-                in found
-            )
-            assert any(i.role is Role.SERVICE_SERVER and i.ros_type == CANCEL_GOAL for i in found)
-            replies: list[zenoh.Reply] = []
-            bus.session.get(
-                RmwZenohKeys(0).data_any_hash(
-                    "navigate_to_pose/_action/cancel_goal", dds_type_name(CANCEL_GOAL)
-                ),
-                replies.append,
-                payload=codec.cancel_goal_request(),
-                attachment=Attachment(7, 5, bytes(range(16))).encode(),
-            )
-            await async_wait_until(lambda: replies, 5.0, "the reply")
-            answer = replies[0].ok
-            assert answer is not None
-            assert answer.attachment is not None
-            echoed = Attachment.decode(answer.attachment.to_bytes())
-            assert (echoed.sequence, echoed.gid) == (7, bytes(range(16)))
-            assert echoed.timestamp_ns > 5
-
-    on_bus(router, body)
+            in found
+        )
+        assert any(i.role is Role.SERVICE_SERVER and i.ros_type == CANCEL_GOAL for i in found)
+        replies: list[zenoh.Reply] = []
+        bus.session.get(
+            RmwZenohKeys(0).data_any_hash(
+                "navigate_to_pose/_action/cancel_goal", dds_type_name(CANCEL_GOAL)
+            ),
+            replies.append,
+            payload=codec.cancel_goal_request(),
+            attachment=Attachment(7, 5, bytes(range(16))).encode(),
+        )
+        await async_wait_until(lambda: replies, 5.0, "the reply")
+        answer = replies[0].ok
+        assert answer is not None
+        assert answer.attachment is not None
+        echoed = Attachment.decode(answer.attachment.to_bytes())
+        assert (echoed.sequence, echoed.gid) == (7, bytes(range(16)))
+        assert echoed.timestamp_ns > 5

@@ -18,7 +18,7 @@ from pathlib import Path
 import pytest
 from PIL import Image as PilImage
 
-from shared.bus import Bus, BusOptions, json_decoder
+from shared.bus import json_decoder
 from shared.keys import RobotKeys, RobotNames
 from shared.messages import (
     CancelOrder,
@@ -36,10 +36,10 @@ from shared.ros2 import Ros2Codec
 from .conftest import Processes, async_wait_until, voicectl
 from .support import (
     ExecutorHarness,
-    on_bus,
+    harness_on,
+    joined,
     order,
     robot_key,
-    run_harness,
     start_robot,
     until_heard,
 )
@@ -116,7 +116,7 @@ async def moving(harness: ExecutorHarness) -> None:
     await async_wait_until(lambda: harness.pose().linear_x > 0.2, 15.0, "the robot to drive")
 
 
-def test_a_remapped_robot_with_stamped_cmd_vel_and_a_compressed_camera(
+async def test_a_remapped_robot_with_stamped_cmd_vel_and_a_compressed_camera(
     router: str, start: Start, transport: TransportKind, tmp_path: Path
 ) -> None:
     start(
@@ -124,7 +124,7 @@ def test_a_remapped_robot_with_stamped_cmd_vel_and_a_compressed_camera(
         NAMES,
     )
 
-    async def body(harness: ExecutorHarness) -> None:
+    async with harness_on(router, REMAPPED, transport) as harness:
         # The stamped type comes from the bridge's token: Twist would not decode, and the
         # robot would not move.
         await executor_info(harness, lambda info: info.cmd_vel_type == "stamped")
@@ -145,15 +145,13 @@ def test_a_remapped_robot_with_stamped_cmd_vel_and_a_compressed_camera(
         assert result.status == OrderStatus.SUCCEEDED, result.message
         assert harness.pose().pose.x == pytest.approx(1.5, abs=0.15)
 
-    run_harness(router, body, REMAPPED, transport)
 
-
-def test_the_camera_is_subscribed_only_while_a_photo_is_taken(
+async def test_the_camera_is_subscribed_only_while_a_photo_is_taken(
     router: str, start: Start, transport: TransportKind
 ) -> None:
     start()
 
-    async def body(harness: ExecutorHarness) -> None:
+    async with harness_on(router, transport=transport) as harness:
         key = robot_key(transport, RobotNames().camera_image, "sensor_msgs/msg/Image")
         camera = harness.bus.session.declare_publisher(key)
 
@@ -171,10 +169,8 @@ def test_the_camera_is_subscribed_only_while_a_photo_is_taken(
         finally:
             camera.undeclare()
 
-    run_harness(router, body, transport=transport)
 
-
-def test_humble_goals_relative_to_the_robot_stay_where_they_were_asked(
+async def test_humble_goals_relative_to_the_robot_stay_where_they_were_asked(
     router: str, start: Start, transport: TransportKind
 ) -> None:
     """Humble's navigator re-transforms a base_link goal at every replan (1 Hz here), so
@@ -182,7 +178,7 @@ def test_humble_goals_relative_to_the_robot_stay_where_they_were_asked(
     by itself and sends an odom goal instead."""
     start(("--distro", "humble"))
 
-    async def body(harness: ExecutorHarness) -> None:
+    async with harness_on(router, transport=transport) as harness:
         await executor_info(harness, lambda info: info.distro == "humble")
         begin = harness.pose().pose
         result = await harness.finished(await harness.execute(goal("base_link", 2.0)))
@@ -190,16 +186,14 @@ def test_humble_goals_relative_to_the_robot_stay_where_they_were_asked(
         end = harness.pose().pose
         assert end.x - begin.x == pytest.approx(2.0, abs=0.15)
 
-    run_harness(router, body, transport=transport)
-
 
 @BRIDGE_ONLY
-def test_a_distro_mismatch_fails_navigation_before_any_goal(
+async def test_a_distro_mismatch_fails_navigation_before_any_goal(
     router: str, start: Start, transport: TransportKind
 ) -> None:
     start(("--distro", "humble"), ("--distro", "jazzy"))
 
-    async def body(harness: ExecutorHarness) -> None:
+    async with harness_on(router, transport=transport) as harness:
         begin = harness.pose().pose
         result = await harness.finished(await harness.execute(goal("map", 2.0)))
         assert (result.status, result.message) == (
@@ -211,8 +205,6 @@ def test_a_distro_mismatch_fails_navigation_before_any_goal(
         assert harness.pose().pose == begin
         assert harness.pose().linear_x == 0.0
 
-    run_harness(router, body, transport=transport)
-
 
 @BRIDGE_ONLY
 @pytest.mark.parametrize(
@@ -222,12 +214,12 @@ def test_a_distro_mismatch_fails_navigation_before_any_goal(
         ("cancel-unanswered", "navigation did not answer the cancel of every goal"),
     ],
 )
-def test_a_stop_the_robot_does_not_confirm_is_reported_not_assumed(
+async def test_a_stop_the_robot_does_not_confirm_is_reported_not_assumed(
     router: str, start: Start, transport: TransportKind, fault: str, problem: str
 ) -> None:
     start(("--fault", fault))
 
-    async def body(harness: ExecutorHarness) -> None:
+    async with harness_on(router, transport=transport) as harness:
         order_id = await harness.execute(goal("map", 8.0))
         await moving(harness)
         reply = await harness.control(Halt())
@@ -237,15 +229,13 @@ def test_a_stop_the_robot_does_not_confirm_is_reported_not_assumed(
         assert result.status == OrderStatus.CANCELLED
         assert "navigation" in result.message  # the cancel of its own goal went unconfirmed
 
-    run_harness(router, body, transport=transport)
 
-
-def test_a_cancelled_goal_the_robot_keeps_is_named_in_the_result(
+async def test_a_cancelled_goal_the_robot_keeps_is_named_in_the_result(
     router: str, start: Start, transport: TransportKind
 ) -> None:
     start(("--fault", "cancel-rejected"))
 
-    async def body(harness: ExecutorHarness) -> None:
+    async with harness_on(router, transport=transport) as harness:
         order_id = await harness.execute(goal("map", 8.0))
         await moving(harness)
         assert isinstance(await harness.control(CancelOrder(order_id=order_id)), Done)
@@ -253,30 +243,26 @@ def test_a_cancelled_goal_the_robot_keeps_is_named_in_the_result(
         assert result.status == OrderStatus.CANCELLED
         assert result.message.startswith("cancelled; navigation refused to cancel goal ")
 
-    run_harness(router, body, transport=transport)
-
 
 @BRIDGE_ONLY
-def test_a_result_lost_once_is_asked_again(
+async def test_a_result_lost_once_is_asked_again(
     router: str, start: Start, transport: TransportKind
 ) -> None:
     start(("--fault", "result-lost-once"))
 
-    async def body(harness: ExecutorHarness) -> None:
+    async with harness_on(router, transport=transport) as harness:
         result = await harness.finished(await harness.execute(goal("map", 1.0)))
         assert result.status == OrderStatus.SUCCEEDED, result.message
         assert harness.pose().pose.x == pytest.approx(1.0, abs=0.15)
 
-    run_harness(router, body, transport=transport)
-
 
 @BRIDGE_ONLY
-def test_a_result_that_never_comes_cancels_the_goal_before_failing(
+async def test_a_result_that_never_comes_cancels_the_goal_before_failing(
     router: str, start: Start, transport: TransportKind
 ) -> None:
     start(("--fault", "result-lost"), ("--result-grace", "2"))
 
-    async def body(harness: ExecutorHarness) -> None:
+    async with harness_on(router, transport=transport) as harness:
         result = await harness.finished(await harness.execute(goal("map", 8.0)))
         assert result.status == OrderStatus.FAILED
         assert result.message.startswith("navigation result lost (")
@@ -288,8 +274,6 @@ def test_a_result_that_never_comes_cancels_the_goal_before_failing(
         assert all(odom.linear_x == 0.0 for odom in harness.since(failed_at + 0.3))
         assert harness.pose().pose.x < 6.0  # stopped well short of the goal
 
-    run_harness(router, body, transport=transport)
-
 
 @BRIDGE_ONLY
 @pytest.mark.parametrize(
@@ -299,16 +283,14 @@ def test_a_result_that_never_comes_cancels_the_goal_before_failing(
         ("humble", "navigation ended ABORTED (Humble's Nav2 gives no reason)"),
     ],
 )
-def test_an_aborted_goal_reports_what_the_robot_said(
+async def test_an_aborted_goal_reports_what_the_robot_said(
     router: str, start: Start, transport: TransportKind, distro: str, message: str
 ) -> None:
     start(("--distro", distro, "--fault", "goal-aborts"))
 
-    async def body(harness: ExecutorHarness) -> None:
+    async with harness_on(router, transport=transport) as harness:
         result = await harness.finished(await harness.execute(goal("map", 8.0)))
         assert (result.status, result.message) == (OrderStatus.FAILED, message)
-
-    run_harness(router, body, transport=transport)
 
 
 def test_a_namespace_ros_would_refuse_is_refused_with_what_is_allowed() -> None:
@@ -320,7 +302,7 @@ def test_a_namespace_ros_would_refuse_is_refused_with_what_is_allowed() -> None:
     ) in refused.stderr
 
 
-def test_the_stop_at_start_up_is_in_the_type_the_robot_takes(
+async def test_the_stop_at_start_up_is_in_the_type_the_robot_takes(
     router: str, processes: Processes, tmp_path: Path, transport: TransportKind
 ) -> None:
     """A starting executor stops whatever moves the robot; on a TwistStamped robot that
@@ -337,11 +319,11 @@ def test_the_stop_at_start_up_is_in_the_type_the_robot_takes(
     )
     stamped = "geometry_msgs/msg/TwistStamped"
 
-    async def main(bus: Bus) -> None:
+    with joined(router) as bus:
         sent: list[bytes] = []
         watch = open_transport(bus, transport, "voicectl_test", REMAPPED.namespace)
         watch.subscribe(REMAPPED.cmd_vel, stamped, bytes, sent.append)
-        with Bus.open(BusOptions(connect=[router]), asyncio.get_running_loop()) as probe:
+        with joined(router) as probe:
             await until_heard(probe, robot_key(transport, REMAPPED.cmd_vel, stamped))
         processes.start("services.executor", "--connect", router, "--robot", "r1", *NAMES)
         online = RobotKeys("r1").alive("executor")
@@ -353,5 +335,3 @@ def test_the_stop_at_start_up_is_in_the_type_the_robot_takes(
         await async_wait_until(executor_online, 30.0, "the executor to come online")
         assert len(sent) >= 3, "no stop at start-up"
         assert all(CODEC.read_twist_stamped(raw) == (0.0, 0.0) for raw in sent)
-
-    on_bus(router, main)

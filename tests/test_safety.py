@@ -5,15 +5,16 @@ executor ends stray motion, and queue order survives many reorders and a restart
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import signal
 import stat
 import subprocess
-from collections.abc import Awaitable, Callable
+from collections.abc import AsyncIterator
 from pathlib import Path
 
 import pytest
 
-from shared.bus import Bus, BusOptions, json_decoder
+from shared.bus import Bus, json_decoder
 from shared.keys import RobotKeys, RobotNames
 from shared.messages import (
     ControlRequest,
@@ -35,7 +36,7 @@ from shared.messages import (
 from shared.ros2 import Odometry, Pose2D, Ros2Codec, RosDistro, new_goal_id
 
 from .conftest import Processes, async_wait_until
-from .support import Client, client_wait_ready, on_bus, order
+from .support import Client, client_wait_ready, joined, order
 
 WAIT = 30.0
 CODEC = Ros2Codec(RosDistro.JAZZY)
@@ -90,8 +91,10 @@ class Robot:
         process.send_signal(signal.SIGKILL)
         process.wait()
 
-    def run(self, body: Callable[[Bus, Client], Awaitable[None]]) -> None:
-        async def main(bus: Bus) -> None:
+    @contextlib.asynccontextmanager
+    async def session(self) -> AsyncIterator[tuple[Bus, Client]]:
+        """A bus and a client of r1's supervisor, with the robot's odometry recorded."""
+        with joined(self.router) as bus:
             loop = asyncio.get_running_loop()
             bus.subscribe(
                 self.bridge.odom,
@@ -99,9 +102,7 @@ class Robot:
                 lambda _key, odom: self.odometry.append((loop.time(), odom)),
             )
             await async_wait_until(lambda: self.odometry, WAIT, "odometry from the sim")
-            await body(bus, Client(bus, "r1"))
-
-        on_bus(self.router, main)
+            yield bus, Client(bus, "r1")
 
     async def driving(self) -> None:
         await async_wait_until(
@@ -150,11 +151,11 @@ def remapped_robot(router: str, processes: Processes, tmp_path: Path) -> Robot:
     return Robot(router, processes, tmp_path / "supervisor.sqlite3", REMAPPED, bridge)
 
 
-def test_a_lost_executor_leaves_no_motion_behind(robot: Robot) -> None:
+async def test_a_lost_executor_leaves_no_motion_behind(robot: Robot) -> None:
     robot.start_supervisor()
     robot.start_executor()
 
-    async def body(bus: Bus, client: Client) -> None:
+    async with robot.session() as (_bus, client):
         await client_wait_ready(client)
         (moving,) = await client.submit(FAR)
         await robot.driving()
@@ -170,17 +171,15 @@ def test_a_lost_executor_leaves_no_motion_behind(robot: Robot) -> None:
         await asyncio.sleep(1.0)
         assert abs(robot.odometry[-1][1].pose.x - stopped.x) < 0.01, "it moved again"
 
-    robot.run(body)
 
-
-def test_a_lost_executor_stops_a_remapped_stamped_robot_too(remapped_robot: Robot) -> None:
+async def test_a_lost_executor_stops_a_remapped_stamped_robot_too(remapped_robot: Robot) -> None:
     """The supervisor stops the robot with what the executor told it: its names, and the
     cmd_vel type the executor learnt from the bridge."""
     robot = remapped_robot
     robot.start_supervisor()
     robot.start_executor()
 
-    async def body(bus: Bus, client: Client) -> None:
+    async with robot.session() as (bus, client):
         await client_wait_ready(client)
         (moving,) = await client.submit(FAR)
         sent: list[bytes] = []
@@ -197,17 +196,15 @@ def test_a_lost_executor_stops_a_remapped_stamped_robot_too(remapped_robot: Robo
         assert sent
         assert all(CODEC.read_twist_stamped(raw) == (0.0, 0.0) for raw in sent)
 
-    robot.run(body)
 
-
-def test_an_executor_killed_before_it_answers_leaves_no_motion_behind(robot: Robot) -> None:
+async def test_an_executor_killed_before_it_answers_leaves_no_motion_behind(robot: Robot) -> None:
     """An executor that set the robot moving and died before its answer reached the
     supervisor: the dispatch fails without saying whether the order started, so the
     supervisor stops the robot itself. (The executor is played here, on a session of its
     own, to die at exactly that moment; a killed process did so one run in a few.)"""
     robot.start_supervisor()
 
-    async def body(bus: Bus, client: Client) -> None:
+    async with robot.session() as (_bus, client):
         await client_wait_ready(client, executor=False)
         keys = RobotKeys("r1")
         loop = asyncio.get_running_loop()
@@ -227,7 +224,7 @@ def test_an_executor_killed_before_it_answers_leaves_no_motion_behind(robot: Rob
         async def control(request: ControlRequest) -> Message:
             return Failed(reason="not running here")
 
-        with Bus.open(BusOptions(connect=[robot.router]), loop) as executor:
+        with joined(robot.router) as executor:
             executor.serve(keys.executor_execute, json_decoder(Execute), execute)
             executor.serve(keys.executor_control, json_decoder(ControlRequest), control)
             executor.announce(keys.alive("executor"))
@@ -244,13 +241,11 @@ def test_an_executor_killed_before_it_answers_leaves_no_motion_behind(robot: Rob
         await asyncio.sleep(1.0)
         assert abs(robot.odometry[-1][1].pose.x - stopped.x) < 0.01, "it moved again"
 
-    robot.run(body)
 
-
-def test_stop_stops_the_robot_when_the_executor_is_dead(robot: Robot) -> None:
+async def test_stop_stops_the_robot_when_the_executor_is_dead(robot: Robot) -> None:
     robot.start_supervisor()
 
-    async def body(bus: Bus, client: Client) -> None:
+    async with robot.session() as (bus, client):
         await client_wait_ready(client, executor=False)
         # Motion no executor of ours started (another client, or a crashed executor's goal).
         reply = await bus.request_bytes(
@@ -271,14 +266,12 @@ def test_stop_stops_the_robot_when_the_executor_is_dead(robot: Robot) -> None:
         await asyncio.sleep(1.0)
         assert abs(robot.odometry[-1][1].pose.x - stopped.x) < 0.01, "it moved again"
 
-    robot.run(body)
 
-
-def test_the_emergency_stop_latches_until_released(robot: Robot) -> None:
+async def test_the_emergency_stop_latches_until_released(robot: Robot) -> None:
     robot.start_supervisor()
     robot.start_executor()
 
-    async def body(bus: Bus, client: Client) -> None:
+    async with robot.session() as (_bus, client):
         await client_wait_ready(client)
         assert isinstance(await client.ask(EmergencyStop()), Stopped)
         refused = await client.ask_submit(order("mul", first=2, second=3))
@@ -294,13 +287,11 @@ def test_the_emergency_stop_latches_until_released(robot: Robot) -> None:
         (ran,) = await client.submit(order("mul", first=2, second=3))
         assert (await client.finished(ran)).message == "2 x 3 = 6"
 
-    robot.run(body)
 
-
-def test_orders_restored_after_a_restart_wait_for_resume(robot: Robot) -> None:
+async def test_orders_restored_after_a_restart_wait_for_resume(robot: Robot) -> None:
     robot.start_supervisor()  # no executor yet: orders stay queued
 
-    async def body(bus: Bus, client: Client) -> None:
+    async with robot.session() as (_bus, client):
         await client_wait_ready(client, executor=False)
         first, second = await client.submit(
             order("mul", first=1, second=2), order("mul", first=3, second=4)
@@ -319,11 +310,9 @@ def test_orders_restored_after_a_restart_wait_for_resume(robot: Robot) -> None:
         assert (await client.finished(second)).message == "3 x 4 = 12"
         assert (await client.state()).paused == ""
 
-    robot.run(body)
 
-
-def test_a_starting_executor_ends_stray_motion(robot: Robot) -> None:
-    async def body(bus: Bus, client: Client) -> None:
+async def test_a_starting_executor_ends_stray_motion(robot: Robot) -> None:
+    async with robot.session() as (bus, _client):
         # A goal nobody owns any more (as after an executor crash), sent straight to Nav2.
         goal = new_goal_id()
         reply = await bus.request_bytes(
@@ -337,13 +326,11 @@ def test_a_starting_executor_ends_stray_motion(robot: Robot) -> None:
         robot.start_executor()
         await robot.standing(started)
 
-    robot.run(body)
 
-
-def test_queue_order_survives_many_reorders_and_a_restart(robot: Robot) -> None:
+async def test_queue_order_survives_many_reorders_and_a_restart(robot: Robot) -> None:
     robot.start_supervisor()
 
-    async def body(bus: Bus, client: Client) -> None:
+    async with robot.session() as (_bus, client):
         await client_wait_ready(client, executor=False)
         ids = await client.submit(*(order("mul", first=n, second=1) for n in range(4)))
         expected = list(ids)
@@ -362,14 +349,12 @@ def test_queue_order_survives_many_reorders_and_a_restart(robot: Robot) -> None:
         assert isinstance(beyond, Done)
         assert beyond.detail == f"moved {expected[0]} to position 3"
 
-    robot.run(body)
 
-
-def test_a_result_reached_while_the_supervisor_was_down_is_kept(robot: Robot) -> None:
+async def test_a_result_reached_while_the_supervisor_was_down_is_kept(robot: Robot) -> None:
     robot.start_supervisor()
     robot.start_executor()
 
-    async def body(bus: Bus, client: Client) -> None:
+    async with robot.session() as (bus, client):
         ended: list[OrderFinished] = []
         bus.subscribe(
             RobotKeys("r1").executor_events,
@@ -389,14 +374,10 @@ def test_a_result_reached_while_the_supervisor_was_down_is_kept(robot: Robot) ->
         assert (record.status, record.message) == (OrderStatus.SUCCEEDED, "waited 1 s")
         assert [r.id for r in (await client.state()).queue] == [after]  # waits for resume
 
-    robot.run(body)
 
-
-def test_the_database_is_readable_by_its_owner_only(robot: Robot) -> None:
+async def test_the_database_is_readable_by_its_owner_only(robot: Robot) -> None:
     robot.start_supervisor()
 
-    async def body(bus: Bus, client: Client) -> None:
+    async with robot.session() as (_bus, client):
         await client_wait_ready(client, executor=False)
         assert stat.S_IMODE(robot.db.stat().st_mode) == 0o600
-
-    robot.run(body)

@@ -10,12 +10,8 @@ import json
 import shlex
 import socket
 import stat
-import subprocess
 import sys
-import threading
-from collections.abc import Callable, Coroutine
 from pathlib import Path
-from typing import Any
 
 import pytest
 
@@ -27,7 +23,7 @@ from shared.ros2 import Odometry, Ros2Codec
 from voicectl.bus_secrets import ROUTER_TEMPLATE, USERS, SecretsExist, write_bus_secrets
 
 from .conftest import REPO, Processes, async_wait_until, free_port, voicectl, wait_until
-from .support import Client, client_wait_ready, on_bus, order
+from .support import Client, client_wait_ready, joined, order
 
 CODEC = Ros2Codec()
 
@@ -50,8 +46,8 @@ class SecureSite:
     def options(self, config: Path) -> BusOptions:
         return BusOptions(connect=[], mode=None, config_file=config, wait=False)
 
-    def run(self, user: str, body: Callable[[Bus], Coroutine[Any, Any, None]]) -> None:
-        on_bus(self.options(self.config(user)), body)
+    def joined(self, user: str) -> Bus:
+        return joined(self.options(self.config(user)))
 
 
 @pytest.fixture
@@ -103,12 +99,12 @@ def test_bus_secrets_are_private_and_never_overwritten(tmp_path: Path) -> None:
         write_bus_secrets(tmp_path / "bus", ["robot.local"])
 
 
-def test_the_stack_runs_end_to_end_on_the_secured_bus(site: SecureSite) -> None:
+async def test_the_stack_runs_end_to_end_on_the_secured_bus(site: SecureSite) -> None:
     site.start("services.converter", "converter")
     start_robot(site)
     operator = str(site.config("operator"))
 
-    async def body(bus: Bus) -> None:
+    with site.joined("operator") as bus:
         client = Client(bus, "r1")
         await client_wait_ready(client)
         (product,) = await client.submit(order("mul", first=6, second=7))
@@ -120,13 +116,11 @@ def test_the_stack_runs_end_to_end_on_the_secured_bus(site: SecureSite) -> None:
         (composites,) = json.loads(said.stdout)["order_ids"]
         assert (await client.finished(composites)).message == "10 x 20 = 200"
 
-    site.run("operator", body)
 
-
-def test_the_panel_cannot_drive_the_robot_or_reach_the_executor(site: SecureSite) -> None:
+async def test_the_panel_cannot_drive_the_robot_or_reach_the_executor(site: SecureSite) -> None:
     start_robot(site)
 
-    async def body(bus: Bus) -> None:
+    with site.joined("panel") as bus:
         odometry: list[Odometry] = []
         bus.subscribe(RobotNames().odom, CODEC.read_odometry, lambda _k, o: odometry.append(o))
         client = Client(bus, "r1")
@@ -149,8 +143,6 @@ def test_the_panel_cannot_drive_the_robot_or_reach_the_executor(site: SecureSite
                 f"{key}: no service answered (none is up, or the router's access control "
                 "refuses this user)"
             )
-
-    site.run("panel", body)
 
 
 def without_credentials(config: Path, target: Path) -> Path:
@@ -195,7 +187,7 @@ def test_a_certificate_from_another_authority_is_refused(site: SecureSite, tmp_p
     assert plain.returncode == 3
 
 
-def test_the_documented_observer_watches_the_order_stream(site: SecureSite) -> None:
+async def test_the_documented_observer_watches_the_order_stream(site: SecureSite) -> None:
     """docs/deploy.md's Zenoh CLI command, with the observer's credentials, sees what the
     supervisor publishes (and the observer cannot publish itself)."""
     doc = (REPO / "docs" / "deploy.md").read_text()
@@ -204,39 +196,37 @@ def test_the_documented_observer_watches_the_order_stream(site: SecureSite) -> N
     words = shlex.split(command.replace("~/.local/share/voicectl/bus", str(site.secrets)))
     assert words[0] == ".venv/bin/zenoh"
     words[0] = str(Path(sys.executable).with_name("zenoh"))
-    with subprocess.Popen(words, stdout=subprocess.PIPE, text=True) as watcher:
-        try:
-            lines: list[str] = []
-            reader = threading.Thread(target=lambda: lines.extend(watcher.stdout or []))
-            reader.start()
+    watcher = await asyncio.create_subprocess_exec(*words, stdout=asyncio.subprocess.PIPE)
+    lines: list[bytes] = []
 
-            async def publish(bus: Bus) -> None:
-                async def seen() -> bool:
-                    bus.publish_bytes("voice/r1/supervisor/state", b'{"marker": 1}')
-                    await asyncio.sleep(0.2)
-                    return any('"marker"' in line for line in lines)
+    async def read() -> None:
+        assert watcher.stdout is not None
+        while line := await watcher.stdout.readline():
+            lines.append(line)
 
-                for _ in range(50):
-                    if await seen():
-                        return
+    reader = asyncio.ensure_future(read())
+    try:
+        with site.joined("supervisor") as bus:
+            for _ in range(50):
+                bus.publish_bytes("voice/r1/supervisor/state", b'{"marker": 1}')
+                await asyncio.sleep(0.2)
+                if any(b'"marker"' in line for line in lines):
+                    break
+            else:
                 raise AssertionError(f"the observer saw nothing: {lines}")
-
-            site.run("supervisor", publish)
-        finally:
+    finally:
+        if watcher.returncode is None:
             watcher.terminate()
-            watcher.wait(timeout=10)
-            reader.join(timeout=10)
+        await asyncio.wait_for(watcher.wait(), 10.0)
+        await asyncio.wait_for(reader, 10.0)
 
-    async def forge(bus: Bus) -> None:
+    with site.joined("panel") as bus:
         received: list[bytes] = []
         bus.subscribe("voice/r1/supervisor/state", bytes, lambda _k, raw: received.append(raw))
         await asyncio.sleep(0.5)
-        observer = Bus.open(site.options(site.config("observer")), asyncio.get_running_loop())
-        with observer as sneaky:
+        with site.joined("observer") as sneaky:
             for _ in range(5):
                 sneaky.publish_bytes("voice/r1/supervisor/state", b'{"forged": 1}')
                 await asyncio.sleep(0.1)
         await asyncio.sleep(0.5)
         assert received == []
-
-    site.run("panel", forge)

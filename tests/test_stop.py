@@ -9,7 +9,6 @@ from pathlib import Path
 
 import pytest
 
-from shared.bus import Bus, BusOptions
 from shared.client import Unreachable, VoicectlClient
 from shared.messages import (
     EmergencyStop,
@@ -26,7 +25,7 @@ from shared.ros2 import CmdVelType, RosDistro
 
 from .conftest import Processes, async_wait_until
 from .stop_rig import CASES, ROBOT, StopRig, ended, order
-from .support import on_bus
+from .support import joined
 
 BOUND = 0.25
 """Seconds from STOP to the robot told to stop, on a loaded two-core machine (the bench's
@@ -43,18 +42,16 @@ p99 on an idle one is in docs/benchmarks.md)."""
         ("supervisor-and-executor-killed", TransportKind.RMW_ZENOH),
     ],
 )
-def test_stop_stops_the_robot_at_once_and_for_good(
+async def test_stop_stops_the_robot_at_once_and_for_good(
     case: str, transport: TransportKind, router: str, processes: Processes, tmp_path: Path
 ) -> None:
     rig = StopRig(router, processes, tmp_path / "supervisor.sqlite3", transport=transport)
-
-    async def body(bus: Bus) -> None:
-        # The stopwatch listens in a session of its own, as the robot does: one that
-        # shared the client's would hear its puts without the router.
-        with Bus.open(BusOptions(connect=[router]), asyncio.get_running_loop()) as ear:
-            rig.listen(ear)
-            client = VoicectlClient(bus)
-            outcome = await rig.run(case, client)
+    # The stopwatch listens in a session of its own, as the robot does: one that shared
+    # the client's would hear its puts without the router.
+    with joined(router) as bus, joined(router) as ear:
+        rig.listen(ear)
+        client = VoicectlClient(bus)
+        outcome = await rig.run(case, client)
         print(case, outcome)
         assert outcome.zero_velocity < BOUND, outcome
         if outcome.cancelled is not None:
@@ -82,73 +79,65 @@ def test_stop_stops_the_robot_at_once_and_for_good(
             history = reply.state.history
             assert sum(r.message == "emergency stop" for r in history) >= 10, history
 
-    on_bus(router, body)
 
-
-def test_a_stalled_event_loop_is_noticed_and_the_robot_halted(
+async def test_a_stalled_event_loop_is_noticed_and_the_robot_halted(
     router: str, processes: Processes, tmp_path: Path
 ) -> None:
     """No STOP at all: an executor drives from a blocked loop, and the executor's own
     watchdog halts the robot once the loop has stalled for its limit (0.5 s)."""
     rig = StopRig(router, processes, tmp_path / "supervisor.sqlite3", stall_limit=0.5)
 
-    async def body(bus: Bus) -> None:
-        with Bus.open(BusOptions(connect=[router]), asyncio.get_running_loop()) as ear:
-            rig.listen(ear)
-            client = VoicectlClient(bus)
-            await rig.ready(client)
-            (order_id,) = await client.submit(ROBOT, [order("blockdrive", seconds=3)])
-            await rig.driving()
-            # Stopped by the watchdog within its limit and a beat, not after the 3 s block.
-            await async_wait_until(
-                lambda: rig.odometry[-1][1].linear_x == 0.0, 2.5, "the watchdog to halt it"
-            )
-            halted = rig.odometry[-1][0]
-            await asyncio.sleep(0.5)
-            moved = [o for at, o in rig.odometry if at > halted]
-            assert all(o.linear_x == 0.0 for o in moved), "it moved again"
+    with joined(router) as bus, joined(router) as ear:
+        rig.listen(ear)
+        client = VoicectlClient(bus)
+        await rig.ready(client)
+        (order_id,) = await client.submit(ROBOT, [order("blockdrive", seconds=3)])
+        await rig.driving()
+        # Stopped by the watchdog within its limit and a beat, not after the 3 s block.
+        await async_wait_until(
+            lambda: rig.odometry[-1][1].linear_x == 0.0, 2.5, "the watchdog to halt it"
+        )
+        halted = rig.odometry[-1][0]
+        await asyncio.sleep(0.5)
+        moved = [o for at, o in rig.odometry if at > halted]
+        assert all(o.linear_x == 0.0 for o in moved), "it moved again"
 
-            record = await ended(client, lambda r: r.id == order_id, "the stalled order to end")
-            assert record.status == OrderStatus.FAILED, record
-            assert "event loop stalled" in record.message, record
-
-    on_bus(router, body)
+        record = await ended(client, lambda r: r.id == order_id, "the stalled order to end")
+        assert record.status == OrderStatus.FAILED, record
+        assert "event loop stalled" in record.message, record
 
 
-def test_an_executor_back_at_once_leaves_no_order_running(
+async def test_an_executor_back_at_once_leaves_no_order_running(
     router: str, processes: Processes, tmp_path: Path
 ) -> None:
     """An executor killed and started again within the supervisor's grace (as `voicectl
     up` restarts it) no longer runs the order: the order ends, the robot stands."""
     rig = StopRig(router, processes, tmp_path / "supervisor.sqlite3")
 
-    async def body(bus: Bus) -> None:
-        with Bus.open(BusOptions(connect=[router]), asyncio.get_running_loop()) as ear:
-            rig.listen(ear)
-            client = VoicectlClient(bus)
-            await rig.ready(client)
-            (order_id,) = await client.submit(ROBOT, [order("runaway")])
-            await rig.driving()
-            rig.kill(rig.executor)
-            rig.start_executor()
+    with joined(router) as bus, joined(router) as ear:
+        rig.listen(ear)
+        client = VoicectlClient(bus)
+        await rig.ready(client)
+        (order_id,) = await client.submit(ROBOT, [order("runaway")])
+        await rig.driving()
+        rig.kill(rig.executor)
+        rig.start_executor()
 
-            record = await ended(client, lambda r: r.id == order_id, "the order to end")
-            assert record.status in (OrderStatus.FAILED, OrderStatus.INTERRUPTED), record
-            await async_wait_until(
-                lambda: rig.odometry[-1][1].linear_x == 0.0, 5.0, "the robot to stand"
-            )
-
-    on_bus(router, body)
+        record = await ended(client, lambda r: r.id == order_id, "the order to end")
+        assert record.status in (OrderStatus.FAILED, OrderStatus.INTERRUPTED), record
+        await async_wait_until(
+            lambda: rig.odometry[-1][1].linear_x == 0.0, 5.0, "the robot to stand"
+        )
 
 
-def test_a_stop_for_a_robot_nobody_serves_creates_none(
+async def test_a_stop_for_a_robot_nobody_serves_creates_none(
     router: str, processes: Processes, tmp_path: Path
 ) -> None:
     """A made-up name is refused by the supervisor without becoming a robot; the client,
     knowing no keys for it either, says that nothing was stopped."""
     rig = StopRig(router, processes, tmp_path / "supervisor.sqlite3")
 
-    async def body(bus: Bus) -> None:
+    with joined(router) as bus:
         rig.listen(bus)
         client = VoicectlClient(bus)
         await rig.ready(client)
@@ -163,10 +152,8 @@ def test_a_stop_for_a_robot_nobody_serves_creates_none(
         assert isinstance(known, Failed), known
         assert "(known robots: r1)" in known.reason, known
 
-    on_bus(router, body)
 
-
-def test_the_stop_codec_is_built_when_an_executor_announces_itself_not_at_stop(
+async def test_the_stop_codec_is_built_when_an_executor_announces_itself_not_at_stop(
     router: str,
 ) -> None:
     """Building a distribution's types and encoders took the first STOP of a process
@@ -175,7 +162,7 @@ def test_the_stop_codec_is_built_when_an_executor_announces_itself_not_at_stop(
     stop_codec.cache_clear()
     info = ExecutorInfo(distro=RosDistro.HUMBLE, cmd_vel_type=CmdVelType.STAMPED)
 
-    async def announced(bus: Bus) -> None:
+    with joined(router) as bus:
         await prepare(info)
         built = stop_codec.cache_info().misses
         stop = RobotStop.of(info, bus)
@@ -183,5 +170,3 @@ def test_the_stop_codec_is_built_when_an_executor_announces_itself_not_at_stop(
         assert stop.codec is stop_codec(RosDistro.HUMBLE)
         stamped = stop.codec.velocity(stop.cmd_vel_type, 0.0, 0.0, 1.0)
         assert stop.codec.read_twist_stamped(stamped) == (0.0, 0.0)
-
-    on_bus(router, announced)

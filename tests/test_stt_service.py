@@ -6,18 +6,17 @@ from __future__ import annotations
 
 import asyncio
 import base64
+import contextlib
 import os
 import shutil
 import time
-from collections.abc import Callable, Coroutine
+from collections.abc import AsyncIterator
 from pathlib import Path
-from typing import Any
 
 import pytest
-import zenoh
 
 from services.stt.audio import frames, read_wav
-from shared.bus import Bus, BusOptions, json_decoder
+from shared.bus import Bus, json_decoder
 from shared.keys import ConverterKeys, RobotKeys, RobotNames
 from shared.messages import (
     AudioChunk,
@@ -32,8 +31,8 @@ from shared.messages import (
 )
 from shared.ros2 import Pose2D, Ros2Codec, RosDistro
 
-from .conftest import REPO, Processes, Speak, Stack, async_wait_until, wait_until
-from .support import Client, on_bus
+from .conftest import REPO, Processes, Speak, Stack, async_wait_until
+from .support import Client, joined
 
 ORDERS = REPO / "orders"
 KEYS = RobotKeys("robot")
@@ -114,29 +113,25 @@ def _chunks(pcm: bytes) -> list[bytes]:
     return [b"".join(split[i : i + CHUNK_FRAMES]) for i in range(0, len(split), CHUNK_FRAMES)]
 
 
-def scenario(
-    router: str,
-    processes: Processes,
-    body: Callable[[Listener], Coroutine[Any, Any, None]],
-    orders: Path = ORDERS,
-    stt_args: tuple[str, ...] = (),
-) -> None:
-    async def run(bus: Bus) -> None:
+@contextlib.asynccontextmanager
+async def scenario(
+    router: str, processes: Processes, orders: Path = ORDERS, stt_args: tuple[str, ...] = ()
+) -> AsyncIterator[Listener]:
+    """A converter and a recogniser, and the test listening to what they say."""
+    with joined(router) as bus:
         listener = Listener(bus)
         processes.start("services.converter", "--connect", router, "--orders", str(orders))
         processes.start("services.stt", "--connect", router, "--debug", *stt_args)
         await listener.ready()
-        await body(listener)
-
-    on_bus(router, run)
+        yield listener
 
 
-def test_speech_becomes_a_proposal_while_partials_grow(
+async def test_speech_becomes_a_proposal_while_partials_grow(
     router: str, processes: Processes, speech: Speak
 ) -> None:
     wav = speech("turn left then reach the kitchen")
 
-    async def body(listener: Listener) -> None:
+    async with scenario(router, processes) as listener:
         await stream(listener.bus, "s1", wav)
         [final] = await listener.final("s1")
         assert final.text == "turn left then reach the kitchen"
@@ -157,15 +152,13 @@ def test_speech_becomes_a_proposal_while_partials_grow(
         assert not proposal.rejected
         assert proposal.errors == []
 
-    scenario(router, processes, body)
 
-
-def test_speech_that_is_not_a_command_is_rejected(
+async def test_speech_that_is_not_a_command_is_rejected(
     router: str, processes: Processes, speech: Speak
 ) -> None:
     wav = speech("what is the weather like")
 
-    async def body(listener: Listener) -> None:
+    async with scenario(router, processes) as listener:
         await stream(listener.bus, "chat", wav)
         await listener.final("chat")
         proposal = await listener.proposal("chat")  # rejected by the recogniser or the converter
@@ -173,16 +166,14 @@ def test_speech_that_is_not_a_command_is_rejected(
         assert proposal.orders == []
         assert "not a command" in proposal.errors[0].reason
 
-    scenario(router, processes, body)
 
-
-def test_two_sessions_at_once_keep_their_own_speech(
+async def test_two_sessions_at_once_keep_their_own_speech(
     router: str, processes: Processes, speech: Speak
 ) -> None:
     first = _chunks(read_wav(speech("turn left")))
     second = _chunks(read_wav(speech("reach the kitchen", "festival:kal_diphone")))
 
-    async def body(listener: Listener) -> None:
+    async with scenario(router, processes) as listener:
         senders = [listener.bus.stream(KEYS.stt_audio(name)) for name in ("a", "b")]
         for sender in senders:
             assert await sender.matched(WAIT)
@@ -200,17 +191,15 @@ def test_two_sessions_at_once_keep_their_own_speech(
         assert not a.rejected
         assert not b.rejected
 
-    scenario(router, processes, body)
 
-
-def test_a_grammar_change_applies_without_a_restart(
+async def test_a_grammar_change_applies_without_a_restart(
     router: str, processes: Processes, speech: Speak, tmp_path: Path
 ) -> None:
     orders = tmp_path / "orders"
     shutil.copytree(ORDERS, orders)
     wav = speech("wave hello")
 
-    async def body(listener: Listener) -> None:
+    async with scenario(router, processes, orders=orders) as listener:
         before = await listener.ready()
         await stream(listener.bus, "old", wav)
         await listener.final("old")
@@ -233,15 +222,13 @@ def test_a_grammar_change_applies_without_a_restart(
         assert not new.rejected, new.reason
         assert [o.order for o in (await listener.proposal("new")).orders] == ["wave"]
 
-    scenario(router, processes, body, orders=orders)
 
-
-def test_bad_input_is_logged_and_dropped_and_sessions_go_on(
+async def test_bad_input_is_logged_and_dropped_and_sessions_go_on(
     router: str, processes: Processes, speech: Speak
 ) -> None:
     wav = speech("turn right")
 
-    async def body(listener: Listener) -> None:
+    async with scenario(router, processes) as listener:
         bus = listener.bus
         bus.session.put(KEYS.stt_audio("junk"), b"\xff\x00 not json")
         odd = base64.b64encode(b"\x00" * 700).decode()  # 700 bytes: not whole 20 ms frames
@@ -255,8 +242,6 @@ def test_bad_input_is_logged_and_dropped_and_sessions_go_on(
         assert final.text == "turn right"
         assert not final.rejected
         assert listener.statuses[-1].ready
-
-    scenario(router, processes, body)
     log = processes.log(next(p for name, p, _ in processes.started if name == "stt"))
     assert "dropped undecodable message on voice/robot/stt/audio/junk" in log
     assert "pcm must be whole 640-byte frames" in log
@@ -265,14 +250,14 @@ def test_bad_input_is_logged_and_dropped_and_sessions_go_on(
     assert "grammar empty not used: grammar empty: JSGF grammar has no public rule" in log
 
 
-def test_speech_that_goes_on_is_cut_at_the_maximum_utterance(
+async def test_speech_that_goes_on_is_cut_at_the_maximum_utterance(
     router: str, processes: Processes, speech: Speak
 ) -> None:
     wav = speech(
         "turn left then reach the kitchen then move forward then turn right", "festival:kal_diphone"
     )
 
-    async def body(listener: Listener) -> None:
+    async with scenario(router, processes, stt_args=("--max-utterance", "1.5")) as listener:
         await stream(listener.bus, "long", wav, stop=False)
         finals = await listener.final("long", count=2)  # before any stop was sent
         assert all(t.speech_end is not None for t in finals)
@@ -281,15 +266,14 @@ def test_speech_that_goes_on_is_cut_at_the_maximum_utterance(
         assert first.speech_end is not None
         assert first.speech_end - first.speech_start < 2.0
 
-    scenario(router, processes, body, stt_args=("--max-utterance", "1.5"))
 
-
-def _spoken_to_the_stack(stack: Stack, wav: Path, expected: list[str]) -> Pose2D:
+async def _spoken_to_the_stack(stack: Stack, wav: Path, expected: list[str]) -> Pose2D:
     """Stream `wav` to the stack's recogniser as a microphone would, send what it proposes
     (as Send does: only a proposal without doubts), and return the simulated robot's pose
     once the orders have run."""
-
-    async def run(bus: Bus) -> None:
+    pose: list[Pose2D] = []
+    codec = Ros2Codec(RosDistro.JAZZY)
+    with joined(stack.router) as bus:
         listener = Listener(bus)
         await listener.ready()
         await stream(bus, "mic", wav)
@@ -301,21 +285,13 @@ def _spoken_to_the_stack(stack: Stack, wav: Path, expected: list[str]) -> Pose2D
         ids = await client.submit(*proposal.orders)
         finished = [await client.finished(i, timeout=WAIT) for i in ids]
         assert [r.status for r in finished] == [OrderStatus.SUCCEEDED] * len(ids)
-
-    on_bus(stack.router, run)
-    pose: list[Pose2D] = []
-    codec = Ros2Codec(RosDistro.JAZZY)
-    with zenoh.open(BusOptions(connect=[stack.router]).zenoh_config()) as session:
-        subscriber = session.declare_subscriber(
-            RobotNames().odom, lambda s: pose.append(codec.read_odometry(s.payload.to_bytes()).pose)
-        )
-        wait_until(lambda: pose, 30.0, "odometry")
-        subscriber.undeclare()
+        bus.subscribe(RobotNames().odom, codec.read_odometry, lambda _k, o: pose.append(o.pose))
+        await async_wait_until(lambda: pose, 30.0, "odometry")
     return pose[-1]
 
 
 @pytest.mark.e2e
-def test_speech_streamed_to_voicectl_up_moves_the_simulated_robot(
+async def test_speech_streamed_to_voicectl_up_moves_the_simulated_robot(
     stack: Stack, speech: Speak
 ) -> None:
     """Done-when of the speech issue: generated speech from the shipped orders, streamed to
@@ -323,23 +299,23 @@ def test_speech_streamed_to_voicectl_up_moves_the_simulated_robot(
     # Flite's slt, as the panel's speech test: the open decode hears Festival's kal diphone
     # voice say "them both to the future if", which is rightly too foreign to obey.
     wav = speech("please turn left then go to the kitchen", "flite:slt")
-    pose = _spoken_to_the_stack(stack, wav, ["turn left", "reach kitchen"])
+    pose = await _spoken_to_the_stack(stack, wav, ["turn left", "reach kitchen"])
     assert abs(pose.x - 3.0) < 0.1
     assert abs(pose.y - 5.0) < 0.1
 
 
 @pytest.mark.e2e
-def test_a_person_saying_go_forward_ten_meters_moves_the_robot_ten_metres(
+async def test_a_person_saying_go_forward_ten_meters_moves_the_robot_ten_metres(
     stack: Stack, people: dict[str, Path]
 ) -> None:
     """Done-when of the hearing issue: a real recording of a man (pocketsphinx's own test
     clip), once heard as "two", now moves the simulated robot ten metres."""
-    pose = _spoken_to_the_stack(stack, people["real-goforward"], ["move forward 10 m"])
+    pose = await _spoken_to_the_stack(stack, people["real-goforward"], ["move forward 10 m"])
     assert abs(pose.x - 10.0) < 0.2, pose
     assert abs(pose.y) < 0.2, pose
 
 
-def test_memory_goes_back_when_the_sessions_close(
+async def test_memory_goes_back_when_the_sessions_close(
     router: str, processes: Processes, speech: Speak
 ) -> None:
     """Each open session holds a decoder of tens of megabytes; once they close, the
@@ -352,7 +328,7 @@ def test_memory_goes_back_when_the_sessions_close(
                 return int(line.split()[1]) / 1024
         raise AssertionError("no VmRSS")
 
-    async def body(listener: Listener) -> None:
+    async with scenario(router, processes) as listener:
         (_, stt, _) = next(p for p in processes.started if p[0] == "stt")
         names = [f"m{n}" for n in range(4)]
         senders = [listener.bus.stream(KEYS.stt_audio(name)) for name in names]
@@ -379,5 +355,3 @@ def test_memory_goes_back_when_the_sessions_close(
         await async_wait_until(
             lambda: rss_mb(stt.pid) < peak - 80, 10.0, f"RSS to fall from {peak:.0f} MB"
         )
-
-    scenario(router, processes, body)

@@ -7,9 +7,7 @@ import asyncio
 import signal
 import sqlite3
 import subprocess
-from collections.abc import Callable, Coroutine
 from pathlib import Path
-from typing import Any
 
 import pytest
 
@@ -41,7 +39,7 @@ from shared.messages import (
 from shared.ros2 import Odometry, Ros2Codec, RosDistro
 
 from .conftest import Processes, async_wait_until
-from .support import Client, client_wait_ready, on_bus, order
+from .support import Client, client_wait_ready, joined, order
 
 EXECUTORS = ["--executor", "tests.executors_for_tests:Slow=slow"]
 
@@ -77,8 +75,8 @@ class Site:
         self.executors[robot].send_signal(signal.SIGKILL)
         self.executors[robot].wait()
 
-    def run(self, body: Callable[[Bus], Coroutine[Any, Any, None]]) -> None:
-        on_bus(self.router, body)
+    def joined(self) -> Bus:
+        return joined(self.router)
 
 
 @pytest.fixture
@@ -86,12 +84,12 @@ def site(router: str, processes: Processes, tmp_path: Path) -> Site:
     return Site(router, processes, tmp_path / "supervisor.sqlite3")
 
 
-def test_sigkill_with_orders_in_flight_loses_nothing_and_resumes(site: Site) -> None:
+async def test_sigkill_with_orders_in_flight_loses_nothing_and_resumes(site: Site) -> None:
     site.processes.start("services.sim", "--connect", site.router)
     site.start_supervisor()
     site.start_executor()
 
-    async def body(bus: Bus) -> None:
+    with site.joined() as bus:
         client = Client(bus, "r1")
         await client_wait_ready(client)
         (done_before,) = await client.submit(order("mul", first=2, second=2))
@@ -127,14 +125,12 @@ def test_sigkill_with_orders_in_flight_loses_nothing_and_resumes(site: Site) -> 
         page = await client.history()
         assert [r.id for r in page.records] == [queued_2, queued_1, running, done_before]
 
-    site.run(body)
 
-
-def test_running_order_is_interrupted_when_no_executor_runs_it(site: Site) -> None:
+async def test_running_order_is_interrupted_when_no_executor_runs_it(site: Site) -> None:
     site.start_supervisor()
     site.start_executor()
 
-    async def body(bus: Bus) -> None:
+    with site.joined() as bus:
         client = Client(bus, "r1")
         await client_wait_ready(client)
         running, sibling = await client.submit(order("slow"), order("mul", first=1, second=1))
@@ -154,15 +150,13 @@ def test_running_order_is_interrupted_when_no_executor_runs_it(site: Site) -> No
         assert isinstance(await client.ask(Resume()), Done)
         assert (await client.finished(other)).message == "5 x 5 = 25"
 
-    site.run(body)
 
-
-def test_an_order_waits_until_the_executor_can_be_reached_not_only_heard(site: Site) -> None:
+async def test_an_order_waits_until_the_executor_can_be_reached_not_only_heard(site: Site) -> None:
     """After a link comes back, an executor's token can arrive before its services are
     reachable: an order dispatched in between reached nobody, and failed."""
     site.start_supervisor()
 
-    async def body(bus: Bus) -> None:
+    with site.joined() as bus:
         client = Client(bus, "r1")
         await client_wait_ready(client, executor=False)
         keys = RobotKeys("r1")
@@ -187,13 +181,11 @@ def test_an_order_waits_until_the_executor_can_be_reached_not_only_heard(site: S
         assert (await asyncio.wait_for(taken.get(), 10.0)).order_id == waiting
         await client.wait_state(lambda s: s.executor_online, "the executor to be online")
 
-    site.run(body)
 
-
-def test_burst_of_submits_killed_midway_keeps_every_acknowledged_order(site: Site) -> None:
+async def test_burst_of_submits_killed_midway_keeps_every_acknowledged_order(site: Site) -> None:
     site.start_supervisor()  # no executor: everything stays queued
 
-    async def body(bus: Bus) -> None:
+    with site.joined() as bus:
         client = Client(bus, "r1")
         await client_wait_ready(client, executor=False)
         acknowledged: list[str] = []
@@ -232,13 +224,11 @@ def test_burst_of_submits_killed_midway_keeps_every_acknowledged_order(site: Sit
             assert isinstance(reply, Submitted)
         assert (await client.state()).queue_length == 2000
 
-    site.run(body)
 
-
-def test_ten_thousand_submits_are_all_accepted_and_kept(site: Site) -> None:
+async def test_ten_thousand_submits_are_all_accepted_and_kept(site: Site) -> None:
     site.start_supervisor()
 
-    async def body(bus: Bus) -> None:
+    with site.joined() as bus:
         client = Client(bus, "r1")
         await client_wait_ready(client, executor=False)
         replies: list[object] = []
@@ -255,13 +245,11 @@ def test_ten_thousand_submits_are_all_accepted_and_kept(site: Site) -> None:
         await client_wait_ready(client, executor=False)
         assert (await client.state()).queue_length == 10_000
 
-    site.run(body)
 
-
-def test_reorder_is_served_and_survives_a_restart(site: Site) -> None:
+async def test_reorder_is_served_and_survives_a_restart(site: Site) -> None:
     site.start_supervisor()
 
-    async def body(bus: Bus) -> None:
+    with site.joined() as bus:
         client = Client(bus, "r1")
         await client_wait_ready(client, executor=False)
         a, b, c = await client.submit(
@@ -282,14 +270,12 @@ def test_reorder_is_served_and_survives_a_restart(site: Site) -> None:
         await client.finished(b)
         assert [r.id for r in (await client.history()).records] == [b, a, c]
 
-    site.run(body)
 
-
-def test_cancel_racing_the_end_of_an_order_records_what_happened(site: Site) -> None:
+async def test_cancel_racing_the_end_of_an_order_records_what_happened(site: Site) -> None:
     site.start_supervisor()
     site.start_executor()
 
-    async def body(bus: Bus) -> None:
+    with site.joined() as bus:
         client = Client(bus, "r1")
         await client_wait_ready(client)
         ids = []
@@ -311,14 +297,12 @@ def test_cancel_racing_the_end_of_an_order_records_what_happened(site: Site) -> 
         assert state.current is None
         assert not state.queue
 
-    site.run(body)
 
-
-def test_history_pages(site: Site) -> None:
+async def test_history_pages(site: Site) -> None:
     site.start_supervisor()
     site.start_executor()
 
-    async def body(bus: Bus) -> None:
+    with site.joined() as bus:
         client = Client(bus, "r1")
         await client_wait_ready(client)
         ids = await client.submit(*(order("mul", first=i, second=1) for i in range(25)))
@@ -333,14 +317,12 @@ def test_history_pages(site: Site) -> None:
         assert isinstance(bad, Failed)
         assert bad.reason == "undecodable request: Expected `int` >= 0 - at `$.offset`"
 
-    site.run(body)
 
-
-def test_each_robot_has_its_own_queue_and_executor(site: Site) -> None:
+async def test_each_robot_has_its_own_queue_and_executor(site: Site) -> None:
     site.start_supervisor("--robot", "r2")  # r2 is known before its executor comes
     site.start_executor("r1")
 
-    async def body(bus: Bus) -> None:
+    with site.joined() as bus:
         one, two = Client(bus, "r1"), Client(bus, "r2")
         await client_wait_ready(one)
         (for_two,) = await two.submit(order("mul", first=2, second=2))  # r2 has no executor yet
@@ -367,16 +349,14 @@ def test_each_robot_has_its_own_queue_and_executor(site: Site) -> None:
         assert isinstance(again, Failed)
         assert "known robots: r1, r2)" in again.reason
 
-    site.run(body)
 
-
-def test_emergency_stop_halts_a_moving_robot_at_once(site: Site) -> None:
+async def test_emergency_stop_halts_a_moving_robot_at_once(site: Site) -> None:
     site.processes.start("services.sim", "--connect", site.router)
     site.start_supervisor()
     site.start_executor()
     codec = Ros2Codec(RosDistro.JAZZY)
 
-    async def body(bus: Bus) -> None:
+    with site.joined() as bus:
         odometry: list[tuple[float, Odometry]] = []
         loop = asyncio.get_running_loop()
         bus.subscribe(
@@ -417,15 +397,13 @@ def test_emergency_stop_halts_a_moving_robot_at_once(site: Site) -> None:
         assert (await client.finished(moving)).status == OrderStatus.CANCELLED
         assert (await client.finished(queued)).message == "emergency stop"
 
-    site.run(body)
 
-
-def test_a_second_supervisor_on_the_bus_stands_down(site: Site, tmp_path: Path) -> None:
+async def test_a_second_supervisor_on_the_bus_stands_down(site: Site, tmp_path: Path) -> None:
     """Two supervisors for one robot would both accept and dispatch every order: the one
     that came second refuses, naming the first, and the first goes on serving."""
     site.start_supervisor()
 
-    async def body(bus: Bus) -> None:
+    with site.joined() as bus:
         client = Client(bus, "r1")
         await client_wait_ready(client, executor=False)
         second = site.processes.start(
@@ -443,5 +421,3 @@ def test_a_second_supervisor_on_the_bus_stands_down(site: Site, tmp_path: Path) 
         log = site.processes.log(second)
         assert "robot 'r1' already has a supervisor (Zenoh id " in log, log
         assert not (await client.state()).stopped  # the first still answers
-
-    site.run(body)

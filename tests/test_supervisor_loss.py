@@ -6,16 +6,16 @@ until a supervisor is back."""
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import signal
 import subprocess
-from collections.abc import Awaitable, Callable
+from collections.abc import AsyncIterator, Callable
 from pathlib import Path
 
 import pytest
 
 from services.executor.robot import UNSUPERVISED
 from services.executor.runner import SUPERVISOR_LOST
-from shared.bus import Bus
 from shared.keys import RobotKeys, RobotNames
 from shared.messages import Done, Order, OrderStatus, Resume, TargetPose
 from shared.ros2 import Odometry, Pose2D, Ros2Codec
@@ -23,11 +23,10 @@ from shared.ros2 import Odometry, Pose2D, Ros2Codec
 from .conftest import Processes, async_wait_until
 from .support import (
     Client,
-    ExecutorHarness,
     client_wait_ready,
-    on_bus,
+    harness_on,
+    joined,
     order,
-    run_harness,
     start_robot,
 )
 
@@ -74,8 +73,11 @@ class Robot:
     def executor_log(self) -> str:
         return self.processes.log(self.executor)
 
-    def run(self, body: Callable[[Client], Awaitable[None]]) -> None:
-        async def main(bus: Bus) -> None:
+    @contextlib.asynccontextmanager
+    async def session(self) -> AsyncIterator[Client]:
+        """A client of r1's supervisor once it and the executor are up, with the robot's
+        odometry recorded."""
+        with joined(self.router) as bus:
             loop = asyncio.get_running_loop()
             bus.subscribe(
                 RobotNames().odom,
@@ -85,9 +87,7 @@ class Robot:
             await async_wait_until(lambda: self.odometry, WAIT, "odometry from the sim")
             client = Client(bus, "r1")
             await client_wait_ready(client)
-            await body(client)
-
-        on_bus(self.router, main)
+            yield client
 
     async def driving(self) -> None:
         await async_wait_until(
@@ -120,8 +120,8 @@ def robot(router: str, processes: Processes, tmp_path: Path) -> Robot:
 
 
 @pytest.mark.parametrize("moving", [DRIVE_FAR, FAR], ids=["drive", "mbgoal"])
-def test_a_lost_supervisor_stops_the_moving_robot(robot: Robot, moving: Order) -> None:
-    async def body(client: Client) -> None:
+async def test_a_lost_supervisor_stops_the_moving_robot(robot: Robot, moving: Order) -> None:
+    async with robot.session() as client:
         running, sibling = await client.submit(moving, order("mul", first=2, second=3))
         (later,) = await client.submit(order("mul", first=4, second=5))
         await robot.driving()
@@ -146,11 +146,9 @@ def test_a_lost_supervisor_stops_the_moving_robot(robot: Robot, moving: Order) -
         assert [r.id for r in (await client.history()).records] == [later, sibling, running]
         assert robot.executor_log().count("supervisor lost while order") == 1
 
-    robot.run(body)
 
-
-def test_an_order_that_does_not_command_the_robot_goes_on(robot: Robot) -> None:
-    async def body(client: Client) -> None:
+async def test_an_order_that_does_not_command_the_robot_goes_on(robot: Robot) -> None:
+    async with robot.session() as client:
         running, after = await client.submit(
             order("slow", seconds=3), order("mul", first=3, second=3)
         )
@@ -170,10 +168,8 @@ def test_an_order_that_does_not_command_the_robot_goes_on(robot: Robot) -> None:
         assert (record.status, record.message) == (OrderStatus.SUCCEEDED, "slept")
         assert [r.id for r in (await client.state()).queue] == [after]
 
-    robot.run(body)
 
-
-def test_no_order_commands_the_robot_until_a_supervisor_is_back(
+async def test_no_order_commands_the_robot_until_a_supervisor_is_back(
     router: str, processes: Processes, tmp_path: Path
 ) -> None:
     """The test holds the supervisor's token, and sends orders as no supervisor would
@@ -184,7 +180,7 @@ def test_no_order_commands_the_robot_until_a_supervisor_is_back(
     def logged(text: str) -> Callable[[], bool]:
         return lambda: text in processes.log(executor)
 
-    async def body(harness: ExecutorHarness) -> None:
+    async with harness_on(router) as harness:
         supervisor = RobotKeys("r1").alive("supervisor")
         withdraw = harness.bus.announce(supervisor)
         await async_wait_until(logged("supervisor online"), WAIT, "the supervisor to be seen")
@@ -202,5 +198,3 @@ def test_no_order_commands_the_robot_until_a_supervisor_is_back(
         await async_wait_until(logged("supervisor back"), WAIT, "the supervisor to be back")
         driven = await harness.finished(await harness.execute(order("drive", distance=0.3)))
         assert (driven.status, driven.message) == (OrderStatus.SUCCEEDED, "drove 0.3 m")
-
-    run_harness(router, body)
