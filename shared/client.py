@@ -108,7 +108,8 @@ class VoicectlClient:
         while robot not in self._robots and loop.time() < deadline:
             self._announced.clear()
             with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(self._announced.wait(), deadline - loop.time())
+                async with asyncio.timeout_at(deadline):
+                    await self._announced.wait()
         info = self._robots.get(robot)
         return None if info is None else RobotStop.of(info, self.bus)
 
@@ -128,7 +129,8 @@ class VoicectlClient:
             self._pending.add(cancelling)  # the loop keeps only weak references
             cancelling.add_done_callback(self._pending.discard)
         try:
-            reply = await asyncio.wait_for(asyncio.shield(asked), STOP_ANSWER)
+            async with asyncio.timeout(STOP_ANSWER):
+                reply = await asyncio.shield(asked)
         except (TimeoutError, Unreachable) as exc:
             asked.cancel()
             why = str(exc) or f"no answer in {STOP_ANSWER:g} s"

@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 from PIL import Image as PilImage
 
+from services.executor.robot import RobotLink
 from shared.bus import json_decoder
 from shared.keys import RobotNames
 from shared.messages import (
@@ -25,10 +26,12 @@ from shared.messages import (
     Rejected,
     TargetPose,
 )
-from shared.ros2 import Ros2Codec, RosDistro
+from shared.robot import TransportKind, open_transport
+from shared.robot_options import RobotOptions
+from shared.ros2 import Pose2D, Ros2Codec, RosDistro
 
 from .conftest import Processes, async_wait_until
-from .support import harness_on, order, start_robot
+from .support import harness_on, joined, order, start_robot, until_heard
 
 
 @pytest.fixture
@@ -210,3 +213,20 @@ async def test_each_executor_key_takes_only_its_own_requests(robot: tuple[str, P
         assert isinstance(wrong_key, Failed)
         assert wrong_key.reason.startswith("undecodable request")
         assert pytest.approx(0.0) == harness.pose().linear_x  # and nothing moved
+
+
+async def test_an_order_cancelled_as_a_pose_arrives_is_cancelled(router: str) -> None:
+    """A cancel in the very turn of the loop in which a pose arrives ends the wait for
+    that pose. (asyncio.wait_for, on Python 3.11, returned the pose and lost the cancel: a
+    drive cancelled because its supervisor was lost went on and met its revoked handle.)"""
+    codec = Ros2Codec(RosDistro.JAZZY)
+    with joined(router) as bus, joined(router) as robot:
+        link = RobotLink(open_transport(bus, TransportKind.BRIDGE, "voicectl_test"), RobotOptions())
+        link.start()
+        waiting = asyncio.ensure_future(link.next_pose())
+        link.on_pose(lambda _pose: waiting.cancel())  # called as the pose is set
+        await until_heard(robot, RobotNames().odom)
+        robot.publish_bytes(RobotNames().odom, codec.odometry(Pose2D(x=1.0), 0.0, 0.0, 0.0))
+        done, _ = await asyncio.wait({waiting}, timeout=10.0)
+        assert done, "no pose came"
+        assert waiting.cancelled(), f"the cancel was lost: {waiting.result()}"

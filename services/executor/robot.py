@@ -138,7 +138,8 @@ class RobotLink:
         announced by the robot: a stop in the wrong type is one the robot cannot read."""
         if self.options.cmd_vel_type is None:
             with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(self._cmd_vel_learnt.wait(), timeout)
+                async with asyncio.timeout(timeout):
+                    await self._cmd_vel_learnt.wait()
         return self.options.cmd_vel_type is not None or self.announced_cmd_vel is not None
 
     def on_pose(self, listener: Callable[[Pose2D], None]) -> None:
@@ -259,7 +260,10 @@ class RobotLink:
         """The next odometry pose (fresher than any seen so far)."""
         self._odometry.clear()
         try:
-            await asyncio.wait_for(self._odometry.wait(), timeout)
+            # Not asyncio.wait_for: on Python 3.11 it can swallow a cancellation that comes
+            # as the pose does, and the order would run on past its cancel.
+            async with asyncio.timeout(timeout):
+                await self._odometry.wait()
         except TimeoutError:
             raise OrderFailed(f"no odometry on '{self.names.odom}' for {timeout:g} s") from None
         assert self.pose is not None
@@ -284,7 +288,8 @@ class RobotLink:
         name = self.names.camera_image
         unsubscribe = self.transport.subscribe(name, kind, decode, on_frame)
         try:
-            return await asyncio.wait_for(frame, timeout)
+            async with asyncio.timeout(timeout):
+                return await frame
         except TimeoutError:
             raise OrderFailed(f"no {kind} on '{name}' for {timeout:g} s") from None
         finally:

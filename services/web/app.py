@@ -349,9 +349,11 @@ class Panel:
             with hub.listen(robot) as queue:
                 while True:
                     try:
-                        yield await asyncio.wait_for(queue.get(), timeout=KEEP_ALIVE)
+                        async with asyncio.timeout(KEEP_ALIVE):
+                            event = await queue.get()
                     except TimeoutError:
-                        yield b": keep-alive\n\n"
+                        event = b": keep-alive\n\n"
+                    yield event
 
         return StreamingResponse(stream(), media_type="text/event-stream")
 

@@ -93,7 +93,8 @@ class AudioSocket:
 
     async def _greet(self, websocket: WebSocket) -> str | None:
         """The robot the first message names, once its token is right; else None."""
-        message = await asyncio.wait_for(websocket.receive(), HELLO_TIMEOUT)
+        async with asyncio.timeout(HELLO_TIMEOUT):
+            message = await websocket.receive()
         if message["type"] == "websocket.disconnect":
             raise WebSocketDisconnect(message.get("code", 1000))
         text = message.get("text")

@@ -93,7 +93,8 @@ async def detect_transport(
 
     stops = [bus.watch(BRIDGE_TOKENS, on_bridge), bus.watch(rmw.tokens, on_rmw)]
     try:
-        return await asyncio.wait_for(found, timeout)
+        async with asyncio.timeout(timeout):
+            return await found
     except TimeoutError:
         return None
     finally:
