@@ -12,6 +12,7 @@ import asyncio
 import contextlib
 import json
 import logging
+import os
 import re
 import signal
 import threading
@@ -38,6 +39,8 @@ CLIENT_TIMEOUT = 3.0
 """Seconds a command (voicectl state, stop...) waits for the router before it gives up."""
 WAIT_WARNING = 10.0
 """Seconds between two warnings of a service still waiting for its router."""
+OPEN_GRACE = 2.0
+"""Seconds a stop signal waits for a session that is being opened, to close it."""
 JSON = zenoh.Encoding.APPLICATION_JSON
 CDR = zenoh.Encoding.APPLICATION_CDR
 
@@ -652,6 +655,15 @@ def _open_session(options: BusOptions) -> zenoh.Session:
 
     def stop(signum: int, _frame: object) -> None:
         _LOGGER.info("stopped (%s) while waiting for the router", signal.Signals(signum).name)
+        opener.join(OPEN_GRACE)  # it may be about to return: then close what it opened
+        if opener.is_alive():
+            # Still inside Zenoh: the interpreter's shutdown would end that thread by
+            # unwinding it through Zenoh's Rust frames, which aborts the process. Nothing
+            # of this process has started yet; end it here, its logs flushed.
+            logging.shutdown()
+            os._exit(0)
+        for session in opened:
+            session.close()
         raise SystemExit(0)
 
     opener = threading.Thread(target=open_it, name="zenoh-open", daemon=True)

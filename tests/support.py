@@ -50,8 +50,8 @@ def joined(where: str | BusOptions) -> Bus:
 
 def on_bus(where: str | BusOptions, body: Callable[[Bus], Coroutine[Any, Any, T]]) -> T:
     """Run `body` with a bus joined to `where`, in an event loop of its own: for the few
-    synchronous places (a fixture, a helper class) that need one exchange on the bus.
-    Tests themselves are async and use `joined`."""
+    synchronous places that need the bus (a listener class, a browser test whose thread
+    Playwright's sync API holds, the compose test). Other tests are async: `joined`."""
 
     async def main() -> T:
         with joined(where) as bus:

@@ -37,6 +37,7 @@ CHROMIUM_FLAGS = [
 ARTIFACTS = REPO / "test-artifacts"
 """Screenshots of the panel, kept after the run (the directory is ignored by git)."""
 WAIT = 60_000
+EXPECT_WAIT = 20_000
 
 pytestmark = [
     pytest.mark.e2e,
@@ -52,8 +53,11 @@ def panel(
     stack: Stack, profile: Path, microphone: Path | None = None, extra: tuple[str, ...] = ()
 ) -> Iterator[Any]:
     """A page for the stack's panel, with `microphone` as the fake microphone."""
-    from playwright.sync_api import sync_playwright
+    from playwright.sync_api import expect, sync_playwright
 
+    # What the page shows comes over the bus and an event stream: on a machine running
+    # two suites at once, 5 s (Playwright's default) was once too short to connect.
+    expect.set_options(timeout=EXPECT_WAIT)
     flags = [*CHROMIUM_FLAGS, *extra]
     if microphone is not None:
         flags += [
