@@ -13,6 +13,8 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import uuid
+from collections.abc import Coroutine
+from typing import Any, TypeVar
 
 import msgspec
 
@@ -36,7 +38,9 @@ from .messages import (
     Submitted,
     SupervisorReply,
 )
-from .robot.stop import Cancelled, RobotStop, prepare
+from .robot.stop import RobotStop, prepare
+
+T = TypeVar("T")
 
 TIMEOUT = 10.0
 """Seconds a service has to answer. Each answers at once (a submit once it is stored);
@@ -87,7 +91,7 @@ class VoicectlClient:
         """What each robot's executor last said about reaching it: how to stop it
         without any other voicectl process."""
         self._announced = asyncio.Event()
-        self._pending: set[asyncio.Future[Cancelled]] = set()
+        self._pending: set[asyncio.Future[Any]] = set()
         bus.subscribe(
             RobotKeys.any_robot().executor_info,
             json_decoder(ExecutorInfo),
@@ -122,12 +126,14 @@ class VoicectlClient:
         executor ever announced the robot, so that its keys are unknown."""
         asked = asyncio.ensure_future(self.request(robot, EmergencyStop()))
         direct = await self._robot_stop(robot)
-        sent, cancelling = "", None
+        sent, cancelling, latching = "", None, None
         if direct is not None:
             sent = direct.zero_velocity()
-            cancelling = asyncio.ensure_future(direct.cancel_goals())
-            self._pending.add(cancelling)  # the loop keeps only weak references
-            cancelling.add_done_callback(self._pending.discard)
+            cancelling = self._keep(direct.cancel_goals())
+            # The executor is latched from here too, as the supervisor will: the goal's
+            # cancel can reach the robot, end the running order and let the supervisor
+            # start the next one before the supervisor has heard of the stop.
+            latching = self._keep(self._latch(robot))
         try:
             async with asyncio.timeout(STOP_ANSWER):
                 reply = await asyncio.shield(asked)
@@ -142,12 +148,12 @@ class VoicectlClient:
                     why = reason
                 case other:
                     why = f"answered {type(other).__name__}"
-        if direct is None or cancelling is None:
+        if direct is None or cancelling is None or latching is None:
             raise Unreachable(
                 "supervisor",
                 BusError(f"{why}; and no executor has announced robot '{robot}': nothing stopped"),
             )
-        latched = await self._latch(robot)
+        latched = await latching
         cancelled = await cancelling
         confirmed = latched[0] and (cancelled.confirmed or not cancelled.answered)
         detail = (
@@ -156,6 +162,13 @@ class VoicectlClient:
             "new orders"
         )
         return Stopped(confirmed=confirmed, detail=detail)
+
+    def _keep(self, work: Coroutine[Any, Any, T]) -> asyncio.Future[T]:
+        """`work` running on its own, kept until done (the loop keeps only weak references)."""
+        future = asyncio.ensure_future(work)
+        self._pending.add(future)
+        future.add_done_callback(self._pending.discard)
+        return future
 
     async def _latch(self, robot: str) -> tuple[bool, str]:
         """Latch the executor's stop directly: (whether it is safe, what happened)."""

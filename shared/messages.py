@@ -531,6 +531,8 @@ class Accepted(Message):
 class Rejected(Message):
     order_id: str
     reason: str
+    latched: bool = False
+    """The executor is under an emergency stop: the order was refused for the stop."""
 
 
 class Running(Message):

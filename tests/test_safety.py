@@ -22,6 +22,7 @@ from shared.messages import (
     EmergencyStop,
     Execute,
     Failed,
+    Latch,
     Message,
     Order,
     OrderFinished,
@@ -240,6 +241,38 @@ async def test_an_executor_killed_before_it_answers_leaves_no_motion_behind(robo
         assert record.message.startswith("executor did not take it"), record.message
         await asyncio.sleep(1.0)
         assert abs(robot.odometry[-1][1].pose.x - stopped.x) < 0.01, "it moved again"
+
+
+async def test_a_stop_that_reaches_the_executor_first_stops_the_queue_too(robot: Robot) -> None:
+    """A client stops the robot directly as well as through the supervisor, and the
+    direct latch can reach the executor first: the running order ends, and the next one,
+    sent before the supervisor hears of the stop, is refused for the stop. The supervisor
+    then stops too: that order and the rest end as the stop's, none runs."""
+    robot.start_supervisor()
+    robot.start_executor()
+    async with robot.session() as (bus, client):
+        await client_wait_ready(client)
+        (moving,) = await client.submit(FAR)
+        queued = await client.submit(order("drive", distance=1.0), order("rotate", angle=1.0))
+        await robot.driving()
+        latched = await bus.request(
+            RobotKeys("r1").executor_latch, Latch(on=True), json_decoder(Done | Failed)
+        )
+        assert isinstance(latched, Done), latched
+        stopped = await robot.standing(asyncio.get_running_loop().time())
+        assert (await client.finished(moving)).status == OrderStatus.CANCELLED
+        # The first was sent to the executor, which refused it for the stop; the second
+        # was never sent.
+        records = [await client.finished(order_id) for order_id in queued]
+        for record in records:
+            assert (record.status, record.message) == (OrderStatus.CANCELLED, "emergency stop")
+        assert records[1].started_at is None, records[1]
+        assert (await client.state()).stopped
+        await asyncio.sleep(1.0)
+        assert abs(robot.odometry[-1][1].pose.x - stopped.x) < 0.01, "it moved again"
+        assert isinstance(await client.ask(Release()), Done)
+        (after,) = await client.submit(order("mul", first=2, second=3))
+        assert (await client.finished(after)).status == OrderStatus.SUCCEEDED
 
 
 async def test_stop_stops_the_robot_when_the_executor_is_dead(robot: Robot) -> None:

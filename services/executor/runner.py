@@ -338,7 +338,9 @@ class ExecutorService(Service):
             )
         if self._robot.latched:
             return Rejected(
-                order_id=order_id, reason="the emergency stop is latched on this executor"
+                order_id=order_id,
+                reason="the emergency stop is latched on this executor",
+                latched=True,
             )
         if self._running is not None:
             return Rejected(order_id=order_id, reason=f"busy with order '{self._running.order_id}'")

@@ -217,10 +217,7 @@ class RobotSupervisor:
         `CONFIRM_WAIT`, with what answered by then; later answers land in the state."""
         stop = self._robot_stop()
         sent = stop.zero_velocity()
-        self._queue.stopped = True
-        cleared = self._queue.clear_queue("emergency stop")
-        self._store.write([self._store.save_stopped(self.robot, True)])
-        self._hold()
+        cleared = self._latch_queue()
         latch = asyncio.ensure_future(self._latch_executor(True))
         cancel = asyncio.ensure_future(stop.cancel_goals())
         await asyncio.wait({latch, cancel}, timeout=CONFIRM_WAIT)
@@ -232,6 +229,15 @@ class RobotSupervisor:
                 asyncio.ensure_future(self._stop_settles(sent, cleared, latch, cancel))
             )
         return Stopped(confirmed=confirmed, detail=detail)
+
+    def _latch_queue(self) -> int:
+        """This supervisor's side of a stop: latched (remembered across restarts), the
+        queue cleared, the robot held still; returns how many orders were cleared."""
+        self._queue.stopped = True
+        cleared = self._queue.clear_queue("emergency stop")
+        self._store.write([self._store.save_stopped(self.robot, True)])
+        self._hold()
+        return cleared
 
     def _stop_outcome(
         self,
@@ -380,10 +386,17 @@ class RobotSupervisor:
         match reply:
             case Accepted():
                 _LOGGER.debug("%s: %s started", self.robot, order_id)
-            case Rejected() if self._queue.stopped:
+            case Rejected(latched=latched) if latched or self._queue.stopped:
                 # STOP reached the executor before this order did: it never ran, and it
-                # ends as every other order the stop caught, not as a refusal.
+                # ends as every other order the stop caught, not as a refusal. A stop this
+                # supervisor has not heard of yet (a client latches the executor directly
+                # too, and its request here may still be on the way) stops the queue now,
+                # so that no other order is sent in between.
                 self._finish(order_id, OrderStatus.CANCELLED, "emergency stop")
+                if not self._queue.stopped:
+                    _LOGGER.warning("%s: the executor is under an emergency stop", self.robot)
+                    self._latch_queue()
+                    self._changed()
             case Rejected(reason=reason):
                 self._finish(order_id, OrderStatus.REJECTED, reason)
             case Failed(reason=reason):
