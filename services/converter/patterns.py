@@ -8,9 +8,10 @@ Two regex dialects meet in the converter, and must: checks, assembly and the exp
 the recogniser's grammar is built from (expand.py) use Python's `re`, because `re`'s
 parser is the one parser of this syntax Python has, so a pattern is checked by the same
 reading that expands it. Matching uses the `regex` module (parser.py), because only it
-can stop a search after a time limit. `regex` reads every construct the checks here
-admit the same way `re` does; parser.py also matches every expanded phrase against
-the compiled pattern before it is used, so a disagreement would show at load time.
+can stop a search after a time limit. `regex` reads the constructs the checks here
+admit as `re` does; where the two could still disagree, parser.py notices at load time
+(an expanded phrase its compiled pattern does not match) and then tries that command on
+every sentence rather than trust the expansion.
 """
 
 from __future__ import annotations
