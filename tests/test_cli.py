@@ -4,9 +4,11 @@ refuse a bad configuration in one line, junk on the bus answered and survived.""
 from __future__ import annotations
 
 import asyncio
+import datetime
 import json
 import socket
 from pathlib import Path
+from typing import Any
 
 from shared.bus import json_decoder
 from shared.keys import RobotKeys, RobotNames
@@ -144,3 +146,67 @@ async def test_a_stop_navigation_refuses_is_said_to_be_unconfirmed(
     assert answer["confirmed"] is False
     assert "navigation refused to cancel every goal" in answer["detail"]
     assert stopped.stderr.startswith("voicectl stop: sent, but not confirmed: sent zero velocity")
+
+
+async def test_say_tells_a_person_what_was_sent_and_when(router: str, processes: Processes) -> None:
+    """`voicectl say` suggests on stderr, once; what it did not submit is not printed as
+    sent; `state` and `history` give every time as an epoch and in ISO 8601."""
+    processes.start("services.sim", "--connect", router, "--time-scale", "10")
+    processes.start("services.converter", "--connect", router)
+    processes.start("services.supervisor", "--connect", router, "--robot", "r1")
+    processes.start("services.executor", "--connect", router, "--robot", "r1")
+    bus = ("--robot", "r1", "--connect", router)
+
+    def executor_online() -> bool:
+        state = voicectl("state", *bus, timeout=30.0)
+        return state.returncode == 0 and json.loads(state.stdout)["executor_online"]
+
+    await asyncio.to_thread(wait_until, executor_online, 60.0, "the executor")
+
+    def say(*args: str) -> tuple[int, dict[str, Any], str]:
+        done = voicectl("say", *bus, *args, timeout=30.0)
+        return done.returncode, json.loads(done.stdout), done.stderr
+
+    # The converter's reason already suggests a phrase: the hint is said once.
+    code, said, stderr = await asyncio.to_thread(say, "move forwad 2 meters")
+    assert code == 1
+    assert said["submitted"] is False
+    assert said["orders"] == said["not_sent"] == []
+    assert stderr.count("did you mean: move forward 2 meters?") == 1, stderr
+    assert stderr.splitlines()[-1] == "voicectl say: nothing submitted"
+
+    # A misspelling with no reason of its own gets the suggestion from the candidates.
+    code, said, stderr = await asyncio.to_thread(say, "trun left")
+    assert code == 1
+    assert stderr.splitlines()[0] == (
+        "voicectl say: 'trun left': no order matches; did you mean: turn left?"
+    )
+
+    # Understood in part: what was understood is held back, and not printed as sent.
+    code, said, stderr = await asyncio.to_thread(say, "turn left then dance")
+    assert code == 1
+    assert said["submitted"] is False
+    assert said["orders"] == []
+    assert said["order_ids"] == []
+    assert [order["description"] for order in said["not_sent"]] == ["turn left"]
+    assert "nothing submitted (--partial submits what was understood)" in stderr
+
+    code, said, stderr = await asyncio.to_thread(say, "turn left")
+    assert code == 0, stderr
+    assert said["submitted"] is True
+    assert len(said["order_ids"]) == 1
+    assert stderr == ""
+
+    def finished() -> bool:
+        page = json.loads(voicectl("history", *bus, timeout=30.0).stdout)
+        return bool(page["records"])
+
+    await asyncio.to_thread(wait_until, finished, 60.0, "the turn to finish")
+    history = json.loads((await asyncio.to_thread(voicectl, "history", *bus)).stdout)
+    state = json.loads((await asyncio.to_thread(voicectl, "state", *bus)).stdout)
+    for record in (history["records"][0], state["history"][0]):
+        for key in ("submitted_at", "started_at", "ended_at"):
+            epoch = record[key]
+            readable = datetime.datetime.fromisoformat(record[f"{key}_iso"])
+            assert readable.tzinfo is not None, record  # a time a person can place
+            assert abs(readable.timestamp() - epoch) < 1.0, (key, record)

@@ -424,7 +424,9 @@ async def _say(args: argparse.Namespace) -> int:
     )
     for error in result.errors:
         maybe = [c for c in error.candidates if "/" not in c]  # phrases, not order names
-        hint = f"; did you mean: {' or '.join(maybe)}?" if maybe else ""
+        # The converter's reason may already end with the suggestion: say it once.
+        unsaid = [phrase for phrase in maybe if phrase not in error.reason]
+        hint = f"; did you mean: {' or '.join(unsaid)}?" if unsaid else ""
         print(f"voicectl say: {error.text!r}: {error.reason}{hint}", file=sys.stderr)
     if result.errors and not args.partial and result.orders:
         print(
