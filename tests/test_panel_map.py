@@ -34,6 +34,16 @@ def test_the_map_shows_places_robot_and_where_orders_go_before_and_after_send(
         grid = page.locator("#map image.grid")
         expect(grid).to_have_count(1, timeout=15_000)
         assert grid.get_attribute("href").startswith("data:image/png;base64,")
+        # The view takes in the robot's map (walls from -10 to 10 m), not only the places.
+        page.wait_for_function("document.querySelector('#map').viewBox.baseVal.width >= 20")
+        box = page.eval_on_selector(
+            "#map", "m => { const b = m.viewBox.baseVal; return [b.x, b.y, b.width, b.height]; }"
+        )
+        assert box[0] <= -10, box
+        assert box[0] + box[2] >= 10, box
+        assert box[1] <= -10, box
+        assert box[1] + box[3] >= 10, box
+        assert box[2] <= 26, box  # and little else: the walls fill the view
 
         # Before Send: the turn is drawn where the robot stands, the path to the kitchen
         # from where the turn ends.
@@ -49,6 +59,21 @@ def test_the_map_shows_places_robot_and_where_orders_go_before_and_after_send(
         assert float(path.get_attribute("x2")) == 3.0
         assert float(path.get_attribute("y2")) == -5.0  # SVG's y points down
         assert abs(float(path.get_attribute("x1"))) < 0.2  # from the turn's end, at base
+        # The turn on the spot is drawn around the robot, not hidden under its arrow.
+        turn = staged.nth(0).locator("path.turn")
+        expect(turn).to_be_visible()
+        robot = page.locator("#map .robot").bounding_box()
+        arc = turn.bounding_box()
+        assert robot is not None
+        assert arc is not None
+        outside = (
+            arc["x"] + arc["width"] > robot["x"] + robot["width"] + 5 or arc["y"] < robot["y"] - 5
+        )
+        assert outside, (arc, robot)
+        assert (
+            page.eval_on_selector("#map", "m => m.lastElementChild.dataset.order")
+            == "reach kitchen"
+        )  # the orders are drawn over the robot
         ARTIFACTS.mkdir(exist_ok=True)
         page.screenshot(path=str(ARTIFACTS / "map-staged.png"), full_page=True)
 

@@ -58,22 +58,116 @@ function arrow(pose, size, cls) {
   return node("polygon", { points, class: cls });
 }
 
+// The part of an occupancy grid worth framing, in metres: where its cells are known (not
+// map_server's 205 grey), found once per grid by reading its PNG back from a canvas. A Nav2
+// map is often mostly unknown margin; framing all of it would shrink the rooms to nothing.
+// Resolves to the whole grid when the image cannot be read.
+function knownExtent(grid) {
+  const whole = {
+    minX: grid.origin.x, minY: grid.origin.y,
+    maxX: grid.origin.x + grid.width * grid.resolution,
+    maxY: grid.origin.y + grid.height * grid.resolution,
+  };
+  return new Promise((resolve) => {
+    const image = new Image();
+    image.onerror = () => resolve(whole);
+    image.onload = () => {
+      const canvas = document.createElement("canvas");
+      [canvas.width, canvas.height] = [grid.width, grid.height];
+      const context = canvas.getContext("2d");
+      if (!context) { resolve(whole); return; }
+      context.drawImage(image, 0, 0);
+      const pixels = context.getImageData(0, 0, grid.width, grid.height).data;
+      let [left, right, low, high] = [Infinity, -Infinity, Infinity, -Infinity];
+      for (let row = 0; row < grid.height; row += 1) {
+        for (let column = 0; column < grid.width; column += 1) {
+          if (pixels[(row * grid.width + column) * 4] === 205) continue; // unknown
+          left = Math.min(left, column); right = Math.max(right, column);
+          low = Math.min(low, row); high = Math.max(high, row);
+        }
+      }
+      if (left > right) { resolve(whole); return; }
+      const metres = (cells) => cells * grid.resolution;
+      resolve({ // row 0 is at the origin (the image is flipped when drawn)
+        minX: grid.origin.x + metres(left), maxX: grid.origin.x + metres(right + 1),
+        minY: grid.origin.y + metres(low), maxY: grid.origin.y + metres(high + 1),
+      });
+    };
+    image.src = `data:image/png;base64,${grid.png}`;
+  });
+}
+
+// The view box, in world metres: everything that is drawn (the robot's map where it is
+// known, the places, the robot, its recent trail and every staged or queued target), with
+// a margin, square as the map is, never narrower than 5 m.
+function frame(scene) {
+  const seen = [];
+  if (scene.pose) seen.push(scene.pose);
+  for (const place of scene.places) seen.push(place.pose);
+  for (const step of scene.steps) {
+    if (step.to) seen.push(step.to);
+    if (step.from) seen.push(step.from);
+  }
+  for (const pose of scene.trail.slice(-50)) seen.push(pose);
+  if (scene.map) {
+    const grid = scene.map;
+    const known = grid.extent || {
+      minX: grid.origin.x, minY: grid.origin.y,
+      maxX: grid.origin.x + grid.width * grid.resolution,
+      maxY: grid.origin.y + grid.height * grid.resolution,
+    };
+    seen.push({ x: known.minX, y: known.minY }, { x: known.maxX, y: known.maxY });
+  }
+  if (!seen.length) seen.push({ x: 0, y: 0 });
+  const xs = seen.map((p) => p.x);
+  const ys = seen.map((p) => p.y);
+  const [minX, maxX, minY, maxY] = [Math.min(...xs), Math.max(...xs), Math.min(...ys), Math.max(...ys)];
+  const size = Math.max(maxX - minX, maxY - minY, 5);
+  const span = size * 1.08 + 1; // room for the labels above the places at the edges
+  return { cx: (minX + maxX) / 2, cy: (minY + maxY) / 2, span };
+}
+
+function point(pose, radius, angle) {
+  return [pose.x + radius * Math.cos(angle), pose.y + radius * Math.sin(angle)];
+}
+
+// A turn on the spot would be drawn under the robot: it is drawn around it instead, an arc
+// from the heading it starts with to the one it ends with, ending in an arrowhead, and a
+// dashed ghost heading from the robot to the arc's end. `ring` moves each later turn at
+// the same spot one ring further out.
+function turnShapes(step, unit, ring, label) {
+  const target = step.order.target_pose;
+  let turned = target && target.frame === ROBOT_FRAME ? target.yaw || 0
+    : normalize(step.to.yaw - step.from.yaw);
+  turned = Math.max(-2 * Math.PI + 0.05, Math.min(2 * Math.PI - 0.05, turned));
+  const radius = unit * (5.5 + 2.2 * ring);
+  const start = point(step.from, radius, step.from.yaw);
+  const end = point(step.to, radius, step.from.yaw + turned);
+  const large = Math.abs(turned) > Math.PI ? 1 : 0;
+  const sweep = turned > 0 ? 0 : 1; // counter-clockwise in the world is so on screen too
+  const shapes = [
+    node("path", {
+      d: `M ${start[0]} ${-start[1]} A ${radius} ${radius} 0 ${large} ${sweep} ${end[0]} ${-end[1]}`,
+      class: "turn", "stroke-width": unit * 0.7, fill: "none",
+    }),
+    node("line", {
+      x1: step.to.x, y1: -step.to.y, x2: end[0], y2: -end[1], class: "heading",
+      "stroke-width": unit * 0.5, "stroke-dasharray": `${unit * 1.2} ${unit}`,
+    }),
+  ];
+  const along = step.from.yaw + turned + (turned > 0 ? Math.PI / 2 : -Math.PI / 2);
+  shapes.push(arrow({ x: end[0], y: end[1], yaw: along }, unit * 2.2, "target"));
+  const [lx, ly] = point(step.to, radius + unit * 2.6, step.from.yaw + turned);
+  shapes.push(node("text", { x: lx, y: -ly + unit, "font-size": unit * 2.6,
+    "text-anchor": "middle" }, label));
+  return shapes;
+}
+
 // Draw everything into `svg`. `scene`: {pose, trail, places, steps (staged and queued),
 // map (the robot's occupancy grid, or null)}; `onPlace(place)` is called when a place is
 // chosen with the mouse or the keyboard.
 function draw(svg, scene, onPlace) {
-  const seen = [];
-  if (scene.pose) seen.push(scene.pose);
-  for (const place of scene.places) seen.push(place.pose);
-  for (const step of scene.steps) if (step.to) seen.push(step.to);
-  for (const pose of scene.trail.slice(-50)) seen.push(pose);
-  if (!seen.length) seen.push({ x: 0, y: 0 });
-  const xs = seen.map((p) => p.x);
-  const ys = seen.map((p) => p.y);
-  const margin = 1.5;
-  let [minX, maxX, minY, maxY] = [Math.min(...xs), Math.max(...xs), Math.min(...ys), Math.max(...ys)];
-  const span = Math.max(maxX - minX, maxY - minY, 5) + 2 * margin;
-  const [cx, cy] = [(minX + maxX) / 2, (minY + maxY) / 2];
+  const { cx, cy, span } = frame(scene);
   svg.setAttribute("viewBox", `${cx - span / 2} ${-cy - span / 2} ${span} ${span}`);
   const unit = span / 60; // line widths and text scale with the view
   const layers = [];
@@ -108,21 +202,31 @@ function draw(svg, scene, onPlace) {
     };
     layers.push(group);
   }
+  // The robot under the orders' marks: what it will do is drawn over where it is.
+  if (scene.pose) layers.push(arrow(scene.pose, unit * 3, "robot"));
+  const rings = []; // the spots turned on so far, one entry per turn
   scene.steps.forEach((step, index) => {
     if (!step.to || !step.from) return;
     const cls = `step ${step.kind}${step.running ? " running" : ""}`;
     const group = node("g", { class: cls, "data-order": step.order.description });
-    group.append(node("line", { x1: step.from.x, y1: -step.from.y, x2: step.to.x, y2: -step.to.y,
-      "stroke-width": unit * (step.running ? 0.9 : 0.6), "stroke-dasharray": `${unit * 2} ${unit * 1.5}` }));
-    group.append(arrow(step.to, unit * 2.4, "target"));
-    group.append(node("text", { x: step.to.x + unit * 2.5, y: -step.to.y + unit * 1.2,
-      "font-size": unit * 2.6 }, String(index + 1)));
+    const label = String(index + 1);
+    const moved = Math.hypot(step.to.x - step.from.x, step.to.y - step.from.y);
+    if (moved < 0.05) {
+      const ring = rings.filter((spot) => Math.hypot(spot.x - step.to.x, spot.y - step.to.y) < 0.05).length;
+      rings.push(step.to);
+      group.append(...turnShapes(step, unit, ring, label));
+    } else {
+      group.append(node("line", { x1: step.from.x, y1: -step.from.y, x2: step.to.x, y2: -step.to.y,
+        "stroke-width": unit * (step.running ? 0.9 : 0.6), "stroke-dasharray": `${unit * 2} ${unit * 1.5}` }));
+      group.append(arrow(step.to, unit * 2.4, "target"));
+      group.append(node("text", { x: step.to.x + unit * 2.5, y: -step.to.y + unit * 1.2,
+        "font-size": unit * 2.6 }, label));
+    }
     group.append(node("title", {}, `${index + 1}. ${step.order.description}`));
     layers.push(group);
   });
-  if (scene.pose) layers.push(arrow(scene.pose, unit * 3, "robot"));
   svg.replaceChildren(...layers);
 }
 
-window.voicectlMap = { plan, compose, draw };
+window.voicectlMap = { plan, compose, draw, knownExtent };
 window.voicectlPlan = plan; // for the browser tests: the same code the map draws with

@@ -185,6 +185,17 @@ function redraw() {
   });
 }
 
+function showMap(grid) {
+  // Drawn at once, framed on the whole grid; framed on its known part once that is found.
+  view.map = grid;
+  redraw();
+  window.voicectlMap.knownExtent(grid).then((extent) => {
+    if (view.map !== grid) return;
+    grid.extent = extent;
+    redraw();
+  });
+}
+
 function scene() {
   // Where the robot will go: the running order from where it started, then the queue, then
   // what is staged, each from where the one before ends.
@@ -256,7 +267,7 @@ function handle(message) {
     case "labels": if (message.robot === view.robot) { view.labels = message.labels; showStaged(); } break;
     case "robotpose": showPose(message); break;
     case "places": view.places = message.places; redraw(); break;
-    case "robotmap": view.map = message; redraw(); break;
+    case "robotmap": showMap(message); break;
     case "sttstatus": showStt(message); break;
     case "partialtranscript": if (mine) showHeard(message.text, "partial"); break;
     case "transcript":
