@@ -112,10 +112,54 @@ def test_on_a_phone_nothing_scrolls_sideways_and_stop_stays_in_reach(
         page.goto(f"http://127.0.0.1:{stack.port}/")
         expect(page.locator("#connection")).to_have_text("not connected")
         expect(page.locator("#stop")).to_be_disabled()
+        expect(page.locator("#panel")).to_be_hidden()  # no idle queue, no live-looking map
+        looks = "e => { const s = getComputedStyle(e); return [s.opacity, s.backgroundColor]; }"
+        off = page.eval_on_selector("#stop", looks)
+        header_off = page.eval_on_selector("header", "e => getComputedStyle(e).backgroundColor")
+        ARTIFACTS.mkdir(exist_ok=True)
+        page.screenshot(path=str(ARTIFACTS / "phone-not-connected.png"))
 
         login(page, stack)
         expect(page.locator("#connection")).to_have_text("connected")
         expect(page.locator("#stop")).to_be_enabled()
+        # A STOP that cannot stop does not look like one that can, nor the panel live.
+        on = page.eval_on_selector("#stop", looks)
+        assert off[0] != on[0], (off, on)
+        assert off[1] != on[1], (off, on)
+        assert header_off != page.eval_on_selector(
+            "header", "e => getComputedStyle(e).backgroundColor"
+        )
+        # Nothing overlaps: the header's parts, and the panel's blocks below it.
+        boxes = page.evaluate(
+            """() => {
+                const box = (e) => {
+                    const r = e.getBoundingClientRect();
+                    return {name: e.id || e.className || e.tagName, x: r.x, y: r.y + scrollY,
+                            right: r.right, bottom: r.bottom + scrollY};
+                };
+                const shown = (e) => e.getClientRects().length > 0 && !e.hidden;
+                return {
+                    header: [...document.querySelectorAll('header > *')].filter(shown).map(box),
+                    main: [document.querySelector('header'),
+                           ...document.querySelectorAll('main > section')].filter(shown).map(box),
+                    map: [...document.querySelectorAll('#where > *')].filter(shown).map(box),
+                };
+            }"""
+        )
+        for group, found in boxes.items():
+            assert len(found) >= 3, (group, found)
+            for box in found:
+                assert box["x"] >= 0, (group, box)
+                assert box["right"] <= 390, (group, box)
+            for i, one in enumerate(found):
+                for other in found[i + 1 :]:
+                    apart = (
+                        one["right"] <= other["x"] + 0.5
+                        or other["right"] <= one["x"] + 0.5
+                        or one["bottom"] <= other["y"] + 0.5
+                        or other["bottom"] <= one["y"] + 0.5
+                    )
+                    assert apart, (group, one, other)
         page.fill("#text", "turn left then turn right then wait two seconds")
         page.press("#text", "Enter")
         page.click("#send")

@@ -101,6 +101,7 @@ function showConnected(trouble) {
   $("stop").title = loggedOut ? "Not connected: this panel cannot stop the robot (use voicectl stop)"
     : "Emergency stop: halt now and clear the queue";
   $("mic").disabled = Boolean(trouble);
+  document.body.classList.toggle("offline", Boolean(trouble));
   if (trouble) {
     $("current").textContent = trouble;
     $("current").className = "muted";
