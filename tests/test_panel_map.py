@@ -85,6 +85,18 @@ def test_the_map_shows_places_robot_and_where_orders_go_before_and_after_send(
         expect(staged).to_have_count(3)
 
         # After Send: the queue, the running order highlighted, the trail growing.
+        page.evaluate(
+            """() => {
+                window.runningSeen = [];
+                setInterval(() => {
+                    const step = document.querySelector('#map .step.running');
+                    const seen = window.runningSeen;
+                    if (step && seen[seen.length - 1] !== step.dataset.order) {
+                        seen.push(step.dataset.order);
+                    }
+                }, 20);
+            }"""
+        )
         page.click("#send")
         expect(page.locator("#map .step.running")).to_have_count(1)
         trail = page.locator("#map .trail")
@@ -99,6 +111,27 @@ def test_the_map_shows_places_robot_and_where_orders_go_before_and_after_send(
         history = page.locator("#history tr")
         expect(history.nth(0)).to_contain_text("reached bathroom", timeout=60_000)
         expect(history.nth(2)).to_contain_text("turned left 90°")
+        # The highlight went from one order to the next as the robot drove.
+        seen = page.evaluate("window.runningSeen")
+        orders = ["turn left", "reach kitchen", "reach bathroom"]
+        assert len(seen) >= 2, seen
+        assert [orders.index(name) for name in seen] == sorted(
+            {orders.index(name) for name in seen}
+        ), seen
+        expect(page.locator("#map .step.running")).to_have_count(0)
+
+        # Another robot: nothing of this one stays on the map or in the header.
+        page.eval_on_selector(
+            "#robot",
+            "s => { s.append(new Option('other', 'other')); s.value = 'other'; "
+            "s.dispatchEvent(new Event('change')); }",
+        )
+        expect(page.locator("#pose")).to_have_text("no position yet")
+        expect(page.locator("#map .robot")).to_have_count(0)
+        expect(page.locator("#map .trail")).to_have_count(0)
+        expect(page.locator("#map image.grid")).to_have_count(0)
+        page.select_option("#robot", "robot")
+        expect(page.locator("#map .robot")).to_have_count(1)
 
 
 def test_on_a_phone_nothing_scrolls_sideways_and_stop_stays_in_reach(

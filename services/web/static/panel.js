@@ -129,6 +129,20 @@ function selectRobot(name) {
   store.robot = name;
   view.historyOffset = 0;
   view.state = null;
+  // Nothing of the robot shown before stays: not its pose, trail, map or the poses its
+  // orders started from; the new robot's come with its event stream.
+  view.labels = null;
+  view.pose = null;
+  view.trail = [];
+  view.map = null;
+  view.startedAt = {};
+  $("pose").textContent = "no position yet";
+  $("parts").replaceChildren();
+  $("queue").replaceChildren();
+  $("history").replaceChildren();
+  $("current").textContent = "waiting for the queue's state";
+  $("current").className = "muted";
+  showStaged();
   stopMic();
   listen();
 }
