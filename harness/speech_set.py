@@ -2,9 +2,11 @@
 
 Sources, none of which the recogniser was built on:
 
-- ``real``: people. The recordings pocketsphinx's source distribution carries for its own
-  tests (a man saying "go forward ten meters", read literature from LibriVox, card names,
-  digits), fetched with pip at bench time. Test split only: there are too few to spare.
+- ``real``: people. In the test split, the recordings pocketsphinx's source distribution
+  carries for its own tests (a man saying "go forward ten meters", read literature from
+  LibriVox, card names, digits), fetched with pip at bench time. In the dev split, the
+  channel names alsa-utils ships ("front left", "rear right": a woman's voice, in
+  /usr/share/sounds/alsa): short phrases that hold a command's words and are no command.
 - ``espeak``: espeak-ng, a formant synthesizer, American and British voices.
 - ``festival``: Festival's diphone voices (kal, ked) and its HTS voice (slt, a woman).
 - ``flite``: CMU Flite's voices (awb, a Scottish man; rms; slt; kal16).
@@ -144,6 +146,15 @@ DEV_CHATTER = [
     "we should paint the fence blue",
     "my brother lives in the city",
     "the meeting starts at ten",
+    # short phrases that hold a command's words
+    "front left",
+    "all right",
+    "the left one",
+    "go away",
+    "back off",
+    "right now",
+    "wait a minute",
+    "turn it off",
 ]
 TEST_CHATTER = [
     "could you please pass me the salt",
@@ -168,6 +179,15 @@ TEST_CHATTER = [
     "let me know when you are ready",
     "the store closes at nine",
     "four people came to the party",
+    # short phrases that hold a command's words
+    "rear right",
+    "that is right",
+    "on the left",
+    "keep left",
+    "go home",
+    "move it",
+    "turn the page",
+    "come back",
 ]
 VOICES_PER_COMMAND = 3
 VOICES_PER_CHATTER = 2
@@ -201,6 +221,21 @@ REAL: list[tuple[str, str, list[str]]] = [
     ("test/data/cards/003.wav", "seven of clubs", []),
     ("test/data/cards/004.wav", "five five", []),
     ("test/data/cards/005.wav", "eight of spades four of clubs seven of hearts", []),
+]
+ALSA_SOUNDS = Path("/usr/share/sounds/alsa")
+"""alsa-utils' speaker-test recordings: a woman naming each loudspeaker channel."""
+ALSA_CHANNELS = [
+    f"{place}_{side}"
+    for place, side in [
+        ("Front", "Center"),
+        ("Front", "Left"),
+        ("Front", "Right"),
+        ("Rear", "Center"),
+        ("Rear", "Left"),
+        ("Rear", "Right"),
+        ("Side", "Left"),
+        ("Side", "Right"),
+    ]
 ]
 
 CONDITIONS = ("clean", "noise", "babble", "reverb")
@@ -263,6 +298,8 @@ def _clean_split(directory: Path, split: str) -> list[Utterance]:
                 made.append(speak(text, voice, directory / split, orders, split))
     if split == "test":
         made += real_recordings(directory / split)
+    else:
+        made += channel_names(directory / split)
     return made
 
 
@@ -364,36 +401,44 @@ def real_recordings(directory: Path) -> list[Utterance]:
                 target.parent.mkdir(parents=True, exist_ok=True)
                 shutil.copy(root / path, target)
             staging.rename(unpacked)
-    made = []
-    for path, text, orders in REAL:
-        source = unpacked / path
-        wav = directory / f"real-{Path(path).stem}.wav"
-        if not wav.exists():
-            with tempfile.TemporaryDirectory() as tmp:
-                raw = Path(tmp) / "raw.wav"
-                if source.suffix == ".raw":
-                    convert = ["sox", "-D", "-t", "raw", "-r", "16000", "-e", "signed"]
-                    subprocess.run(
-                        [*convert, "-b", "16", "-c", "1", str(source), str(raw)], check=True
-                    )
-                else:
-                    shutil.copy(source, raw)
-                speech = _pad(raw, wav)
-                wav.with_suffix(".json").write_text(json.dumps({"speech": speech}))
-        speech = json.loads(wav.with_suffix(".json").read_text())["speech"]
-        made.append(
-            Utterance(
-                str(wav.relative_to(directory.parent)),
-                text,
-                orders,
-                "real",
-                "person",
-                directory.name,
-                "clean",
-                round(LEAD_SILENCE + speech, 3),
-            )
-        )
-    return made
+    return [_person(unpacked / path, text, orders, directory) for path, text, orders in REAL]
+
+
+def channel_names(directory: Path) -> list[Utterance]:
+    """alsa-utils' recordings of a person naming loudspeaker channels: no commands."""
+    if not ALSA_SOUNDS.is_dir():
+        raise RuntimeError(f"{ALSA_SOUNDS} is missing (Debian package alsa-utils)")
+    return [
+        _person(ALSA_SOUNDS / f"{name}.wav", name.replace("_", " ").lower(), [], directory)
+        for name in ALSA_CHANNELS
+    ]
+
+
+def _person(source: Path, text: str, orders: list[str], directory: Path) -> Utterance:
+    """A recording of a person, converted and padded like the synthesized ones (cached)."""
+    wav = directory / f"real-{source.stem}.wav"
+    if not wav.exists():
+        directory.mkdir(parents=True, exist_ok=True)
+        with tempfile.TemporaryDirectory() as tmp:
+            raw = Path(tmp) / "raw.wav"
+            if source.suffix == ".raw":
+                convert = ["sox", "-D", "-t", "raw", "-r", "16000", "-e", "signed"]
+                subprocess.run([*convert, "-b", "16", "-c", "1", str(source), str(raw)], check=True)
+            else:
+                shutil.copy(source, raw)
+            speech = _pad(raw, wav)
+            wav.with_suffix(".json").write_text(json.dumps({"speech": speech}))
+    speech = json.loads(wav.with_suffix(".json").read_text())["speech"]
+    return Utterance(
+        str(wav.relative_to(directory.parent)),
+        text,
+        orders,
+        "real",
+        "person",
+        directory.name,
+        "clean",
+        round(LEAD_SILENCE + speech, 3),
+    )
 
 
 def _noisy(directory: Path, split: str, clean: list[Utterance]) -> list[Utterance]:

@@ -12,7 +12,7 @@ from pathlib import Path
 import pocketsphinx
 import pytest
 
-from services.stt.judge import Thresholds, Vocabulary, Word, judge
+from services.stt.judge import OFF, Thresholds, Vocabulary, Word, judge
 
 from .conftest import Speak, voicectl
 
@@ -179,3 +179,17 @@ def test_the_judge_doubts_a_value_the_grammar_was_unsure_of() -> None:
         [],
         0.6,
     )
+
+
+def test_the_judge_rejects_a_word_the_search_squeezed_in() -> None:
+    # "on the left" came out of the grammar as "turn the left", its "the" (two phones) six
+    # frames long: the shortest a path can make it, three frames a phone.
+    heard = timed(("on", 20), ("the", 31), ("left", 70))
+    squeezed = timed(("turn", 25), ("the", 31), ("left", 70))
+    verdict = judge(squeezed, heard, VOCABULARY, Thresholds())
+    assert verdict.rejection == "I heard 'on the left': not a command"
+    # One frame more, and it could have been said.
+    said = timed(("turn", 24), ("the", 31), ("left", 70))
+    assert judge(said, heard, VOCABULARY, Thresholds()).rejection == ""
+    # The grammar alone (the benchmark's comparison) keeps no such rule.
+    assert judge(squeezed, heard, VOCABULARY, OFF).rejection == ""

@@ -21,6 +21,11 @@ that, one from outside the grammar and one from inside it:
 - **Values.** A spoken number is also compared with the open decode: when it heard another
   number there ("two" where the grammar says "ten"), or none that matches, the value is a
   doubt, to be asked, never guessed.
+- **Words squeezed in.** A phone lasts at least three 10 ms frames in pocketsphinx's
+  models (three emitting states, none skipped). A word of the grammar's path no longer
+  than that was not said: the search pressed it into the gap between words that were,
+  because the grammar needs it there (in babble, "move forward" became "turn a left then
+  move forward", its "turn" 90 ms long). The utterance is rejected.
 
 Requiring the open decode to hear the command words as well (its "support") rejected most
 commands in noise and in voices it cannot transcribe, for no fewer wrong orders than the
@@ -43,6 +48,8 @@ ALIKE = 0.75
 """Words at least this alike sound like each other to the judge ("crimes"/"primes")."""
 SUPPORTS = 0.6
 """An open word at least this alike to a command word at the same time supports it."""
+FRAMES_PER_PHONE = 3
+"""The fewest frames a phone can last in pocketsphinx's models: three emitting states."""
 
 
 def filler(text: str) -> bool:
@@ -71,9 +78,17 @@ class Thresholds:
     decode too, makes the utterance a rejection."""
     min_value_posterior: float = 0.75
     """A value less sure than this in the grammar's lattice is a doubt."""
+    squeezed: float = 1.0
+    """A grammar word lasting at most this many times its shortest possible length
+    (`FRAMES_PER_PHONE` a phone) was squeezed in, not said; 0 turns the rule off."""
 
 
-OFF = Thresholds(max_foreign=math.inf, min_word_posterior=0.0, min_value_posterior=0.0)
+OFF = Thresholds(
+    max_foreign=math.inf,
+    min_word_posterior=0.0,
+    min_value_posterior=0.0,
+    squeezed=0.0,
+)
 """The grammar alone: what the benchmark compares the judge with."""
 
 
@@ -173,7 +188,9 @@ def judge(
         if posterior < thresholds.min_word_posterior and match == 0:
             unsure.append(token)
     support = round(supported / len(commands), 3) if commands else 0.0
-    if foreign > thresholds.max_foreign:
+    if foreign > thresholds.max_foreign or any(
+        _squeezed(w, vocabulary, thresholds.squeezed) for w in grammar
+    ):
         return Verdict(_not_a_command(said), said, confidences, [], foreign, support)
     if unsure:
         doubtful = ", ".join(f"'{t.text}'" for t in unsure)
@@ -211,6 +228,13 @@ def judge(
 
 def _not_a_command(said: str) -> str:
     return f"I heard '{said}': not a command" if said else "not a command"
+
+
+def _squeezed(word: Word, vocabulary: Vocabulary, limit: float) -> bool:
+    """The word lasts no longer than `limit` times the shortest it could (its shortest
+    pronunciation at `FRAMES_PER_PHONE` a phone)."""
+    phones = min((len(p.split()) for p in vocabulary.sounds(word.text)), default=0)
+    return phones > 0 and word.end - word.start + 1 <= limit * FRAMES_PER_PHONE * phones
 
 
 def _unexplained(grammar: list[Word], heard: list[Word], vocabulary: Vocabulary) -> float:
