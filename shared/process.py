@@ -6,8 +6,8 @@ A service (`Service`) has three steps: `start()` declares what it serves and ann
 it on the bus; `run()` does its ongoing work (a poll, a tick, a watch) and returns or
 raises only when the service must end by itself; `stop()` withdraws, stops what runs and
 lets go of what it holds. It is an async context manager of those. `serve()` runs
-services until a stop signal; `run_service()` is every entry point's process: its exit
-code, and a `ServiceError` as one line on stderr.
+services until a stop signal, `running()` for the length of a block; `run_service()` is
+every entry point's process: its exit code, and a `ServiceError` as one line on stderr.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ import logging
 import os
 import signal
 import sys
-from collections.abc import Awaitable, Callable, Mapping
+from collections.abc import AsyncIterator, Awaitable, Callable, Mapping
 from pathlib import Path
 from typing import Self
 
@@ -259,10 +259,26 @@ def open_bus(args: argparse.Namespace) -> contextlib.AbstractContextManager[Bus]
 async def serve(*services: Service) -> None:
     """Enter `services` in order, run them until a stop signal or until one's `run()`
     ends (its error raised again), then leave them in the reverse order."""
+    async with running(*services) as runs:
+        await wait_for_stop(*runs)
+
+
+@contextlib.asynccontextmanager
+async def running(*services: Service) -> AsyncIterator[list[asyncio.Task[None]]]:
+    """Enter `services` in order and run each one's `run()` as a task while the block
+    lasts (the tasks are what it gives); then cancel the tasks and leave the services in
+    the reverse order. `serve()` waits on it for a stop signal; a service inside another
+    server's lifecycle (the panel's hub, in its ASGI lifespan) lives in its block."""
     async with contextlib.AsyncExitStack() as entered:
         for service in services:
             await entered.enter_async_context(service)
-        await wait_for_stop(*(service.run() for service in services))
+        runs = [asyncio.create_task(service.run()) for service in services]
+        try:
+            yield runs
+        finally:
+            for task in runs:
+                task.cancel()
+            await asyncio.gather(*runs, return_exceptions=True)
 
 
 async def forever() -> None:

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import asyncio
-import contextlib
 import json
 import logging
 
@@ -83,15 +81,12 @@ async def test_request_reply_and_errors(router: str) -> None:
 
         server.serve("voice/r1/supervisor/request", json_decoder(SupervisorRequest), handle)
         decode = json_decoder(Done | Failed)
-        replies: list[Done | Failed] = []
-        for _ in range(100):  # until the queryable has reached the router
-            with contextlib.suppress(BusError):
-                replies.append(
-                    await client.request("voice/r1/supervisor/request", GetState(), decode)
-                )
-                break
-            await asyncio.sleep(0.05)
-        assert replies == [Done(detail="state")]
+        served: list[bool] = []
+        # A queryable's until_heard: the request goes once the router has it.
+        client.watch_served("voice/r1/supervisor/request", served.append)
+        await async_wait_until(lambda: served[-1:] == [True], 10.0, "the queryable")
+        reply = await client.request("voice/r1/supervisor/request", GetState(), decode)
+        assert reply == Done(detail="state")
         raw = await client.request_bytes("voice/r1/supervisor/request", b"junk", 5.0)
         assert b"undecodable request" in raw
         failed = await client.request(

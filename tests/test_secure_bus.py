@@ -23,7 +23,7 @@ from shared.ros2 import Odometry, Ros2Codec
 from voicectl.bus_secrets import ROUTER_TEMPLATE, USERS, SecretsExist, write_bus_secrets
 
 from .conftest import REPO, Processes, async_wait_until, free_port, voicectl, wait_until
-from .support import Client, client_wait_ready, joined, order
+from .support import Client, client_wait_ready, joined, order, until_heard
 
 CODEC = Ros2Codec()
 
@@ -207,13 +207,11 @@ async def test_the_documented_observer_watches_the_order_stream(site: SecureSite
     reader = asyncio.ensure_future(read())
     try:
         with site.joined("supervisor") as bus:
-            for _ in range(50):
-                bus.publish_bytes("voice/r1/supervisor/state", b'{"marker": 1}')
-                await asyncio.sleep(0.2)
-                if any(b'"marker"' in line for line in lines):
-                    break
-            else:
-                raise AssertionError(f"the observer saw nothing: {lines}")
+            await until_heard(bus, "voice/r1/supervisor/state", timeout=30.0)
+            bus.publish_bytes("voice/r1/supervisor/state", b'{"marker": 1}')
+            await async_wait_until(
+                lambda: any(b'"marker"' in line for line in lines), 10.0, "the observer's line"
+            )
     finally:
         if watcher.returncode is None:
             watcher.terminate()

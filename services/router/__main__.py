@@ -8,8 +8,9 @@ import sys
 
 import zenoh
 
+from shared.bus import BusOptions
 from shared.errors import BusError, ServiceError
-from shared.process import add_bus_arguments, bus_options, run_service, wait_for_stop
+from shared.process import Service, add_bus_arguments, bus_options, run_service, serve
 
 _LOGGER = logging.getLogger(__name__)
 
@@ -20,19 +21,32 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
-async def main(args: argparse.Namespace) -> None:
-    options = bus_options(args, router=True)
-    listen = ", ".join(options.listen) or f"the endpoints of {options.config_file}"
-    try:
-        session = zenoh.open(options.zenoh_config())
-    except (zenoh.ZError, BusError) as exc:
-        reason = str(exc).split(" at /", 1)[0]
-        raise ServiceError(f"cannot listen on {listen}: {reason}") from exc
-    try:
+class Router(Service):
+    """A Zenoh session in router mode: `start()` opens it listening, `stop()` closes it;
+    its work is all inside Zenoh, so `run()` is the default (nothing until the stop)."""
+
+    def __init__(self, options: BusOptions) -> None:
+        self._options = options
+        self._session: zenoh.Session | None = None
+
+    async def start(self) -> None:
+        options = self._options
+        listen = ", ".join(options.listen) or f"the endpoints of {options.config_file}"
+        try:
+            # Listening only, never waiting for a peer: quick enough for the loop.
+            self._session = zenoh.open(options.zenoh_config())
+        except (zenoh.ZError, BusError) as exc:
+            reason = str(exc).split(" at /", 1)[0]
+            raise ServiceError(f"cannot listen on {listen}: {reason}") from exc
         _LOGGER.info("router listening on %s", listen)
-        await wait_for_stop()
-    finally:
-        session.close()
+
+    async def stop(self) -> None:
+        if self._session is not None:
+            self._session.close()
+
+
+async def main(args: argparse.Namespace) -> None:
+    await serve(Router(bus_options(args, router=True)))
 
 
 def run(argv: list[str] | None = None) -> int:

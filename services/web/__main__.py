@@ -1,4 +1,9 @@
-"""`voicectl web`: the browser panel and HTTP API for the robots on the bus."""
+"""`voicectl web`: the browser panel and HTTP API for the robots on the bus.
+
+Like every service it is served by `serve()` (shared/process.py); the service here is
+uvicorn (`PanelServer`), and the app's own lifespan opens the bus and runs the hub, so
+that any ASGI server (Starlette's TestClient in the tests) runs the panel the same way.
+"""
 
 from __future__ import annotations
 
@@ -15,7 +20,14 @@ import uvicorn
 
 from shared.config import default_token_file, load_or_create_token
 from shared.errors import ServiceError
-from shared.process import add_bus_arguments, bus_options, robot_name, run_service, wait_for_stop
+from shared.process import (
+    Service,
+    add_bus_arguments,
+    bus_options,
+    robot_name,
+    run_service,
+    serve,
+)
 
 from .app import Access, create_app
 from .audio import MAX_MESSAGE
@@ -74,6 +86,38 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
+class PanelServer(Service):
+    """uvicorn serving the panel on a socket already bound, as a service: `start()` sets it
+    serving, `run()` returns if it ends by itself (its app failed to start), `stop()` has it
+    close its connections and return. The app's lifespan opens the bus and runs the hub."""
+
+    def __init__(self, config: uvicorn.Config, listening: socket.socket, where: str) -> None:
+        self._server = _QuietServer(config)
+        self._listening = listening
+        self._where = where
+        self._serving: asyncio.Task[None] | None = None
+
+    async def start(self) -> None:
+        self._serving = asyncio.create_task(self._server.serve(sockets=[self._listening]))
+        _LOGGER.info("panel on %s", self._where)
+
+    async def run(self) -> None:
+        assert self._serving is not None
+        # asyncio.wait, not await: cancelling run() at a stop must not cancel uvicorn,
+        # which stop() ends gracefully.
+        await asyncio.wait({self._serving})
+
+    async def stop(self) -> None:
+        try:
+            if self._serving is not None:
+                self._server.should_exit = True  # uvicorn closes connections and returns
+                await self._serving
+        finally:
+            self._listening.close()
+        if not self._server.started:
+            raise ServiceError("the panel's server did not start (its log says why)")
+
+
 async def main(args: argparse.Namespace) -> None:
     problem = tls_problem(args)
     if problem:
@@ -94,19 +138,9 @@ async def main(args: argparse.Namespace) -> None:
         listening = _bind(args.host, args.port)
     except OSError as exc:
         raise ServiceError(f"cannot serve on {args.host}:{args.port}: {exc.strerror}") from exc
-    server = _QuietServer(config)
-    serving = asyncio.create_task(server.serve(sockets=[listening]))
-    stopping = asyncio.create_task(wait_for_stop())
     scheme = "https" if args.certfile else "http"
-    _LOGGER.info("panel on %s://%s:%d (token in %s)", scheme, args.host, args.port, token_file)
-    await asyncio.wait({serving, stopping}, return_when=asyncio.FIRST_COMPLETED)
-    server.should_exit = True  # uvicorn closes connections and returns
-    stopping.cancel()
-    await serving
-    listening.close()
-    await asyncio.gather(stopping, return_exceptions=True)
-    if not server.started:
-        raise ServiceError("the panel's server did not start (its log says why)")
+    where = f"{scheme}://{args.host}:{args.port} (token in {token_file})"
+    await serve(PanelServer(config, listening, where))
 
 
 def run(argv: list[str] | None = None) -> int:

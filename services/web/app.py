@@ -49,6 +49,7 @@ from shared.messages import (
     Submitted,
     SupervisorReply,
 )
+from shared.process import running
 
 from .audio import AudioSocket
 from .hub import Hub
@@ -150,11 +151,12 @@ class Panel:
         self.hub: Hub | None = None
         self._encoder = msgspec.json.Encoder()
 
-    def attach(self, bus: Bus) -> None:
+    def attach(self, bus: Bus) -> Hub:
+        """Serve from `bus`; the hub it gives is a service for the caller to run."""
         self._bus = bus
         self._client = VoicectlClient(bus, BUS_TIMEOUT)
         self.hub = Hub(bus, self.default_robot)
-        self.hub.start()
+        return self.hub
 
     @property
     def bus(self) -> Bus:
@@ -359,19 +361,16 @@ class Panel:
 
 
 def create_app(options: BusOptions, robot: str, access: Access) -> Starlette:
-    """The panel as an ASGI app; it opens its bus when it starts and closes it at the end."""
+    """The panel as an ASGI app. Its lifespan opens its bus and runs the hub as a service
+    (`running`, shared/process.py) on the loop that serves it, whichever server that is
+    (uvicorn in `voicectl web`, Starlette's TestClient in the tests), and closes both at
+    the end."""
     panel = Panel(robot, access)
 
     @contextlib.asynccontextmanager
     async def lifespan(_app: Starlette) -> AsyncIterator[None]:
         with Bus.open(options, asyncio.get_running_loop()) as bus:
-            panel.attach(bus)
-            assert panel.hub is not None
-            watcher = asyncio.create_task(panel.hub.watch_poses())
-            try:
+            async with running(panel.attach(bus)):
                 yield
-            finally:
-                watcher.cancel()
-                await asyncio.gather(watcher, return_exceptions=True)
 
     return Starlette(routes=panel.routes(), lifespan=lifespan)

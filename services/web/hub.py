@@ -5,6 +5,9 @@ listens to the robot it selected. New listeners get the last state, recogniser s
 pose, parts and the orders' places at once, so a reloaded page is whole without asking.
 A robot's own map is subscribed to only while a browser listens to that robot: its
 executor relays the map only while someone does.
+
+The hub is a service (shared/process.py): `start()` subscribes, `run()` marks robots
+offline whose pose went stale, `stop()` ends every subscription.
 """
 
 from __future__ import annotations
@@ -28,6 +31,7 @@ from shared.messages import (
     SttStatus,
     Transcript,
 )
+from shared.process import Service
 
 _LOGGER = logging.getLogger(__name__)
 
@@ -64,7 +68,7 @@ PanelEvent = (
 )
 
 
-class Hub:
+class Hub(Service):
     """Bus subscriptions for every robot, and the browsers listening to each."""
 
     def __init__(self, bus: Bus, default_robot: str) -> None:
@@ -84,9 +88,12 @@ class Hub:
         self._maps: dict[str, Callable[[], None]] = {}
         """Per robot listened to, the end of its map subscription."""
         self._encoder = msgspec.json.Encoder()
+        self._ends: list[Callable[[], None]] = []
+        """What `stop()` ends: the subscriptions and watches `start()` made."""
 
-    def start(self) -> None:
+    async def start(self) -> None:
         every = RobotKeys(ANY)
+        subscribe, watch = self._bus.subscribe, self._bus.watch
         for key, kind in (
             (every.state, StateUpdate),
             (every.proposal, Proposal),
@@ -95,15 +102,23 @@ class Hub:
             (every.stt_status, SttStatus),
             (every.pose, RobotPose),
         ):
-            self._bus.subscribe(key, json_decoder(kind), self._on_event, history=kind is SttStatus)
-        self._bus.subscribe(
-            ConverterKeys().places, json_decoder(Places), self._on_places, history=True
-        )
-        self._bus.watch(ConverterKeys().alive(), self._on_converter)
-        self._bus.watch(every.alive(ANY), self._on_alive)
-        self._bus.watch(every.label(ANY), self._on_label)
+            self._ends.append(
+                subscribe(key, json_decoder(kind), self._on_event, history=kind is SttStatus)
+            )
+        self._ends += [
+            subscribe(ConverterKeys().places, json_decoder(Places), self._on_places, history=True),
+            watch(ConverterKeys().alive(), self._on_converter),
+            watch(every.alive(ANY), self._on_alive),
+            watch(every.label(ANY), self._on_label),
+        ]
 
-    async def watch_poses(self) -> None:
+    async def stop(self) -> None:
+        for end in [*self._ends, *self._maps.values()]:
+            end()
+        self._ends.clear()
+        self._maps.clear()
+
+    async def run(self) -> None:
         """Mark robots offline whose pose went stale; runs until cancelled."""
         while True:
             await asyncio.sleep(1.0)
