@@ -102,7 +102,7 @@ class VoicectlClient:
     def _on_info(self, key: str, info: ExecutorInfo) -> None:
         self._robots[robot_of(key)] = info
         self._announced.set()
-        prepare(info)
+        prepare(info, self.bus)
 
     async def _robot_stop(self, robot: str) -> RobotStop | None:
         """How to stop `robot`, once its executor's announcement is in (waiting at most

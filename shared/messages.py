@@ -291,6 +291,10 @@ class ExecutorInfo(Message):
     cmd_vel: str = "cmd_vel"
     """The velocity topic's name."""
     cmd_vel_type: CmdVelType = CmdVelType.TWIST
+    cmd_vel_hash: str = ""
+    """On rmw_zenoh, the type hash the robot's cmd_vel subscribers announced for
+    `cmd_vel_type` ('RIHS01_...', 'TypeHashNotSupported' on Humble): the last chunk of the
+    only key they hear. '' until the executor has seen their tokens."""
     navigate: str = "navigate_to_pose"
     """The NavigateToPose action's name."""
 

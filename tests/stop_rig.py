@@ -9,7 +9,9 @@ and `voicectl stop` use), and measures, from the moment STOP is asked:
 
 - the first zero velocity on cmd_vel, and for a navigation the goal's end in the status
   the simulator publishes when it handles the cancel, each timed on arrival (Zenoh's
-  thread), one hop from the simulator like the robot itself;
+  thread), one hop from the simulator like the robot itself; on rmw_zenoh, zero velocity
+  is heard only where the robot's own subscription would hear it: on the key its
+  liveliness token announces (its type and type hash), as rmw_zenoh subscribes;
 - the motion afterwards: how far the robot moved from `SETTLE` to `WATCH` seconds after
   STOP, and whether any odometry after `SETTLE` shows velocity.
 
@@ -20,6 +22,7 @@ bench/stop.py (many rounds, percentiles).
 from __future__ import annotations
 
 import asyncio
+import functools
 import math
 import subprocess
 import time
@@ -30,7 +33,7 @@ from pathlib import Path
 from shared.bus import Bus
 from shared.client import VoicectlClient
 from shared.errors import BusError
-from shared.keys import RobotNames
+from shared.keys import RmwKind, RmwZenohKeys, RobotNames
 from shared.messages import (
     GetState,
     Order,
@@ -42,7 +45,7 @@ from shared.messages import (
     TargetPose,
 )
 from shared.robot import TransportKind
-from shared.ros2 import Odometry, Ros2Codec
+from shared.ros2 import CmdVelType, Odometry, Ros2Codec, ros_type_of
 
 from .conftest import Processes, async_wait_until
 from .support import robot_key
@@ -125,7 +128,9 @@ class StopRig:
         time_scale: float = 1.0,
         stall_limit: float = 30.0,
         transport: TransportKind = TransportKind.BRIDGE,
+        sim_args: tuple[str, ...] = (),
     ) -> None:
+        """`sim_args`: more flags for the simulator (the robot it plays, its faults)."""
         self.stall_limit = stall_limit
         """30 s by default: the watchdog is tested on its own, STOP must do it alone."""
         self.router = router
@@ -140,7 +145,11 @@ class StopRig:
             f"{time_scale:g}",
             "--transport",
             transport.value,
+            *sim_args,
         )
+        self.cmd_vel_keys: list[str] = []
+        """Where zero velocity is heard: cmd_vel's key, or on rmw_zenoh the keys of the
+        robot's cmd_vel subscriptions as their tokens announce them."""
         self.supervisor: subprocess.Popen[bytes] | None = None
         self.executor: subprocess.Popen[bytes] | None = None
         self.odometry: list[tuple[float, Odometry]] = []
@@ -181,16 +190,30 @@ class StopRig:
         def key(name: str, ros_type: str) -> str:
             return robot_key(self.transport, name, ros_type, any_hash=True)
 
-        def on_cmd_vel(_key: str, twist: tuple[float, float]) -> None:
-            if twist == (0.0, 0.0):
+        def on_cmd_vel(_key: str, velocity: tuple[float, float]) -> None:
+            if velocity == (0.0, 0.0):
                 self.zero_at.append(time.monotonic())
 
-        bus.subscribe(
-            key(names.cmd_vel, "geometry_msgs/msg/Twist"),
-            CODEC.read_twist,
-            on_cmd_vel,
-            on_loop=False,
-        )
+        def hear_cmd_vel(key: str, kind: CmdVelType) -> None:
+            if key not in self.cmd_vel_keys:
+                self.cmd_vel_keys.append(key)
+                decode = functools.partial(CODEC.read_velocity, kind)
+                bus.subscribe(key, decode, on_cmd_vel, on_loop=False)
+
+        if self.transport is TransportKind.RMW_ZENOH:
+            # A robot's rmw_zenoh subscription hears its own type and type hash only.
+            rmw = RmwZenohKeys(0)
+
+            def on_token(token_key: str, present: bool) -> None:
+                token = rmw.parse_token(token_key)
+                if present and token is not None and token.kind is RmwKind.SUBSCRIBER:
+                    kind = CmdVelType.of(ros_type_of(token.dds_type))
+                    if token.name == names.cmd_vel and kind is not None:
+                        hear_cmd_vel(rmw.data(token.name, token.dds_type, token.type_hash), kind)
+
+            bus.watch(rmw.tokens, on_token)
+        else:
+            hear_cmd_vel(names.cmd_vel, CmdVelType.TWIST)
         bus.subscribe(
             key(names.navigate("status"), "action_msgs/msg/GoalStatusArray"),
             bytes,
@@ -253,16 +276,16 @@ class StopRig:
         far = self._away()
         match case:
             case "healthy" | "executor-killed" | "supervisor-and-executor-killed":
-                await self._submit(client, far)
+                await self.submit(client, far)
             case "blocked-loop":
                 x = far.target_pose.x if far.target_pose else 8.0
-                await self._submit(client, order("blocknav", seconds=4, x=x))
+                await self.submit(client, order("blocknav", seconds=4, x=x))
             case "commanding-from-blocked-loop":
-                await self._submit(client, order("blockdrive", seconds=4))
+                await self.submit(client, order("blockdrive", seconds=4))
             case "swallowed-cancel":
-                await self._submit(client, order("runaway"))
+                await self.submit(client, order("runaway"))
             case "50-queued":
-                await self._submit(
+                await self.submit(
                     client, far, *[order("mul", first=i, second=2) for i in range(49)]
                 )
             case _:
@@ -282,11 +305,15 @@ class StopRig:
             self.kill(self.executor)
         return outcome
 
-    async def _submit(self, client: VoicectlClient, *orders: Order) -> None:
+    def first_zero(self, asked: float) -> float:
+        """Seconds from `asked` to the first zero velocity heard since; inf if none."""
+        return next((at for at in self.zero_at if at >= asked), math.inf) - asked
+
+    async def submit(self, client: VoicectlClient, *orders: Order) -> None:
         await client.ask(ROBOT, Submit(request_id=f"{time.monotonic_ns()}", orders=list(orders)))
 
     def _measure(self, case: str, stopped: Stopped, asked: float) -> Outcome:
-        zero = next((at for at in self.zero_at if at >= asked), math.inf) - asked
+        zero = self.first_zero(asked)
         cancelled = None
         if case in NAVIGATING or case == "50-queued":
             cancelled = next((at for at in self.status_at if at >= asked), math.inf) - asked

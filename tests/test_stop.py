@@ -5,11 +5,13 @@ bench/stop.py measures the same cases many times for the percentiles."""
 from __future__ import annotations
 
 import asyncio
+import time
 from pathlib import Path
 
 import pytest
 
 from shared.client import Unreachable, VoicectlClient
+from shared.errors import BusError
 from shared.messages import (
     EmergencyStop,
     ExecutorInfo,
@@ -18,6 +20,7 @@ from shared.messages import (
     OrderStatus,
     Release,
     StateReply,
+    Stopped,
 )
 from shared.robot import TransportKind
 from shared.robot.stop import RobotStop, prepare, stop_codec
@@ -78,6 +81,87 @@ async def test_stop_stops_the_robot_at_once_and_for_good(
         if case == "50-queued":
             history = reply.state.history
             assert sum(r.message == "emergency stop" for r in history) >= 10, history
+
+
+HUMBLE_WITHOUT_NAV2 = (
+    "0/cmd_vel/geometry_msgs::msg::dds_::Twist_/TypeHashNotSupported",
+    ("--distro", "humble", "--navigate", "elsewhere"),
+)
+"""A Humble robot on rmw_zenoh with no navigation where its executor looks for it: nothing
+answers the executor's distribution probe, and Jazzy's hash, the default, is not the one
+its cmd_vel announces."""
+HUMBLE_STAMPED = (
+    "0/cmd_vel/geometry_msgs::msg::dds_::TwistStamped_/TypeHashNotSupported",
+    ("--distro", "humble", "--cmd-vel-type", "stamped"),
+)
+"""A Humble robot on rmw_zenoh whose cmd_vel takes TwistStamped: neither the type nor the
+hash is the default one."""
+
+
+@pytest.mark.parametrize(
+    ("case", "robot"),
+    [
+        ("executor-killed", HUMBLE_WITHOUT_NAV2),
+        ("supervisor-started-after-executor-died", HUMBLE_STAMPED),
+    ],
+)
+async def test_stop_on_rmw_zenoh_goes_to_the_key_the_robot_announced(
+    case: str,
+    robot: tuple[str, tuple[str, ...]],
+    router: str,
+    processes: Processes,
+    tmp_path: Path,
+) -> None:
+    """On rmw_zenoh a robot's subscription hears only its own type and type hash, as its
+    liveliness token announces them. Zero velocity from the supervisor and the client
+    must go there, not to a key built from a guessed distribution or type: whether their
+    executor learnt the key and died (`executor-killed`), or the supervisor never heard
+    of an executor at all (it started after its executor died; it must not fall back to
+    the bridge's keys)."""
+    announced, sim_args = robot
+    rig = StopRig(
+        router,
+        processes,
+        tmp_path / "supervisor.sqlite3",
+        transport=TransportKind.RMW_ZENOH,
+        sim_args=sim_args,
+    )
+    with joined(router) as bus, joined(router) as ear:
+        rig.listen(ear)
+        client = VoicectlClient(bus)
+        await rig.ready(client)
+        assert rig.cmd_vel_keys == [announced]  # the stopwatch hears as the robot does
+        stopped: Stopped
+        if case == "executor-killed":
+            await rig.submit(client, order("runaway"))
+            await rig.driving()
+            rig.kill(rig.executor)
+            asked = time.monotonic()
+            stopped = await client.stop(ROBOT)
+        else:
+            rig.kill(rig.executor)
+            rig.kill(rig.supervisor)
+            rig.start_supervisor()
+
+            async def supervisor_up() -> bool:
+                try:
+                    return isinstance(await client.ask(ROBOT, GetState()), StateReply)
+                except BusError:
+                    return False
+
+            await async_wait_until(supervisor_up, 20.0, "the new supervisor")
+            asked = time.monotonic()
+            # The supervisor alone: this client's own stop is not asked.
+            reply = await client.request(ROBOT, EmergencyStop())
+            assert isinstance(reply, Stopped), reply
+            stopped = reply
+        await async_wait_until(
+            lambda: rig.first_zero(asked) < BOUND * 4, 2.0, "zero velocity on the robot's key"
+        )
+        zero = rig.first_zero(asked)
+        print(case, zero, stopped)
+        assert zero < BOUND, (zero, stopped)
+        assert stopped.confirmed, stopped
 
 
 async def test_a_stalled_event_loop_is_noticed_and_the_robot_halted(
@@ -170,3 +254,8 @@ async def test_the_stop_codec_is_built_when_an_executor_announces_itself_not_at_
         assert stop.codec is stop_codec(RosDistro.HUMBLE)
         stamped = stop.codec.velocity(stop.cmd_vel_type, 0.0, 0.0, 1.0)
         assert stop.codec.read_twist_stamped(stamped) == (0.0, 0.0)
+    # A robot no executor announced is stopped with one codec, whatever its distribution.
+    humble, jazzy = stop_codec(RosDistro.HUMBLE), stop_codec(RosDistro.JAZZY)
+    for kind in CmdVelType:
+        assert humble.velocity(kind, 0.0, 0.0, 1.0) == jazzy.velocity(kind, 0.0, 0.0, 1.0)
+    assert humble.cancel_goal_request() == jazzy.cancel_goal_request()

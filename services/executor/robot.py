@@ -105,6 +105,8 @@ class RobotLink:
         """Whether the robot's NavigateToPose server has shown itself (announced or answered)."""
         self.announced_cmd_vel: CmdVelType | None = None
         """What the robot's graph says its cmd_vel subscribers take."""
+        self._cmd_vel_hashes: dict[CmdVelType, str] = {}
+        """The type hashes the robot's cmd_vel subscribers announced, by type (rmw_zenoh)."""
         self._cmd_vel_learnt = asyncio.Event()
         self.announced_camera: CameraType | None = None
         self._warned_cmd_vel = False
@@ -123,6 +125,12 @@ class RobotLink:
     def cmd_vel_type(self) -> CmdVelType:
         """As configured, else as the robot announced it, else plain Twist."""
         return self.options.cmd_vel_type or self.announced_cmd_vel or CmdVelType.TWIST
+
+    @property
+    def cmd_vel_hash(self) -> str:
+        """The type hash the robot's cmd_vel subscribers announced for `cmd_vel_type`; ''
+        if none did (or the layout has none): for whoever stops the robot without us."""
+        return self._cmd_vel_hashes.get(self.cmd_vel_type, "")
 
     @property
     def camera_type(self) -> CameraType:
@@ -162,14 +170,14 @@ class RobotLink:
         names = self.names
         match interface.role:
             case Role.SUBSCRIBER if interface.name == names.cmd_vel:
-                self._learn_cmd_vel(interface.ros_type)
+                self._learn_cmd_vel(interface.ros_type, interface.type_hash)
             case Role.PUBLISHER if interface.name == names.camera_image:
                 self.announced_camera = CameraType.of(interface.ros_type)
             case Role.ACTION_SERVER if interface.name == names.topic(names.navigate_name):
                 self.navigation_seen = True
                 self._probe_soon()
 
-    def _learn_cmd_vel(self, ros_type: str) -> None:
+    def _learn_cmd_vel(self, ros_type: str, type_hash: str = "") -> None:
         found = CmdVelType.of(ros_type)
         if found is None:
             _LOGGER.error("'%s' takes %s, which voicectl cannot send", self.names.cmd_vel, ros_type)
@@ -184,9 +192,16 @@ class RobotLink:
                 configured,
             )
         self._cmd_vel_learnt.set()
+        changed = False
+        if type_hash and self._cmd_vel_hashes.get(found) != type_hash:
+            # The supervisor and the clients stop on that key (ExecutorInfo).
+            self._cmd_vel_hashes[found] = type_hash
+            changed = True
         if found is not self.announced_cmd_vel:
             self.announced_cmd_vel = found
             _LOGGER.info("'%s' takes %s (announced by the robot)", self.names.cmd_vel, ros_type)
+            changed = True
+        if changed:
             self._on_change()
 
     # --- the distribution -----------------------------------------------------------------

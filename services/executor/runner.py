@@ -139,7 +139,8 @@ class ExecutorService(Service):
 
     def publish_info(self) -> None:
         """What a supervisor needs to stop the robot itself if this process dies; sent
-        again when something about the robot is learnt (the type its cmd_vel takes)."""
+        again when something about the robot is learnt (the type its cmd_vel takes, and
+        on rmw_zenoh the type hash of the only key the robot hears it on)."""
         robot = self._robot
         info = ExecutorInfo(
             transport=robot.transport.kind,
@@ -148,6 +149,7 @@ class ExecutorService(Service):
             distro=robot.codec.distro,
             cmd_vel=robot.names.cmd_vel_name,
             cmd_vel_type=robot.cmd_vel_type,
+            cmd_vel_hash=robot.cmd_vel_hash,
             navigate=robot.names.navigate_name,
         )
         if self._info is not None:

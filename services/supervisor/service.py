@@ -99,12 +99,18 @@ class RobotSupervisor:
         self._served: dict[str, bool] = {}
         """Which of its services (execute, control) are reachable: a request sent to one
         now would arrive."""
-        self.executor_info = ExecutorInfo()
-        """How to reach the robot without its executor: the executor's last word on it."""
+        self.executor_info: ExecutorInfo | None = None
+        """How to reach the robot without its executor: the executor's last word on it;
+        None while no executor was heard (`RobotStop.of` then looks for the robot)."""
 
     @property
     def robot(self) -> str:
         return self._queue.robot
+
+    def on_info(self, info: ExecutorInfo) -> None:
+        """The executor's word on its robot: its stop is prepared now, not at STOP."""
+        self.executor_info = info
+        prepare(info, self._bus, STOP_NODE)
 
     def start(self) -> None:
         loop = asyncio.get_running_loop()
@@ -573,6 +579,10 @@ class SupervisorService(Service):
                 _LOGGER.info("%s: restored %d open order(s)", name, len(robot.open_orders))
         for name in robots:
             self.robot(name)
+        # A robot whose executor this supervisor never hears is stopped on the keys its
+        # graph announces (RobotStop.of): follow it from now on, and have the stop's codec
+        # built before any STOP can arrive.
+        await prepare(None, self._bus, STOP_NODE)
         self._bus.serve_keyed(
             RobotKeys.any_robot().supervisor, json_decoder(SupervisorRequest), self._on_request
         )
@@ -660,8 +670,7 @@ class SupervisorService(Service):
         self.robot(robot_of(key)).on_executor(alive)
 
     def _on_info(self, key: str, info: ExecutorInfo) -> None:
-        self.robot(robot_of(key)).executor_info = info
-        prepare(info)  # so that its first STOP does not build the codec
+        self.robot(robot_of(key)).on_info(info)
 
 
 def _order(tag: str) -> tuple[int, str]:

@@ -70,3 +70,15 @@ class BridgeTransport(RobotTransport):
                 handler(Interface(_ROLES[token.kind], token.key, token.ros_type), present)
 
         self._bus.watch(BRIDGE_TOKENS, on_token)
+
+    # A key is a ROS name here, whatever the robot announces: nothing to learn for it, and
+    # a topic's types share its key, so a stop sends in one type only.
+
+    def follow(self) -> None:
+        pass
+
+    def expect(self, interface: Interface) -> None:
+        pass
+
+    def subscriber_types(self, name: str) -> list[str]:
+        return []

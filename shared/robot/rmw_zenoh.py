@@ -3,10 +3,12 @@
 What rmw_zenoh puts on the wire, as read in ros2/rmw_zenoh's docs/design.md and its
 rmw_zenoh_cpp sources as released for Humble (0.1.9), Jazzy (0.2.10) and Kilted (0.6.7):
 
-- Keys ``<domain>/<name>/<DDS type>/<type hash>`` (`RmwZenohKeys`). What voicectl sends
-  goes to the exact key the robot's side announced (its token carries its type hash), or,
-  before that is known, to the key of the type hash this distribution computes
-  (`shared.ros2.type_hash`); what it hears or asks, it hears or asks whatever the hash.
+- Keys ``<domain>/<name>/<DDS type>/<type hash>`` (`RmwZenohKeys`). What voicectl
+  publishes goes to the exact key the robot's side announced (its token carries its type
+  hash), as this transport has seen it since it was opened or as the executor saw it
+  (`expect`), or, before either is known, to the key of the type hash this distribution
+  computes (`shared.ros2.type_hash`); what it hears or asks (a service call), it hears or
+  asks whatever the hash.
 - An attachment on every publication, query and reply, in zenoh's own serialization:
   int64 sequence number (per publisher or client, from 1), int64 source timestamp in
   nanoseconds since the epoch, then the 16-byte source GID as a sequence (a 0x10 length
@@ -23,6 +25,7 @@ rmw_zenoh_cpp sources as released for Humble (0.1.9), Jazzy (0.2.10) and Kilted 
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import logging
 import struct
@@ -144,15 +147,22 @@ class RmwZenohTransport(RobotTransport):
         self._lock = threading.Lock()
         self._announced: dict[tuple[str, str], str] = {}
         """(name, DDS type) -> the type hash the robot's side announced for it."""
+        self._expected: dict[tuple[str, str], str] = {}
+        """The same as another process saw it (`expect`): until this one has seen it."""
+        self._subscribed: dict[str, list[str]] = {}
+        """Topic name -> the ROS types the robot's subscribers of it announced."""
         node_token = RmwToken(
             self._zid, self._node_id, self._node_id, RmwKind.NODE, namespace, node
         )
         bus.announce(self.keys.token(node_token))
+        self._following = False
+        """The robot's tokens are watched (`follow`, `discover`): what they say is learnt."""
 
     # --- keys and entities --------------------------------------------------------------
 
     def _hash(self, name: str, ros_type: str) -> str:
-        announced = self._announced.get((name, dds_type_name(ros_type)))
+        key = (name, dds_type_name(ros_type))
+        announced = self._announced.get(key) or self._expected.get(key)
         return announced or type_hash(self.distro or RosDistro.JAZZY, ros_type)
 
     def _exact(self, name: str, ros_type: str) -> str:
@@ -250,16 +260,36 @@ class RmwZenohTransport(RobotTransport):
                     )
                     self.entity(kind, member.name, member.ros_type)
 
+    def expect(self, interface: Interface) -> None:
+        if interface.type_hash and interface.role in (Role.SUBSCRIBER, Role.SERVICE_SERVER):
+            self._expected[(interface.name, dds_type_name(interface.ros_type))] = (
+                interface.type_hash
+            )
+
+    def subscriber_types(self, name: str) -> list[str]:
+        return list(self._subscribed.get(name, ()))
+
+    def follow(self) -> None:
+        if self._start_following():
+            self._bus.watch(self.keys.tokens, self._on_token)
+
+    def _start_following(self) -> bool:
+        with self._lock:
+            started, self._following = not self._following, True
+        return started
+
     def discover(self, handler: Callable[[Interface, bool], None]) -> None:
+        self._start_following()  # this watch learns as well: `follow` need not add one
+
         def on_token(key: str, present: bool) -> None:
-            token = self.keys.parse_token(key)
-            if token is None or token.zid == self._zid or token.kind is RmwKind.NODE:
+            token = self._robot_token(key)
+            if token is None:
                 return
             try:
                 ros_type = ros_type_of(token.dds_type)
             except ValueError:
                 return
-            if present:
+            if present:  # learnt before the handler hears of it, whichever watch came first
                 self._learn(token)
             role = _KINDS[token.kind]
             handler(Interface(role, token.name, ros_type, token.type_hash), present)
@@ -270,10 +300,30 @@ class RmwZenohTransport(RobotTransport):
 
         self._bus.watch(self.keys.tokens, on_token)
 
+    def _robot_token(self, key: str) -> RmwToken | None:
+        """The entity a token announces, unless it is a node or this process's own."""
+        token = self.keys.parse_token(key)
+        if token is None or token.zid == self._zid or token.kind is RmwKind.NODE:
+            return None
+        return token
+
+    def _on_token(self, key: str, present: bool) -> None:
+        token = self._robot_token(key)
+        if token is not None and present:
+            self._learn(token)
+
     def _learn(self, token: RmwToken) -> None:
-        """Note the robot's type hash for a name, and its distribution from it."""
+        """Note the robot's type hash for a name, the types its subscribers take, and its
+        distribution from the hash. Kept when the token goes: a robot restarting comes
+        back on the same key, and a stop meanwhile goes to the best key known."""
         if token.kind in (RmwKind.SUBSCRIBER, RmwKind.SERVICE_SERVER):
             self._announced[(token.name, token.dds_type)] = token.type_hash
+        if token.kind is RmwKind.SUBSCRIBER:
+            with contextlib.suppress(ValueError):  # a type name voicectl cannot read
+                ros_type = ros_type_of(token.dds_type)
+                types = self._subscribed.setdefault(token.name, [])
+                if ros_type not in types:
+                    types.append(ros_type)
         found = RosDistro.HUMBLE if token.type_hash == NO_TYPE_HASH else RosDistro.JAZZY
         if self.distro is None:
             self.distro = found

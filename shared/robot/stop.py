@@ -7,6 +7,21 @@ is left alive can stop the robot the same way, through the bridge or on rmw_zeno
 
 `zero_velocity` is a plain put: it may be called from any thread (a Zenoh callback, the
 executor's watchdog), never waits for an event loop, and goes out at once.
+
+On rmw_zenoh the robot hears only its own key: its type and type hash, as its liveliness
+tokens announce them. A stop goes there, never to a key built from a guess: the executor
+passes on what it learnt from the robot's tokens (`ExecutorInfo.cmd_vel_hash`), and the
+stop's own transport follows the robot's tokens from the moment it is opened (when the
+executor announces itself, or a supervisor starts), so that what it sees itself wins.
+Zero velocity goes out at once on the best key known; it is sent in every type the robot
+announced for cmd_vel as well as in the executor's (on rmw_zenoh each type is a key of its
+own). Service calls (the cancel) are asked whatever the type hash, so reach the robot's
+server whatever its hash.
+
+A supervisor that never heard of an executor (one started after its executor died) has
+no `ExecutorInfo`: it stops on the default names through rmw_zenoh in domain 0 once a
+robot there has announced a cmd_vel subscriber, in the type and hash it announced, and
+through the bridge otherwise (`RobotStop.of(None, ...)`).
 """
 
 from __future__ import annotations
@@ -33,7 +48,8 @@ from ..ros2 import (
 )
 from . import open_transport
 from .kinds import TransportKind
-from .transport import RobotTransport
+from .rmw_zenoh import RmwZenohTransport
+from .transport import Interface, RobotTransport, Role
 
 _LOGGER = logging.getLogger(__name__)
 
@@ -57,16 +73,34 @@ def stop_codec(distro: RosDistro) -> Ros2Codec:
     return codec
 
 
+UNANNOUNCED = RosDistro.JAZZY
+"""The codec that stops a robot no executor announced: a stop's messages (Twist,
+TwistStamped, CancelGoal) are the same in every distribution voicectl speaks, so one
+prepared codec serves, whatever the robot's tokens say."""
+
 _BUILDING: set[asyncio.Future[None]] = set()
 """Builds under way: the loop keeps only weak references to them."""
 
 
-def prepare(info: ExecutorInfo) -> asyncio.Future[None]:
+def prepare(
+    info: ExecutorInfo | None, bus: Bus | None = None, node: str = NODE
+) -> asyncio.Future[None]:
     """Build what will stop the robot `info` announces (its codec; on rmw_zenoh the type
     hashes in its keys), off the event loop, as soon as its executor announces it: not
-    when someone presses STOP. Nobody has to keep or await the future."""
+    when someone presses STOP. Given the `bus` (and the `node` the stop will use), the
+    stop's transport is opened now too, and follows the robot's announcements from now
+    on. `info` None: a robot no executor announced (`RobotStop.of`). Nobody has to keep
+    or await the future."""
+    if bus is not None:
+        if info is None:
+            _unannounced(bus, node).follow()
+        else:
+            _transport(info, _names(info), bus, node).follow()
 
     def build() -> None:
+        if info is None:  # its keys will be the robot's own: no hash to compute
+            stop_codec(UNANNOUNCED)
+            return
         stop_codec(info.distro)
         if info.transport is TransportKind.RMW_ZENOH:
             type_hash(info.distro, info.cmd_vel_type.ros_type)
@@ -88,29 +122,47 @@ class RobotStop:
     cmd_vel_type: CmdVelType
 
     @classmethod
-    def of(cls, info: ExecutorInfo, bus: Bus, node: str = NODE) -> RobotStop:
+    def of(cls, info: ExecutorInfo | None, bus: Bus, node: str = NODE) -> RobotStop:
         """From what the executor announced; names that make no sense fall back to the
-        defaults (with a warning), since a stop on the usual names beats no stop."""
-        try:
-            names = RobotNames(
-                info.namespace, cmd_vel_name=info.cmd_vel, navigate_name=info.navigate
-            )
-        except ValueError as exc:
-            _LOGGER.warning("unusable executor info (%s); stopping on default names", exc)
+        defaults (with a warning), since a stop on the usual names beats no stop. With no
+        `info` at all (no executor was ever heard), rmw_zenoh's default keys once a robot
+        there announced its cmd_vel, else the bridge's (see the module's docstring)."""
+        if info is None:
+            rmw = _unannounced(bus, node)
+            rmw.follow()
             names = RobotNames()
-        transport = open_transport(
-            bus, info.transport, node, names.namespace, info.domain_id, info.distro
-        )
+            announced = [CmdVelType.of(t) for t in rmw.subscriber_types(names.cmd_vel)]
+            kind = next((kind for kind in announced if kind is not None), None)
+            if kind is not None:
+                return cls(rmw, names, stop_codec(UNANNOUNCED), kind)
+            info = ExecutorInfo(transport=TransportKind.BRIDGE)
+        names = _names(info)
+        transport = _transport(info, names, bus, node)
+        transport.follow()
+        if info.cmd_vel_hash:
+            transport.expect(
+                Interface(
+                    Role.SUBSCRIBER, names.cmd_vel, info.cmd_vel_type.ros_type, info.cmd_vel_hash
+                )
+            )
         return cls(transport, names, stop_codec(info.distro), info.cmd_vel_type)
 
     def zero_velocity(self) -> str:
-        """Send zero velocity, first and at once; says where."""
-        payload = self.codec.velocity(self.cmd_vel_type, 0.0, 0.0, time.time())
-        for _ in range(STOP_REPEAT):
-            self.transport.publish(
-                self.names.cmd_vel, self.cmd_vel_type.ros_type, payload, urgent=True
-            )
-        return f"sent zero velocity on '{self.names.cmd_vel}'"
+        """Send zero velocity, first and at once; says where. In the type the robot's
+        cmd_vel takes as far as anyone knows, and in every type the robot's subscribers
+        announced to this transport (rmw_zenoh), each on its own key."""
+        name = self.names.cmd_vel
+        kinds = [self.cmd_vel_type]
+        for ros_type in self.transport.subscriber_types(name):
+            kind = CmdVelType.of(ros_type)
+            if kind is not None and kind not in kinds:
+                kinds.append(kind)
+        stamp = time.time()
+        for kind in kinds:
+            payload = self.codec.velocity(kind, 0.0, 0.0, stamp)
+            for _ in range(STOP_REPEAT):
+                self.transport.publish(name, kind.ros_type, payload, urgent=True)
+        return f"sent zero velocity on '{name}'"
 
     async def cancel_goals(
         self, goal_id: bytes | None = None, timeout: float = CANCEL_TIMEOUT
@@ -158,6 +210,29 @@ class RobotStop:
         sent = self.zero_velocity()
         cancelled = await self.cancel_goals()
         return Cancelled(cancelled.answered, cancelled.confirmed, f"{sent}; {cancelled.detail}")
+
+
+def _names(info: ExecutorInfo) -> RobotNames:
+    try:
+        return RobotNames(info.namespace, cmd_vel_name=info.cmd_vel, navigate_name=info.navigate)
+    except ValueError as exc:
+        _LOGGER.warning("unusable executor info (%s); stopping on default names", exc)
+        return RobotNames()
+
+
+def _transport(info: ExecutorInfo, names: RobotNames, bus: Bus, node: str) -> RobotTransport:
+    """The transport a stop of the robot `info` announces uses (one per process and robot:
+    `open_transport` keeps it)."""
+    return open_transport(bus, info.transport, node, names.namespace, info.domain_id, info.distro)
+
+
+def _unannounced(bus: Bus, node: str) -> RmwZenohTransport:
+    """rmw_zenoh in domain 0 without a namespace, its distribution learnt from the robot's
+    tokens: where a supervisor that never heard of an executor looks for its robot."""
+    transport = open_transport(bus, TransportKind.RMW_ZENOH, node)
+    if not isinstance(transport, RmwZenohTransport):
+        raise TypeError(f"open_transport gave {type(transport).__name__} for rmw_zenoh")
+    return transport
 
 
 @dataclass(frozen=True)

@@ -100,6 +100,28 @@ class RobotTransport(abc.ABC):
         """Call `handler(interface, present)` on the loop as the robot's interfaces appear
         and go, those that were there before included; this process's own excepted."""
 
+    @abc.abstractmethod
+    def follow(self) -> None:
+        """Learn from the robot's announcements from now on, in the background, so that
+        what this process sends goes where the robot listens (`discover` does it too;
+        once is enough). Nothing to learn where a key does not depend on them (the
+        bridge). A simulated robot does not follow: a robot's keys are its own."""
+
+    @abc.abstractmethod
+    def expect(self, interface: Interface) -> None:
+        """Take `interface` as the robot's, as another process saw it announced (the
+        executor, whose `ExecutorInfo` passes it on): what this process sends to it goes
+        where the robot listens even before this transport has seen the robot's own
+        announcement, which wins once seen. Nothing to do where a key does not depend on
+        what the robot announces (the bridge)."""
+
+    @abc.abstractmethod
+    def subscriber_types(self, name: str) -> list[str]:
+        """The ROS types the robot's subscribers of topic `name` have announced, as far as
+        this transport has seen, where a layout keeps a topic's types apart on the wire
+        (rmw_zenoh: the type is in the key), so that a message in each reaches only those
+        who take it; [] elsewhere (the bridge), and before anything was seen."""
+
 
 @dataclass(frozen=True)
 class ActionMember:
