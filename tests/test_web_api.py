@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 from starlette.testclient import TestClient
 from starlette.websockets import WebSocketDisconnect
 
-from services.web.app import MAX_BODY, Access, create_app
+from services.web.app import MAX_BODY, Access, Panel, create_app
 from shared.bus import BusOptions
 from shared.keys import RobotKeys
 from shared.messages import AudioChunk, AudioMessage, AudioStart, AudioStop
@@ -33,7 +33,7 @@ AUTH = {"Authorization": f"Bearer {TOKEN}"}
 
 @pytest.fixture
 def client(router: str) -> Iterator[TestClient]:
-    app = create_app(BusOptions(connect=[router]), "robot", Access(TOKEN))
+    app = create_app(BusOptions(connect=[router]), Panel("robot", Access(TOKEN)))
     with TestClient(app) as test_client:  # runs the lifespan: the app opens its bus
         yield test_client
 
@@ -139,7 +139,7 @@ def test_robots_lists_the_default_robot(client: TestClient) -> None:
 
 
 def test_the_event_stream_starts_with_what_is_known(router: str) -> None:
-    app = create_app(BusOptions(connect=[router]), "robot", Access(TOKEN))
+    app = create_app(BusOptions(connect=[router]), Panel("robot", Access(TOKEN)))
     with (
         TestClient(app) as client,
         client.stream("GET", "/api/events?robot=robot", headers=AUTH) as response,
@@ -506,6 +506,35 @@ def test_a_client_gone_mid_body_leaves_no_traceback(
     log = processes.log(web)
     assert "Traceback" not in log, log
     assert "ClientDisconnect" not in log, log
+
+
+def test_an_open_event_stream_does_not_hold_up_the_stop(
+    router: str, processes: Processes, tmp_path: Path
+) -> None:
+    """A panel left open in a browser: SIGTERM still stops the service, at once and
+    cleanly, and the stream ends instead of breaking off."""
+    port = free_port()
+    token_file = tmp_path / "token"
+    token_file.write_text(TOKEN)
+    web = processes.start(
+        "services.web", "--connect", router, "--port", str(port), "--token-file", str(token_file)
+    )
+    wait_until(lambda: "panel on" in processes.log(web), 30.0, "the panel")
+    with socket.create_connection(("127.0.0.1", port), timeout=10.0) as raw:
+        raw.sendall(
+            f"GET /api/events HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer {TOKEN}\r\n\r\n".encode()
+        )
+        received = raw.recv(4096)
+        assert received.startswith(b"HTTP/1.1 200"), received
+        while b"data: " not in received:
+            received += raw.recv(4096)
+        stopped_at = time.monotonic()
+        assert processes.stop(web, timeout=10.0) == 0, processes.log(web)
+        assert time.monotonic() - stopped_at < 5.0
+        while chunk := raw.recv(4096):  # the stream's last chunk, then the end
+            received += chunk
+    assert received.endswith(b"0\r\n\r\n"), received[-200:]
+    assert "Traceback" not in processes.log(web), processes.log(web)
 
 
 class StuckStream:

@@ -29,7 +29,7 @@ from shared.process import (
     serve,
 )
 
-from .app import Access, create_app
+from .app import Access, Panel, create_app
 from .audio import MAX_MESSAGE
 from .tls import add_tls_arguments, tls_problem
 
@@ -91,8 +91,11 @@ class PanelServer(Service):
     serving, `run()` returns if it ends by itself (its app failed to start), `stop()` has it
     close its connections and return. The app's lifespan opens the bus and runs the hub."""
 
-    def __init__(self, config: uvicorn.Config, listening: socket.socket, where: str) -> None:
+    def __init__(
+        self, config: uvicorn.Config, listening: socket.socket, where: str, panel: Panel
+    ) -> None:
         self._server = _QuietServer(config)
+        self._panel = panel
         self._listening = listening
         self._where = where
         self._serving: asyncio.Task[None] | None = None
@@ -110,6 +113,7 @@ class PanelServer(Service):
     async def stop(self) -> None:
         try:
             if self._serving is not None:
+                self._panel.end_streams()  # else uvicorn would wait for them forever
                 self._server.should_exit = True  # uvicorn closes connections and returns
                 await self._serving
         finally:
@@ -124,8 +128,9 @@ async def main(args: argparse.Namespace) -> None:
         raise ServiceError(problem)
     token_file = args.token_file or default_token_file()
     access = Access(load_or_create_token(token_file), origins=args.allow_origin)
+    panel = Panel(args.robot, access)
     config = uvicorn.Config(
-        create_app(bus_options(args), args.robot, access),
+        create_app(bus_options(args), panel),
         host=args.host,
         port=args.port,
         access_log=False,
@@ -140,7 +145,7 @@ async def main(args: argparse.Namespace) -> None:
         raise ServiceError(f"cannot serve on {args.host}:{args.port}: {exc.strerror}") from exc
     scheme = "https" if args.certfile else "http"
     where = f"{scheme}://{args.host}:{args.port} (token in {token_file})"
-    await serve(PanelServer(config, listening, where))
+    await serve(PanelServer(config, listening, where, panel))
 
 
 def run(argv: list[str] | None = None) -> int:

@@ -52,7 +52,7 @@ from shared.messages import (
 from shared.process import running
 
 from .audio import AudioSocket
-from .hub import Hub
+from .hub import END, Hub
 
 _LOGGER = logging.getLogger(__name__)
 STATIC = Path(__file__).parent / "static"
@@ -157,6 +157,11 @@ class Panel:
         self._client = VoicectlClient(bus, BUS_TIMEOUT)
         self.hub = Hub(bus, self.default_robot)
         return self.hub
+
+    def end_streams(self) -> None:
+        """End the event streams: the server stops once its responses have ended."""
+        if self.hub is not None:
+            self.hub.end_streams()
 
     @property
     def bus(self) -> Bus:
@@ -355,17 +360,18 @@ class Panel:
                             event = await queue.get()
                     except TimeoutError:
                         event = b": keep-alive\n\n"
+                    if event == END:
+                        return
                     yield event
 
         return StreamingResponse(stream(), media_type="text/event-stream")
 
 
-def create_app(options: BusOptions, robot: str, access: Access) -> Starlette:
-    """The panel as an ASGI app. Its lifespan opens its bus and runs the hub as a service
+def create_app(options: BusOptions, panel: Panel) -> Starlette:
+    """`panel` as an ASGI app. Its lifespan opens its bus and runs the hub as a service
     (`running`, shared/process.py) on the loop that serves it, whichever server that is
     (uvicorn in `voicectl web`, Starlette's TestClient in the tests), and closes both at
     the end."""
-    panel = Panel(robot, access)
 
     @contextlib.asynccontextmanager
     async def lifespan(_app: Starlette) -> AsyncIterator[None]:

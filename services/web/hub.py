@@ -40,6 +40,8 @@ POSE_FRESH = 3.0
 """Seconds after its last pose that a robot still counts as online."""
 QUEUE_LIMIT = 200
 """Frames a stalled browser may fall behind before it loses the oldest."""
+END = b""
+"""The last item of a listener's queue: the stream ends (the server is stopping)."""
 
 
 class Parts(msgspec.Struct, tag="parts", tag_field="type"):
@@ -90,6 +92,7 @@ class Hub(Service):
         self._encoder = msgspec.json.Encoder()
         self._ends: list[Callable[[], None]] = []
         """What `stop()` ends: the subscriptions and watches `start()` made."""
+        self._ending = False
 
     async def start(self) -> None:
         every = RobotKeys(ANY)
@@ -128,6 +131,14 @@ class Hub(Service):
                     del self._posed[robot]
                     self._send_parts(robot)
 
+    def end_streams(self) -> None:
+        """End every listener's stream, and any opened from now on: the server is stopping,
+        and waits for its responses to finish, which an event stream never does."""
+        self._ending = True
+        for listeners in self._listeners.values():
+            for queue in listeners:
+                queue.put_nowait(END)
+
     @property
     def robots(self) -> list[str]:
         return sorted({self._default, *self._alive})
@@ -152,6 +163,8 @@ class Hub(Service):
     def listen(self, robot: str) -> Iterator[asyncio.Queue[bytes]]:
         """A queue of server-sent-event frames for `robot`, primed with what is known."""
         queue: asyncio.Queue[bytes] = asyncio.Queue()
+        if self._ending:
+            queue.put_nowait(END)
         for frame in self._last.get(robot, {}).values():
             queue.put_nowait(frame)
         queue.put_nowait(self._frame(self.parts(robot)))
@@ -176,6 +189,8 @@ class Hub(Service):
         return b"data: " + self._encoder.encode(message) + b"\n\n"
 
     def _send(self, robot: str, frame: bytes) -> None:
+        if self._ending:  # nothing may come after END, nor push it out of a full queue
+            return
         for queue in self._listeners.get(robot, ()):
             if queue.qsize() >= QUEUE_LIMIT:  # a stalled browser loses old frames
                 queue.get_nowait()
