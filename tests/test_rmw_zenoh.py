@@ -1,4 +1,11 @@
-"""rmw_zenoh's wire layout, pinned byte for byte, and voicectl speaking it on a real router.
+"""rmw_zenoh's wire layout, and voicectl speaking it on a real router.
+
+Pinned byte for byte: keys, tokens, type hashes, GIDs and the attachment's encoding (at a
+fixed time). On a router: a publication's exact key, payload and attachment (sequence
+numbers, the GID of its publisher's token); a service call's key (voicectl asks whatever
+the type hash), payload and attachment (its sequence number, the GID of its client's
+token; the time is the call's own); a reply's echo of the request's sequence number and
+GID.
 
 The expected values were worked out from ros2/rmw_zenoh's docs/design.md and its
 rmw_zenoh_cpp sources as released for Jazzy (0.2.10), Kilted (0.6.7) and Humble (0.1.9):
@@ -15,8 +22,10 @@ import zenoh
 from zenoh.ext import Int64, z_serialize
 
 from shared.keys import RMW_QOS_DEFAULT, RmwKind, RmwToken, RmwZenohKeys
+from shared.messages import ExecutorInfo
 from shared.robot import Interface, Role, TransportKind, open_transport
 from shared.robot.rmw_zenoh import Attachment, RmwZenohTransport, gid_of
+from shared.robot.stop import RobotStop
 from shared.ros2 import (
     CANCEL_GOAL,
     NAVIGATE_SEND_GOAL,
@@ -179,7 +188,7 @@ async def test_a_publication_and_a_service_call_carry_what_rmw_zenoh_needs(route
     with joined(router) as bus:
         session = bus.session
         seen: list[zenoh.Sample] = []
-        asked: list[tuple[bytes, bytes]] = []
+        asked: list[tuple[str, bytes, bytes]] = []
         twist_key = RmwZenohKeys(0).data(
             "bot1/cmd_vel", dds_type_name("geometry_msgs/msg/Twist"), TWIST_HASH
         )
@@ -192,7 +201,8 @@ async def test_a_publication_and_a_service_call_carry_what_rmw_zenoh_needs(route
 
         def on_goal(query: zenoh.Query) -> None:  # a robot's rmw_zenoh action server
             attachment = query.attachment.to_bytes() if query.attachment else b""
-            asked.append((query.payload.to_bytes() if query.payload else b"", attachment))
+            payload = query.payload.to_bytes() if query.payload else b""
+            asked.append((str(query.key_expr), payload, attachment))
             reply = Attachment(Attachment.decode(attachment).sequence, 1, bytes(16)).encode()
             query.reply(query.key_expr, codec.send_goal_response(True, 1.0), attachment=reply)
 
@@ -221,8 +231,16 @@ async def test_a_publication_and_a_service_call_carry_what_rmw_zenoh_needs(route
                 "bot1/navigate_to_pose/_action/send_goal", NAVIGATE_SEND_GOAL, request, 5.0
             )
             assert codec.read_send_goal_response(reply)
-            ((payload, attachment),) = asked
+            ((key, payload, attachment),) = asked
+            # A call asks whatever type hash the robot's server has; rmw_zenoh's own
+            # clients ask the exact key. The payload is the request as it was given.
+            assert key == (
+                "0/bot1/navigate_to_pose/_action/send_goal/"
+                "nav2_msgs::action::dds_::NavigateToPose_SendGoal_/*"
+            )
             assert payload == request
+            assert len(attachment) == 33
+            assert attachment[16] == 0x10  # the GID's length, before the GID
             client = Attachment.decode(attachment)
             assert client.sequence == 1
             # The tokens say who sent them: the node, its publisher and its client.
@@ -289,3 +307,44 @@ async def test_a_served_service_echoes_the_client_in_its_reply_and_discovery_see
         echoed = Attachment.decode(answer.attachment.to_bytes())
         assert (echoed.sequence, echoed.gid) == (7, bytes(range(16)))
         assert echoed.timestamp_ns > 5
+
+
+async def test_a_stop_goes_where_the_executor_saw_the_robot_listen_until_it_sees_for_itself(
+    router: str,
+) -> None:
+    """A stop's first zero velocity goes out at once, on the key the executor passed on
+    (ExecutorInfo.cmd_vel_hash); its transport follows the robot's tokens from then on,
+    and what the robot itself announces wins."""
+    told = "RIHS01_" + "ab" * 32  # the executor's word: a robot since restarted, say
+    twist = dds_type_name("geometry_msgs/msg/Twist")
+    with joined(router) as bus, joined(router) as robot_bus:
+        robot = open_transport(
+            robot_bus, TransportKind.RMW_ZENOH, "voicectl_sim", "", 0, RosDistro.HUMBLE
+        )
+        heard: set[str] = set()
+
+        def hear(key: str) -> None:  # as the robot's rmw_zenoh subscription: this key only
+            robot_bus.subscribe(key, bytes, lambda sample_key, _raw: heard.add(sample_key))
+
+        told_key = RmwZenohKeys(0).data("cmd_vel", twist, told)
+        announced = RmwZenohKeys(0).data("cmd_vel", twist, "TypeHashNotSupported")
+        hear(told_key)
+        hear(announced)
+        info = ExecutorInfo(transport=TransportKind.RMW_ZENOH, cmd_vel_hash=told)
+        stop = RobotStop.of(info, bus, "voicectl_test_stop")
+
+        def stopped_on(key: str) -> bool:
+            # Sent again until heard: the robot's subscription may not have reached the
+            # router yet. The robot's token is not there: the told key it is.
+            stop.zero_velocity()
+            return key in heard
+
+        await async_wait_until(lambda: stopped_on(told_key), 5.0, "the stop on the told key")
+        assert heard == {told_key}
+
+        robot.offer(Interface(Role.SUBSCRIBER, "cmd_vel", "geometry_msgs/msg/Twist"))
+        await async_wait_until(
+            lambda: stop.transport.subscriber_types("cmd_vel"), 5.0, "the robot's token"
+        )
+        stop = RobotStop.of(info, bus, "voicectl_test_stop")
+        await async_wait_until(lambda: stopped_on(announced), 5.0, "the stop on the robot's key")
