@@ -212,6 +212,8 @@ async def test_an_executor_back_at_once_leaves_no_order_running(
         await async_wait_until(
             lambda: rig.odometry[-1][1].linear_x == 0.0, 5.0, "the robot to stand"
         )
+        # The executor started again serves again (and is up before the test stops it).
+        await rig.ready(client)
 
 
 async def test_a_stop_for_a_robot_nobody_serves_creates_none(
