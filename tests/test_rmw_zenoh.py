@@ -18,17 +18,24 @@ No ROS 2 runs here: what these values are checked against is that source, not a 
 
 from __future__ import annotations
 
+import asyncio
+
 import zenoh
 from zenoh.ext import Int64, z_serialize
 
 from shared.keys import RMW_QOS_DEFAULT, RmwKind, RmwToken, RmwZenohKeys
 from shared.messages import ExecutorInfo
 from shared.robot import Interface, Role, TransportKind, open_transport
+from shared.robot.action import ActionClient, Cancelled
 from shared.robot.rmw_zenoh import Attachment, RmwZenohTransport, gid_of
 from shared.robot.stop import RobotStop
 from shared.ros2 import (
     CANCEL_GOAL,
+    NAVIGATE_FEEDBACK,
+    NAVIGATE_GET_RESULT,
     NAVIGATE_SEND_GOAL,
+    CancelCode,
+    GoalStatus,
     Pose2D,
     Ros2Codec,
     RosDistro,
@@ -348,3 +355,75 @@ async def test_a_stop_goes_where_the_executor_saw_the_robot_listen_until_it_sees
         )
         stop = RobotStop.of(info, bus, "voicectl_test_stop")
         await async_wait_until(lambda: stopped_on(announced), 5.0, "the stop on the robot's key")
+
+
+async def test_the_action_client_sends_follows_and_cancels_a_goal(router: str) -> None:
+    """The seam's one action client against an action server on rmw_zenoh: a goal sent
+    and accepted, its feedback and status followed, cancelled, its result had."""
+    action = "bot1/navigate_to_pose"
+    goal_id = bytes(range(16))
+    codec = Ros2Codec()
+    with joined(router) as bus, joined(router) as robot_bus:
+        robot = open_transport(robot_bus, TransportKind.RMW_ZENOH, "voicectl_sim", "bot1")
+        ended = asyncio.Event()
+        asked: list[bytes] = []
+
+        async def send_goal(raw: bytes) -> bytes:
+            asked.append(codec.read_send_goal_request(raw).goal_id)
+            return codec.send_goal_response(True, 1.0)
+
+        async def get_result(raw: bytes) -> bytes:
+            assert codec.read_get_result_request(raw) == goal_id
+            await ended.wait()
+            return codec.get_result_response(GoalStatus.CANCELED)
+
+        async def cancel(raw: bytes) -> bytes:
+            ended.set()
+            cancelled = codec.read_cancel_goal_request(raw).goal_id
+            return codec.cancel_goal_response(CancelCode.NONE, (cancelled,))
+
+        robot.serve(f"{action}/_action/send_goal", NAVIGATE_SEND_GOAL, send_goal)
+        robot.serve(f"{action}/_action/get_result", NAVIGATE_GET_RESULT, get_result)
+        robot.serve(f"{action}/_action/cancel_goal", CANCEL_GOAL, cancel)
+        executor = open_transport(bus, TransportKind.RMW_ZENOH, "voicectl_executor", "bot1")
+        servers: set[str] = set()
+        executor.discover(
+            lambda i, present: servers.add(i.name) if i.role is Role.SERVICE_SERVER else None
+        )
+        await async_wait_until(lambda: len(servers) == 3, 5.0, "the action server's tokens")
+
+        client = ActionClient(executor, action, codec)
+        client.follow()
+        heard: list[float] = []
+        try:
+            with client.following(goal_id, lambda f: heard.append(f.distance_remaining)):
+                assert await client.send_goal(goal_id, "map", Pose2D(2.0, 0.0, 0.0), 5.0)
+                assert asked == [goal_id]
+
+                def followed() -> bool:
+                    # Published again until heard: the subscriptions may not have reached
+                    # the router yet. The status of a goal not followed is no one's.
+                    robot.publish(
+                        f"{action}/_action/feedback",
+                        NAVIGATE_FEEDBACK,
+                        codec.feedback(goal_id, Pose2D(0.5, 0.0, 0.0), 1.5, 1.0),
+                    )
+                    robot.publish(
+                        f"{action}/_action/status",
+                        "action_msgs/msg/GoalStatusArray",
+                        codec.goal_status_array(
+                            [(bytes(16), GoalStatus.ABORTED), (goal_id, GoalStatus.EXECUTING)]
+                        ),
+                    )
+                    return bool(heard) and client.status(goal_id) is GoalStatus.EXECUTING
+
+                await async_wait_until(followed, 5.0, "the goal's feedback and status")
+                assert heard[0] == 1.5
+                assert await client.cancel(goal_id) == Cancelled(
+                    True, True, f"navigation cancelled goal {goal_id.hex()[:8]}"
+                )
+                result = await client.get_result(goal_id, 5.0)
+                assert result.status is GoalStatus.CANCELED
+            assert client.status(goal_id) is None  # followed no longer
+        finally:
+            client.close()

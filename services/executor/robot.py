@@ -3,9 +3,10 @@
 `RobotLink` is the one connection of the process: it follows odometry, learns what the
 robot's topics take from what the robot's graph announces, learns the ROS distribution
 from a get_result reply, and does the navigation and stop work, through zenoh-bridge-ros2dds
-or rmw_zenoh alike (shared/robot/). Each order gets an `OrderRobot`, a handle onto the
-link that is revoked when the order ends, so that an executor that outlives its order can
-never move the robot again. `PoseRelay` publishes the pose for voicectl's own panels.
+or rmw_zenoh alike (shared/robot/: Nav2 through the seam's action client, the stop through
+its stop). Each order gets an `OrderRobot`, a handle onto the link that is revoked when the
+order ends, so that an executor that outlives its order can never move the robot again.
+`PoseRelay` publishes the pose for voicectl's own panels.
 """
 
 from __future__ import annotations
@@ -27,12 +28,10 @@ from shared.geometry import compose
 from shared.keys import RobotNames
 from shared.messages import RobotMap, RobotPose, TargetPose
 from shared.robot import Interface, RobotTransport, Role
+from shared.robot.action import ActionClient
 from shared.robot.stop import RobotStop
 from shared.robot_options import RobotOptions
 from shared.ros2 import (
-    NAVIGATE_FEEDBACK,
-    NAVIGATE_GET_RESULT,
-    NAVIGATE_SEND_GOAL,
     NAVIGATION_ERRORS,
     CameraType,
     CdrError,
@@ -94,9 +93,12 @@ class RobotLink:
         self.pose: Pose2D | None = None
         """Latest pose from odometry, None until the first message."""
         self._odometry = asyncio.Event()
-        self._feedback: dict[bytes, Callable[[Pose2D, float], None]] = {}
         self.distro: RosDistro | None = options.distro
         """The robot's distribution: as configured, or once detected; None until then."""
+        self.navigation = ActionClient(
+            transport, self.names.topic(self.names.navigate_name), self.codec
+        )
+        """Nav2's NavigateToPose, its codec the robot's distribution's once known."""
         self.distro_problem: str | None = None
         """Why navigation cannot be used (the configured distribution is not the robot's)."""
         self._distro_checked = False
@@ -158,9 +160,7 @@ class RobotLink:
         codec = self.codec
         names = self.names
         self.transport.subscribe(names.odom, ODOMETRY, codec.read_odometry, self._on_odom)
-        self.transport.subscribe(
-            names.navigate("feedback"), NAVIGATE_FEEDBACK, codec.read_feedback, self._on_feedback
-        )
+        self.navigation.follow()
         self.transport.discover(self._on_interface)
         self._probe_soon()
 
@@ -215,12 +215,7 @@ class RobotLink:
         """Ask get_result about a goal that does not exist: an action server answers at
         once, in its distribution's layout, and nothing moves."""
         try:
-            reply = await self.transport.call(
-                self.names.navigate("get_result"),
-                NAVIGATE_GET_RESULT,
-                self.codec.get_result_request(new_goal_id()),
-                PROBE_TIMEOUT,
-            )
+            reply = await self.navigation.result_reply(new_goal_id(), PROBE_TIMEOUT)
         except BusError as exc:
             _LOGGER.debug("no answer to the distribution probe: %s", exc)
             return
@@ -242,6 +237,7 @@ class RobotLink:
             return
         if self.distro is not found:
             self.distro = found
+            self.navigation.codec = Ros2Codec(found)
             _LOGGER.info("the robot's navigation speaks ROS 2 %s", found.title())
             self._on_change()
 
@@ -310,11 +306,6 @@ class RobotLink:
         finally:
             unsubscribe()
 
-    def _on_feedback(self, feedback: NavigateFeedback) -> None:
-        listener = self._feedback.get(feedback.goal_id)
-        if listener is not None:
-            listener(feedback.pose, feedback.distance_remaining)
-
     def drive(self, linear_x: float, angular_z: float) -> None:
         """Publish one velocity command on cmd_vel, in the type the robot takes. A zero
         one is a stop: it waits for room rather than being dropped, and goes first."""
@@ -376,39 +367,39 @@ class RobotLink:
         'odom' goal from the current odometry first.
         """
         distro = await self._known_distro()
-        codec = Ros2Codec(distro)
+        navigation = self.navigation
+        if navigation.codec.distro is not distro:  # set with the distribution; kept honest here
+            navigation.codec = Ros2Codec(distro)
         frame, pose = target.frame, Pose2D(x=target.x, y=target.y, yaw=target.yaw)
         if distro is RosDistro.HUMBLE and frame == ROBOT_FRAME:
             pose, frame = compose(await self.next_pose(), pose), ODOM_FRAME
         goal_id = new_goal_id()
-        self._feedback[goal_id] = on_feedback
-        try:
+
+        def feedback(message: NavigateFeedback) -> None:
+            on_feedback(message.pose, message.distance_remaining)
+
+        with navigation.following(goal_id, feedback):
             try:
-                reply = await self.transport.call(
-                    self.names.navigate("send_goal"),
-                    NAVIGATE_SEND_GOAL,
-                    codec.send_goal_request(goal_id, frame, pose),
-                    SEND_GOAL_TIMEOUT,
-                )
-            except BusError as exc:
-                raise OrderFailed(f"navigation unavailable: {exc}") from exc
-            if not codec.read_send_goal_response(reply):
-                raise OrderFailed(
-                    f"navigation rejected the goal ({target.frame} {target.x:g}, {target.y:g})"
-                )
-            result = await self._result(goal_id, codec)
-        except asyncio.CancelledError:
-            # While send_goal is still under way too: navigation may have the goal already
-            # (its answer not back yet), and a goal nobody follows must not drive on.
-            problem = await asyncio.shield(self.cancel_goals(goal_id))
-            if problem is not None:
-                on_problem(problem)
-            raise
-        finally:
-            self._feedback.pop(goal_id, None)
+                try:
+                    accepted = await navigation.send_goal(goal_id, frame, pose, SEND_GOAL_TIMEOUT)
+                except BusError as exc:
+                    raise OrderFailed(f"navigation unavailable: {exc}") from exc
+                if not accepted:
+                    raise OrderFailed(
+                        f"navigation rejected the goal ({target.frame} {target.x:g}, {target.y:g})"
+                    )
+                result = await self._result(goal_id)
+            except asyncio.CancelledError:
+                # While send_goal is still under way too: navigation may have the goal
+                # already (its answer not back yet), and a goal nobody follows must not
+                # drive on.
+                problem = await asyncio.shield(self.cancel_goals(goal_id))
+                if problem is not None:
+                    on_problem(problem)
+                raise
         _raise_unless_succeeded(result, distro)
 
-    async def _result(self, goal_id: bytes, codec: Ros2Codec) -> NavigateResult:
+    async def _result(self, goal_id: bytes) -> NavigateResult:
         """get_result, asked again while it fails (it is safe to repeat). If it cannot be
         had within the result grace, the goal is cancelled before the order fails, so that
         the robot does not drive on while the order is reported over."""
@@ -416,13 +407,7 @@ class RobotLink:
         failing_since: float | None = None
         while True:
             try:
-                raw = await self.transport.call(
-                    self.names.navigate("get_result"),
-                    NAVIGATE_GET_RESULT,
-                    codec.get_result_request(goal_id),
-                    RESULT_TIMEOUT,
-                )
-                return codec.read_get_result_response(raw)
+                return await self.navigation.get_result(goal_id, RESULT_TIMEOUT)
             except (BusError, CdrError) as exc:
                 now = loop.time()
                 failing_since = now if failing_since is None else failing_since

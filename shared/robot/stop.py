@@ -1,6 +1,7 @@
 """Stopping a robot: the one implementation of "stop the robot", on any transport.
 
-Zero velocity on cmd_vel, then a cancel of every navigation goal, and what navigation
+Zero velocity on cmd_vel, then a cancel of every navigation goal (through the action
+client of `action.py`, which the executor's navigation uses too), and what navigation
 answered. The executor stops its robot with it, the supervisor on STOP and when the
 executor is lost, and `voicectl stop` and the panel when no supervisor answers: whoever
 is left alive can stop the robot the same way, through the bridge or on rmw_zenoh.
@@ -33,20 +34,19 @@ import time
 from dataclasses import dataclass
 
 from ..bus import Bus
-from ..errors import BusError
 from ..keys import RobotNames
 from ..messages import ExecutorInfo
 from ..ros2 import (
     CANCEL_ALL,
     CANCEL_GOAL,
-    CancelCode,
-    CdrError,
     CmdVelType,
     Ros2Codec,
     RosDistro,
     type_hash,
 )
 from . import open_transport
+from .action import CANCEL_TIMEOUT, ActionClient
+from .action import Cancelled as Cancelled  # where the supervisor has always found it
 from .kinds import TransportKind
 from .rmw_zenoh import RmwZenohTransport
 from .transport import Interface, RobotTransport, Role
@@ -55,8 +55,6 @@ _LOGGER = logging.getLogger(__name__)
 
 STOP_REPEAT = 3
 """Zero velocity is sent this many times: one lost sample must not leave the robot moving."""
-CANCEL_TIMEOUT = 2.0
-"""How long navigation has to answer a cancel."""
 NODE = "voicectl_stop"
 """The ROS node a process that only stops a robot appears as, where nodes are seen."""
 
@@ -164,45 +162,22 @@ class RobotStop:
                 self.transport.publish(name, kind.ros_type, payload, urgent=True)
         return f"sent zero velocity on '{name}'"
 
+    @property
+    def navigation(self) -> ActionClient:
+        """The robot's navigation action, as far as a stop needs it (its cancel): declares
+        nothing until used, so a stop pays nothing for it."""
+        return ActionClient(self.transport, self.names.topic(self.names.navigate_name), self.codec)
+
     async def cancel_goals(
         self, goal_id: bytes | None = None, timeout: float = CANCEL_TIMEOUT
     ) -> Cancelled:
         """Cancel one navigation goal, or every goal; what navigation answered."""
-        what = f"goal {goal_id.hex()[:8]}" if goal_id is not None else "every goal"
-        request = self.codec.cancel_goal_request(goal_id or CANCEL_ALL)
-        try:
-            raw = await self.transport.call(
-                self.names.navigate("cancel_goal"), CANCEL_GOAL, request, timeout, urgent=True
-            )
-        except BusError as exc:
-            return Cancelled(
-                False, False, f"navigation did not answer the cancel of {what} ({exc})"
-            )
-        try:
-            code = self.codec.read_cancel_goal_response(raw).return_code
-        except CdrError as exc:
-            return Cancelled(
-                True, False, f"navigation's answer to the cancel does not decode: {exc}"
-            )
-        match code:
-            case CancelCode.REJECTED:
-                return Cancelled(True, False, f"navigation refused to cancel {what}")
-            case CancelCode.UNKNOWN_GOAL_ID:
-                return Cancelled(True, True, "navigation had no goal to cancel")
-            case CancelCode.GOAL_TERMINATED:
-                return Cancelled(True, True, "navigation's goals had already ended")
-            case _:
-                return Cancelled(True, True, f"navigation cancelled {what}")
+        return await self.navigation.cancel(goal_id, timeout)
 
     def cancel_goals_now(self) -> None:
         """Ask navigation to cancel every goal without waiting for its answer; from any
         thread (one whose event loop is stalled)."""
-        self.transport.call_and_forget(
-            self.names.navigate("cancel_goal"),
-            CANCEL_GOAL,
-            self.codec.cancel_goal_request(),
-            CANCEL_TIMEOUT,
-        )
+        self.navigation.cancel_now()
 
     async def halt(self) -> Cancelled:
         """Zero velocity now, then every goal cancelled; the cancel's outcome, its detail
@@ -233,15 +208,3 @@ def _unannounced(bus: Bus, node: str) -> RmwZenohTransport:
     if not isinstance(transport, RmwZenohTransport):
         raise TypeError(f"open_transport gave {type(transport).__name__} for rmw_zenoh")
     return transport
-
-
-@dataclass(frozen=True)
-class Cancelled:
-    """What navigation said to a cancel."""
-
-    answered: bool
-    """Navigation answered at all (a robot without Nav2 never does)."""
-    confirmed: bool
-    """Nothing it was asked to cancel goes on: cancelled, unknown or already ended."""
-    detail: str
-    """In one line, for a person."""
