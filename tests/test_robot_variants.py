@@ -2,7 +2,9 @@
 by `voicectl sim` in the matching mode over real Zenoh: remapped names with a namespace,
 TwistStamped cmd_vel, a compressed camera, Humble's navigator, and navigation that
 refuses a cancel, never answers one, loses a result or aborts a goal. Every robot is
-played twice: behind zenoh-bridge-ros2dds and as nodes on rmw_zenoh.
+played twice: behind zenoh-bridge-ros2dds and as nodes on rmw_zenoh (navigation's faults
+only behind the bridge; the default robot's goal feedback, turn and cancel only on
+rmw_zenoh, tests/test_executor.py playing them behind the bridge).
 
 The executor is given names only; the transport and the types it must find out itself
 (the graph's tokens for the transport and the topics, a get_result probe for the
@@ -27,6 +29,7 @@ from shared.messages import (
     Failed,
     Halt,
     Order,
+    OrderProgress,
     OrderStatus,
     TargetPose,
 )
@@ -81,6 +84,11 @@ BRIDGE_ONLY = pytest.mark.parametrize("transport", [TransportKind.BRIDGE], ids=s
 played once, behind the bridge. What reaches the robot differently on each transport
 (driving, turning, goals with feedback and results, cancels, the camera, the stop at
 start-up, Humble's layout) is played on both."""
+
+
+RMW_ZENOH_ONLY = pytest.mark.parametrize("transport", [TransportKind.RMW_ZENOH], ids=str)
+"""What tests/test_executor.py plays behind the bridge on the simulator's defaults (a goal's
+feedback, a turn, a cancel that succeeds), played on rmw_zenoh here: once each, cheap."""
 
 
 @pytest.fixture
@@ -242,6 +250,67 @@ async def test_a_cancelled_goal_the_robot_keeps_is_named_in_the_result(
         result = await harness.finished(order_id)
         assert result.status == OrderStatus.CANCELLED
         assert result.message.startswith("cancelled; navigation refused to cancel goal ")
+
+
+@RMW_ZENOH_ONLY
+async def test_a_goal_s_feedback_reaches_the_order_s_progress(
+    router: str, start: Start, transport: TransportKind
+) -> None:
+    start()
+
+    async with harness_on(router, transport=transport) as harness:
+        result = await harness.finished(await harness.execute(goal("map", 1.0)))
+        assert result.status == OrderStatus.SUCCEEDED, result.message
+        remaining = [
+            e.progress.distance_linear
+            for e in harness.events[result.order_id]
+            if isinstance(e, OrderProgress) and e.progress.distance_linear is not None
+        ]
+        assert remaining, "no feedback reached the order's progress"
+        assert remaining[0] == pytest.approx(1.0, abs=0.2)
+        assert remaining[-1] < remaining[0]
+
+
+@RMW_ZENOH_ONLY
+async def test_a_turn_closes_on_odometry(
+    router: str, start: Start, transport: TransportKind
+) -> None:
+    start()
+
+    async with harness_on(router, transport=transport) as harness:
+        begin = harness.pose().pose
+        turn = Order(
+            order="rotation",
+            label="rotate",
+            description="turn left",
+            target_pose=TargetPose(frame="base_link", yaw=1.57),
+        )
+        result = await harness.finished(await harness.execute(turn))
+        assert result.status == OrderStatus.SUCCEEDED, result.message
+        await async_wait_until(lambda: harness.pose().angular_z == 0.0, 5.0, "the turn to end")
+        turned = harness.pose().pose.yaw - begin.yaw
+        assert math.atan2(math.sin(turned), math.cos(turned)) == pytest.approx(1.57, abs=0.05)
+
+
+@RMW_ZENOH_ONLY
+async def test_a_running_goal_is_cancelled_and_the_robot_stops(
+    router: str, start: Start, transport: TransportKind
+) -> None:
+    start()
+
+    async with harness_on(router, transport=transport) as harness:
+        order_id = await harness.execute(goal("map", 8.0))
+        await moving(harness)
+        cancelled_at = asyncio.get_running_loop().time()
+        assert isinstance(await harness.control(CancelOrder(order_id=order_id)), Done)
+        result = await harness.finished(order_id)
+        assert (result.status, result.message) == (OrderStatus.CANCELLED, "cancelled")
+        await async_wait_until(
+            lambda: harness.since(cancelled_at) and harness.pose().linear_x == 0.0,
+            5.0,
+            "the robot to stop",
+        )
+        assert harness.pose().pose.x < 6.0  # stopped well short of the goal
 
 
 @BRIDGE_ONLY
