@@ -5,7 +5,7 @@ fixed time). On a router: a publication's exact key, payload and attachment (seq
 numbers, the GID of its publisher's token); a service call's key (voicectl asks whatever
 the type hash), payload and attachment (its sequence number, the GID of its client's
 token; the time is the call's own); a reply's echo of the request's sequence number and
-GID.
+GID; the seam's action client (shared/robot/action.py) against an action server.
 
 The expected values were worked out from ros2/rmw_zenoh's docs/design.md and its
 rmw_zenoh_cpp sources as released for Jazzy (0.2.10), Kilted (0.6.7) and Humble (0.1.9):

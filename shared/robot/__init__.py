@@ -3,6 +3,8 @@
 - `transport.py`: the seam (`RobotTransport`) and what it speaks of (ROS names and types,
   discovered `Interface`s);
 - `bridge.py`: zenoh-bridge-ros2dds; `rmw_zenoh.py`: ROS 2 nodes on rmw_zenoh, no bridge;
+- `action.py`: a ROS 2 action client on the seam (send goal, feedback, status, get
+  result, cancel), with which the executor runs Nav2's goals and the stop cancels them;
 - `stop.py`: stopping a robot, written once on top of the seam, for the executor, the
   supervisor and the clients alike.
 
