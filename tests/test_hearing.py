@@ -9,9 +9,14 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import numpy as np
 import pocketsphinx
 import pytest
 
+from services.converter.grammar import build_grammar
+from services.converter.orders import OrderSet
+from services.stt.audio import Loudness, frames, read_wav
+from services.stt.engine import EngineOptions, Final, load_engine
 from services.stt.judge import OFF, Thresholds, Vocabulary, Word, judge
 
 from .conftest import Speak, voicectl
@@ -193,3 +198,52 @@ def test_the_judge_rejects_a_word_the_search_squeezed_in() -> None:
     assert judge(said, heard, VOCABULARY, Thresholds()).rejection == ""
     # The grammar alone (the benchmark's comparison) keeps no such rule.
     assert judge(squeezed, heard, VOCABULARY, OFF).rejection == ""
+
+
+# --- where an utterance ends ---------------------------------------------------------------
+
+
+def _pink(seconds: float, rms: float, seed: int) -> np.ndarray:
+    """Pink noise (power falling as 1/f, like a fan or a motor) of the given RMS."""
+    white = np.random.default_rng(seed).normal(size=int(seconds * 16000))
+    spectrum = np.fft.rfft(white)
+    spectrum[1:] /= np.sqrt(np.arange(1, len(spectrum)))
+    noise = np.fft.irfft(spectrum, len(white))
+    return np.asarray(noise * rms / np.sqrt(np.mean(noise**2)))
+
+
+def test_a_command_in_steady_noise_ends_when_the_voice_does(speech: Speak) -> None:
+    """A robot's fan never stops: the utterance must end when the person stops speaking,
+    not when the noise does (the voice activity detector alone calls such noise speech)."""
+    voice = np.frombuffer(read_wav(speech("turn left", "flite:slt")), "<i2").astype(np.float64)
+    loud = np.flatnonzero(np.abs(voice) > 1000)
+    speech_end = loud[-1] / 16000
+    padded = np.concatenate([voice, np.zeros(4 * 16000)])  # four more seconds of the room
+    active = voice[loud[0] : loud[-1]]
+    noise = _pink(len(padded) / 16000, np.sqrt(np.mean(active**2)) / 10 ** (12 / 20), seed=3)
+    pcm = np.clip(padded + noise, -32768, 32767).astype("<i2").tobytes()
+
+    engine = load_engine(EngineOptions())
+    engine.use_grammar(build_grammar(OrderSet.load(Path(__file__).parents[1] / "orders")))
+    recogniser = engine.recogniser(15.0)
+    heard_at, clock = None, 0.0
+    try:
+        for frame in frames(pcm):
+            clock += len(frame) / 32000
+            if any(isinstance(e, Final) for e in recogniser.accept(frame)) and heard_at is None:
+                heard_at = clock
+    finally:
+        recogniser.close()
+    assert heard_at is not None, "no final while the noise went on"
+    assert heard_at - speech_end < 0.8
+
+
+def test_a_frame_counts_as_loud_only_above_the_room() -> None:
+    room = Loudness(margin=6.0, window=100, needed=10)
+    quiet = _pink(0.03, 300.0, seed=1).astype("<i2").tobytes()
+    voice = _pink(0.03, 3000.0, seed=2).astype("<i2").tobytes()
+    assert not room.stands_out(voice)  # the room is not known yet
+    for _ in range(20):
+        assert not room.stands_out(quiet)
+    assert room.stands_out(voice)
+    assert not room.stands_out(quiet)

@@ -13,6 +13,8 @@ Two corrections happen before any engine sees the audio:
 
 from __future__ import annotations
 
+import math
+from collections import deque
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -40,6 +42,27 @@ class NoiseFloor:
         samples = np.frombuffer(pcm, dtype="<i2").astype(np.float32)
         samples += self._random.normal(0.0, NOISE_FLOOR, samples.shape).astype(np.float32)
         return bytes(np.clip(np.rint(samples), -32768, 32767).astype("<i2").tobytes())
+
+
+class Loudness:
+    """Whether a frame stands out from the room: louder by `margin` dB than the quietest
+    tenth of the last `window` frames. A voice activity detector calls steady noise and
+    babble speech; what is no louder than the room around it is not the person."""
+
+    def __init__(self, margin: float, window: int, needed: int) -> None:
+        self._margin = margin
+        self._levels: deque[float] = deque(maxlen=window)
+        self._needed = needed
+        """Frames heard before the room's level is known; until then nothing stands out."""
+
+    def stands_out(self, pcm: bytes) -> bool:
+        samples = np.frombuffer(pcm, dtype="<i2").astype(np.float32)
+        level = 10.0 * math.log10(float(np.mean(samples * samples)) + 1.0)
+        self._levels.append(level)
+        if len(self._levels) < self._needed:
+            return False
+        room = float(np.percentile(np.fromiter(self._levels, dtype=np.float32), 10))
+        return level > room + self._margin
 
 
 def seconds(pcm_bytes: int) -> float:
