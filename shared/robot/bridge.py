@@ -9,13 +9,21 @@ bridge are in docs/deploy.md.
 
 from __future__ import annotations
 
-from collections.abc import Awaitable, Callable
-from typing import TypeVar
+from collections.abc import Awaitable, Callable, Iterable
+from typing import Self, TypeVar
 
 from ..bus import Bus
 from ..keys import BRIDGE_TOKENS, BridgeKind, BridgeToken
-from .kinds import TransportKind
-from .transport import Decode, Handle, Interface, RobotTransport, Role, Unsubscribe
+from .kinds import RosDistro, TransportKind
+from .transport import (
+    Announcements,
+    Decode,
+    Handle,
+    Interface,
+    RobotTransport,
+    Role,
+    Unsubscribe,
+)
 
 T = TypeVar("T")
 
@@ -35,6 +43,21 @@ class BridgeTransport(RobotTransport):
 
     def __init__(self, bus: Bus) -> None:
         self._bus = bus
+
+    @classmethod
+    def open(
+        cls, bus: Bus, node: str, namespace: str, domain_id: int, distro: RosDistro | None
+    ) -> Self:
+        # The bridge is the node, the DDS domain its own setting, and a key a ROS name.
+        return cls(bus)
+
+    @classmethod
+    def announcements(cls, domain_id: int, own: str) -> Announcements:
+        def name_of(key: str) -> str | None:
+            token = BridgeToken.parse(key)
+            return None if token is None else token.key
+
+        return Announcements(BRIDGE_TOKENS, name_of)
 
     def publish(self, name: str, ros_type: str, payload: bytes, urgent: bool = False) -> None:
         self._bus.publish_bytes(name, payload, urgent=urgent)
@@ -71,8 +94,12 @@ class BridgeTransport(RobotTransport):
 
         self._bus.watch(BRIDGE_TOKENS, on_token)
 
-    # A key is a ROS name here, whatever the robot announces: nothing to learn for it, and
-    # a topic's types share its key, so a stop sends in one type only.
+    # A key is a ROS name here, whatever the robot announces: nothing to learn or build for
+    # it, and a topic's types share its key, so a stop sends in one type only.
+
+    @classmethod
+    def prepare(cls, distro: RosDistro, ros_types: Iterable[str]) -> None:
+        pass
 
     def follow(self) -> None:
         pass

@@ -9,7 +9,8 @@ from typing import Self
 
 
 class TransportKind(StrEnum):
-    """How the robot's ROS 2 graph is reached."""
+    """How the robot's ROS 2 graph is reached: one member per transport of `TRANSPORTS`
+    (`shared/robot/__init__.py`), the name messages and `--transport` know it by."""
 
     BRIDGE = "bridge"
     """zenoh-bridge-ros2dds in front of a DDS graph."""

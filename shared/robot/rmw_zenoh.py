@@ -32,9 +32,9 @@ import struct
 import threading
 import time
 import weakref
-from collections.abc import Awaitable, Callable
+from collections.abc import Awaitable, Callable, Iterable
 from dataclasses import dataclass
-from typing import TypeVar
+from typing import Self, TypeVar
 
 import xxhash
 
@@ -49,6 +49,7 @@ from ..keys import (
 from ..ros2 import NO_TYPE_HASH, RosDistro, dds_type_name, ros_type_of, type_hash
 from .kinds import TransportKind
 from .transport import (
+    Announcements,
     Decode,
     Handle,
     Interface,
@@ -157,6 +158,29 @@ class RmwZenohTransport(RobotTransport):
         bus.announce(self.keys.token(node_token))
         self._following = False
         """The robot's tokens are watched (`follow`, `discover`): what they say is learnt."""
+
+    @classmethod
+    def open(
+        cls, bus: Bus, node: str, namespace: str, domain_id: int, distro: RosDistro | None
+    ) -> Self:
+        return cls(bus, node, namespace, domain_id, distro)
+
+    @classmethod
+    def announcements(cls, domain_id: int, own: str) -> Announcements:
+        keys = RmwZenohKeys(domain_id)
+
+        def name_of(key: str) -> str | None:
+            token = keys.parse_token(key)
+            if token is None or token.zid == own or not token.name:  # not the robot's, a node
+                return None
+            return token.name
+
+        return Announcements(keys.tokens, name_of)
+
+    @classmethod
+    def prepare(cls, distro: RosDistro, ros_types: Iterable[str]) -> None:
+        for ros_type in ros_types:
+            type_hash(distro, ros_type)
 
     # --- keys and entities --------------------------------------------------------------
 

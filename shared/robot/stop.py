@@ -20,9 +20,12 @@ own). Service calls (the cancel) are asked whatever the type hash, so reach the 
 server whatever its hash.
 
 A supervisor that never heard of an executor (one started after its executor died) has
-no `ExecutorInfo`: it stops on the default names through rmw_zenoh in domain 0 once a
-robot there has announced a cmd_vel subscriber, in the type and hash it announced, and
-through the bridge otherwise (`RobotStop.of(None, ...)`).
+no `ExecutorInfo`: it follows every transport of the registry on the default names (in
+domain 0 where the layout has domains), and stops through the first on which a robot has
+announced a cmd_vel subscriber, in the type and hash it announced (only rmw_zenoh's
+subscribers announce a type: the bridge's topics share a key whatever the type), and
+through `ExecutorInfo`'s default transport, the bridge, otherwise (`RobotStop.of(None,
+...)`).
 """
 
 from __future__ import annotations
@@ -42,16 +45,15 @@ from ..ros2 import (
     CmdVelType,
     Ros2Codec,
     RosDistro,
-    type_hash,
 )
-from . import open_transport
+from . import open_transport, transports
 from .action import CANCEL_TIMEOUT, ActionClient
 from .action import Cancelled as Cancelled  # where the supervisor has always found it
-from .kinds import TransportKind
-from .rmw_zenoh import RmwZenohTransport
 from .transport import Interface, RobotTransport, Role
 
 _LOGGER = logging.getLogger(__name__)
+
+transports()  # every transport imported with the stop, not at a process's first STOP
 
 STOP_REPEAT = 3
 """Zero velocity is sent this many times: one lost sample must not leave the robot moving."""
@@ -83,26 +85,25 @@ _BUILDING: set[asyncio.Future[None]] = set()
 def prepare(
     info: ExecutorInfo | None, bus: Bus | None = None, node: str = NODE
 ) -> asyncio.Future[None]:
-    """Build what will stop the robot `info` announces (its codec; on rmw_zenoh the type
-    hashes in its keys), off the event loop, as soon as its executor announces it: not
-    when someone presses STOP. Given the `bus` (and the `node` the stop will use), the
-    stop's transport is opened now too, and follows the robot's announcements from now
-    on. `info` None: a robot no executor announced (`RobotStop.of`). Nobody has to keep
-    or await the future."""
+    """Build what will stop the robot `info` announces (its codec, and what its transport
+    prepares: on rmw_zenoh the type hashes in its keys), off the event loop, as soon as
+    its executor announces it: not when someone presses STOP. Given the `bus` (and the
+    `node` the stop will use), the stop's transport is opened now too, and follows the
+    robot's announcements from now on. `info` None: a robot no executor announced
+    (`RobotStop.of`). Nobody has to keep or await the future."""
     if bus is not None:
         if info is None:
-            _unannounced(bus, node).follow()
+            for transport in _unannounced(bus, node):
+                transport.follow()
         else:
             _transport(info, _names(info), bus, node).follow()
 
     def build() -> None:
-        if info is None:  # its keys will be the robot's own: no hash to compute
+        if info is None:  # its keys will be the robot's own: nothing to prepare for them
             stop_codec(UNANNOUNCED)
             return
         stop_codec(info.distro)
-        if info.transport is TransportKind.RMW_ZENOH:
-            type_hash(info.distro, info.cmd_vel_type.ros_type)
-            type_hash(info.distro, CANCEL_GOAL)
+        transports()[info.transport].prepare(info.distro, (info.cmd_vel_type.ros_type, CANCEL_GOAL))
 
     building = asyncio.ensure_future(asyncio.to_thread(build))
     _BUILDING.add(building)
@@ -123,17 +124,19 @@ class RobotStop:
     def of(cls, info: ExecutorInfo | None, bus: Bus, node: str = NODE) -> RobotStop:
         """From what the executor announced; names that make no sense fall back to the
         defaults (with a warning), since a stop on the usual names beats no stop. With no
-        `info` at all (no executor was ever heard), rmw_zenoh's default keys once a robot
-        there announced its cmd_vel, else the bridge's (see the module's docstring)."""
+        `info` at all (no executor was ever heard), the default keys of the first transport
+        on which a robot announced its cmd_vel, else the bridge's (see the module's
+        docstring)."""
         if info is None:
-            rmw = _unannounced(bus, node)
-            rmw.follow()
             names = RobotNames()
-            announced = [CmdVelType.of(t) for t in rmw.subscriber_types(names.cmd_vel)]
-            kind = next((kind for kind in announced if kind is not None), None)
-            if kind is not None:
-                return cls(rmw, names, stop_codec(UNANNOUNCED), kind)
-            info = ExecutorInfo(transport=TransportKind.BRIDGE)
+            for unannounced in _unannounced(bus, node):
+                unannounced.follow()
+                types = unannounced.subscriber_types(names.cmd_vel)
+                announced = [CmdVelType.of(ros_type) for ros_type in types]
+                kind = next((kind for kind in announced if kind is not None), None)
+                if kind is not None:
+                    return cls(unannounced, names, stop_codec(UNANNOUNCED), kind)
+            info = ExecutorInfo()  # its defaults: the bridge, the default names
         names = _names(info)
         transport = _transport(info, names, bus, node)
         transport.follow()
@@ -201,10 +204,9 @@ def _transport(info: ExecutorInfo, names: RobotNames, bus: Bus, node: str) -> Ro
     return open_transport(bus, info.transport, node, names.namespace, info.domain_id, info.distro)
 
 
-def _unannounced(bus: Bus, node: str) -> RmwZenohTransport:
-    """rmw_zenoh in domain 0 without a namespace, its distribution learnt from the robot's
-    tokens: where a supervisor that never heard of an executor looks for its robot."""
-    transport = open_transport(bus, TransportKind.RMW_ZENOH, node)
-    if not isinstance(transport, RmwZenohTransport):
-        raise TypeError(f"open_transport gave {type(transport).__name__} for rmw_zenoh")
-    return transport
+def _unannounced(bus: Bus, node: str) -> list[RobotTransport]:
+    """Every transport in the registry's order, in domain 0 without a namespace, its
+    distribution learnt from the robot's announcements: where a supervisor that never
+    heard of an executor looks for its robot (a transport that learns nothing from them,
+    the bridge, opens without declaring anything and finds no cmd_vel type)."""
+    return [open_transport(bus, kind, node) for kind in transports()]

@@ -10,18 +10,27 @@ types and never builds a key.
 Names are full ROS names without the leading '/' ('bot1/cmd_vel',
 'navigate_to_pose/_action/send_goal', from `RobotNames`); types are ROS type names
 ('geometry_msgs/msg/Twist'; a service's own type, 'action_msgs/srv/CancelGoal').
+
+Besides what a transport does once open, its class says how it is opened (`open`), how a
+robot's graph announces itself in its layout (`announcements`, from which
+`detect_transport` knows the layout) and what a stop may build ahead of time
+(`prepare`): what `open_transport`, `detect_transport` and the stop ask of every
+transport of the registry, `TRANSPORTS` in `__init__.py`, without naming one.
 """
 
 from __future__ import annotations
 
 import abc
 import enum
-from collections.abc import Awaitable, Callable
+from collections.abc import Awaitable, Callable, Iterable
 from dataclasses import dataclass
-from typing import ClassVar, TypeVar
+from typing import TYPE_CHECKING, ClassVar, Self, TypeVar
 
 from ..keys import ACTION_MEMBERS, action_member
-from .kinds import TransportKind
+from .kinds import RosDistro, TransportKind
+
+if TYPE_CHECKING:  # the bus imports the messages, which import this package's kinds
+    from ..bus import Bus
 
 T = TypeVar("T")
 Decode = Callable[[bytes], T]
@@ -54,11 +63,45 @@ class Interface:
     """As announced ('RIHS01_...', 'TypeHashNotSupported'); '' when the layout has none."""
 
 
+@dataclass(frozen=True)
+class Announcements:
+    """How a robot's graph announces its interfaces in one layout: by liveliness tokens."""
+
+    tokens: str
+    """The key expression of every liveliness token of the layout (in one ROS domain)."""
+    name_of: Callable[[str], str | None]
+    """The ROS name of the robot's interface a token's key announces; None for a key that
+    announces none as far as the layout tells (rmw_zenoh: a node's, this process's own)."""
+
+
 class RobotTransport(abc.ABC):
     """One process's way onto the robot's graph. Calls that send may come from any thread
     (a stop from Zenoh's thread or a watchdog): they never wait for the event loop."""
 
     kind: ClassVar[TransportKind]
+
+    @classmethod
+    @abc.abstractmethod
+    def open(
+        cls, bus: Bus, node: str, namespace: str, domain_id: int, distro: RosDistro | None
+    ) -> Self:
+        """This transport on `bus`, this process appearing as ROS node `node` in the
+        robot's `namespace` and ROS domain where the layout has nodes and domains, speaking
+        `distro` (None: learn it) where the layout depends on it (`open_transport`)."""
+
+    @classmethod
+    @abc.abstractmethod
+    def announcements(cls, domain_id: int, own: str) -> Announcements:
+        """How a robot's graph in ROS domain `domain_id` announces itself in this layout,
+        to a process whose Zenoh session is `own` (its id) (`detect_transport`)."""
+
+    @classmethod
+    @abc.abstractmethod
+    def prepare(cls, distro: RosDistro, ros_types: Iterable[str]) -> None:
+        """Build what sending in `ros_types` to a robot of `distro` will first need, so
+        that a STOP does not pay for it (rmw_zenoh: their type hashes, which its keys
+        carry); blocks, so runs off the event loop. Nothing where a key needs nothing
+        built (the bridge)."""
 
     @abc.abstractmethod
     def publish(self, name: str, ros_type: str, payload: bytes, urgent: bool = False) -> None:
