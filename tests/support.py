@@ -32,6 +32,7 @@ from shared.messages import (
     Submit,
     Submitted,
     SupervisorReply,
+    TargetPose,
 )
 from shared.robot import TransportKind, open_transport
 from shared.ros2 import Odometry, Ros2Codec, RosDistro, dds_type_name, type_hash
@@ -86,6 +87,15 @@ def robot_key(transport: TransportKind, name: str, ros_type: str, any_hash: bool
 
 def order(label: str, **params: Any) -> Order:
     return Order(order=label, label=label, description=f"do {label}", params=params)
+
+
+TURN_LEFT = Order(
+    order="rotation",
+    label="rotate",
+    description="turn left",
+    target_pose=TargetPose(frame="base_link", yaw=1.57),
+)
+"""A quarter turn on the spot, closed on odometry by the `rotate` executor."""
 
 
 class Client:

@@ -31,7 +31,7 @@ from shared.robot_options import RobotOptions
 from shared.ros2 import Pose2D, Ros2Codec, RosDistro
 
 from .conftest import Processes, async_wait_until
-from .support import harness_on, joined, order, start_robot, until_heard
+from .support import TURN_LEFT, harness_on, joined, order, start_robot, until_heard
 
 
 @pytest.fixture
@@ -52,13 +52,7 @@ async def test_drive_and_rotate_close_the_loop_on_odometry(robot: tuple[str, Pat
         assert math.hypot(moved.x - start.x, moved.y - start.y) == pytest.approx(0.6, abs=0.05)
         assert harness.pose().linear_x == 0.0
 
-        turn = Order(
-            order="rotation",
-            label="rotate",
-            description="turn left",
-            target_pose=TargetPose(frame="base_link", yaw=1.57),
-        )
-        result = await harness.finished(await harness.execute(turn))
+        result = await harness.finished(await harness.execute(TURN_LEFT))
         assert result.status == OrderStatus.SUCCEEDED
         await asyncio.sleep(0.2)
         turned = harness.pose().pose.yaw - moved.yaw

@@ -38,6 +38,7 @@ from shared.ros2 import Ros2Codec
 
 from .conftest import Processes, async_wait_until, voicectl
 from .support import (
+    TURN_LEFT,
     ExecutorHarness,
     harness_on,
     joined,
@@ -279,13 +280,7 @@ async def test_a_turn_closes_on_odometry(
 
     async with harness_on(router, transport=transport) as harness:
         begin = harness.pose().pose
-        turn = Order(
-            order="rotation",
-            label="rotate",
-            description="turn left",
-            target_pose=TargetPose(frame="base_link", yaw=1.57),
-        )
-        result = await harness.finished(await harness.execute(turn))
+        result = await harness.finished(await harness.execute(TURN_LEFT))
         assert result.status == OrderStatus.SUCCEEDED, result.message
         await async_wait_until(lambda: harness.pose().angular_z == 0.0, 5.0, "the turn to end")
         turned = harness.pose().pose.yaw - begin.yaw

@@ -19,6 +19,7 @@ from hypothesis import strategies as st
 from starlette.testclient import TestClient
 from starlette.websockets import WebSocketDisconnect
 
+from harness.processes import Process
 from services.web.app import MAX_BODY, Access, Panel, create_app
 from shared.bus import BusOptions
 from shared.keys import RobotKeys
@@ -481,9 +482,8 @@ def test_an_idle_session_ends_and_the_browser_is_told(
     assert 1 in counts, counts
 
 
-def test_a_client_gone_mid_body_leaves_no_traceback(
-    router: str, processes: Processes, tmp_path: Path
-) -> None:
+def _panel(router: str, processes: Processes, tmp_path: Path) -> tuple[Process, int]:
+    """`voicectl web` as a process of its own, once it serves: its process and port."""
     port = free_port()
     token_file = tmp_path / "token"
     token_file.write_text(TOKEN)
@@ -491,6 +491,13 @@ def test_a_client_gone_mid_body_leaves_no_traceback(
         "services.web", "--connect", router, "--port", str(port), "--token-file", str(token_file)
     )
     wait_until(lambda: "panel on" in processes.log(web), 30.0, "the panel")
+    return web, port
+
+
+def test_a_client_gone_mid_body_leaves_no_traceback(
+    router: str, processes: Processes, tmp_path: Path
+) -> None:
+    web, port = _panel(router, processes, tmp_path)
     for route in ("/api/parse", "/api/say", "/api/submit", "/api/cancel"):
         with socket.create_connection(("127.0.0.1", port)) as raw:
             raw.sendall(
@@ -513,13 +520,7 @@ def test_an_open_event_stream_does_not_hold_up_the_stop(
 ) -> None:
     """A panel left open in a browser: SIGTERM still stops the service, at once and
     cleanly, and the stream ends instead of breaking off."""
-    port = free_port()
-    token_file = tmp_path / "token"
-    token_file.write_text(TOKEN)
-    web = processes.start(
-        "services.web", "--connect", router, "--port", str(port), "--token-file", str(token_file)
-    )
-    wait_until(lambda: "panel on" in processes.log(web), 30.0, "the panel")
+    web, port = _panel(router, processes, tmp_path)
     with socket.create_connection(("127.0.0.1", port), timeout=10.0) as raw:
         raw.sendall(
             f"GET /api/events HTTP/1.1\r\nHost: x\r\nAuthorization: Bearer {TOKEN}\r\n\r\n".encode()
