@@ -60,12 +60,19 @@ def test_the_map_shows_places_robot_and_where_orders_go_before_and_after_send(
         assert float(path.get_attribute("y2")) == -5.0  # SVG's y points down
         assert abs(float(path.get_attribute("x1"))) < 0.2  # from the turn's end, at base
         # The turn on the spot is drawn around the robot, not hidden under its arrow.
-        turn = staged.nth(0).locator("path.turn")
-        expect(turn).to_be_visible()
-        robot = page.locator("#map .robot").bounding_box()
-        arc = turn.bounding_box()
-        assert robot is not None
-        assert arc is not None
+        expect(staged.nth(0).locator("path.turn")).to_be_visible()
+        # Both boxes in one look: the map is drawn again at every pose, and an element
+        # measured between two drawings is gone.
+        arc, robot = page.wait_for_function(
+            """() => {
+                const boxes = ["#map .step.staged path.turn", "#map .robot"].map((s) => {
+                    const found = document.querySelector(s);
+                    return found && found.getBoundingClientRect();
+                });
+                return boxes.every((b) => b && b.width) &&
+                    boxes.map((b) => ({x: b.x, y: b.y, width: b.width, height: b.height}));
+            }"""
+        ).json_value()
         outside = (
             arc["x"] + arc["width"] > robot["x"] + robot["width"] + 5 or arc["y"] < robot["y"] - 5
         )
