@@ -136,6 +136,15 @@ async def test_stop_on_rmw_zenoh_goes_to_the_key_the_robot_announced(
             await rig.submit(client, order("runaway"))
             await rig.driving()
             rig.kill(rig.executor)
+
+            # Once the supervisor knows its executor is gone, the stop it confirms is its
+            # own (a stop asked sooner tries to latch the dead executor, and rightly says
+            # it could not): the key the zero velocity goes to is what this test is about.
+            async def executor_lost() -> bool:
+                reply = await client.ask(ROBOT, GetState())
+                return isinstance(reply, StateReply) and not reply.state.executor_online
+
+            await async_wait_until(executor_lost, 20.0, "the supervisor to lose its executor")
             asked = time.monotonic()
             stopped = await client.stop(ROBOT)
         else:
