@@ -165,6 +165,9 @@ def stack(tmp_path: Path, request: pytest.FixtureRequest) -> Iterator[Stack]:
         yield stack
     finally:
         try:
+            report = getattr(request.node, "rep_call", None)
+            if report is not None and report.failed:  # what the services said, before down
+                print(stack.compose("logs", "--no-color", "--tail", "60")[-12000:])
             stack.compose("down", "--volumes", "--remove-orphans", "--timeout", "10")
         finally:
             print(stack.log.read_text()[-6000:])
