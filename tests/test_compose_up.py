@@ -56,10 +56,11 @@ with zenoh.open(config) as session:
     )
     time.sleep(float(sys.argv[2]))
 odometry = seen[-1]
-print(json.dumps([odometry.pose.x, odometry.pose.y, odometry.linear_x, odometry.angular_z]))
+pose = odometry.pose
+print(json.dumps([pose.x, pose.y, odometry.linear_x, odometry.angular_z, pose.yaw]))
 """
 """Run in the simulator's container, on the robot's side of the link: the robot's last
-odometry (x, y, linear and angular speed), as the robot's router relays it (or as the
+odometry (x, y, linear and angular speed, heading), as the robot's router relays it (or as the
 secured router does, with a client configuration)."""
 
 INTRUDE = """
@@ -243,7 +244,7 @@ def test_compose_up_runs_orders_keeps_history_and_stops_a_cut_off_robot(stack: S
     stack.docker("network", "disconnect", site, stack.container("sim-router"))
     cut = time.monotonic()
     try:
-        while (odometry := stack.odometry())[2:] != [0.0, 0.0]:
+        while (odometry := stack.odometry())[2:4] != [0.0, 0.0]:
             assert time.monotonic() - cut < LEASE + 5.0, f"still driving: {odometry}"
         print(f"link cut to a standing robot: {time.monotonic() - cut:.1f} s")
         stood = odometry[:2]
@@ -277,14 +278,16 @@ def test_compose_on_the_secured_bus_runs_orders_and_keeps_the_panel_off_the_robo
     )
     assert len(json.loads(said)["order_ids"]) == 1
     deadline = time.monotonic() + 30.0
-    while abs(stack.odometry(via=observer)[3]) < 0.1:  # turning
+    # Turned: its heading, not its speed (a quarter turn takes about a second, and each
+    # look at the odometry opens a session of its own through TLS).
+    while abs(stack.odometry(via=observer)[4] - 1.57) > 0.1:
         assert time.monotonic() < deadline, "the robot never turned"
     # The panel's credentials: no velocity reaches the robot, no executor answers.
     while stack.odometry(via=observer)[3] != 0.0:
         assert time.monotonic() < deadline, "the turn never ended"
     replies = stack.compose("exec", "-T", "web", "python3", "-", stdin=INTRUDE)
     assert json.loads(replies) == 0
-    x, y, linear, angular = stack.odometry(via=observer, listen=1.0)
+    x, y, linear, angular, _ = stack.odometry(via=observer, listen=1.0)
     assert (linear, angular) == (0.0, 0.0)
     assert abs(x) < 0.05
     assert abs(y) < 0.05
