@@ -85,6 +85,11 @@ def robot_key(transport: TransportKind, name: str, ros_type: str, any_hash: bool
             return keys.data(name, dds, type_hash(RosDistro.JAZZY, ros_type))
 
 
+STARTING = 45.0
+"""Seconds a service started by a test has to come up: a bound, not a wait (a few on an
+idle machine, twenty and more with two suites on two cores)."""
+
+
 def order(label: str, **params: Any) -> Order:
     return Order(order=label, label=label, description=f"do {label}", params=params)
 
@@ -148,7 +153,7 @@ class Client:
             states[:] = [state] if predicate(state := await self.state()) else []
             return bool(states)
 
-        await async_wait_until(check, 20.0, what)
+        await async_wait_until(check, STARTING, what)
         return states[0]
 
 
@@ -161,7 +166,7 @@ async def client_wait_ready(client: Client, executor: bool = True) -> None:
         except BusError:
             return False  # supervisor not up yet
 
-    await async_wait_until(ready, 20.0, "the supervisor (and its executor)")
+    await async_wait_until(ready, STARTING, "the supervisor (and its executor)")
 
 
 class ExecutorHarness:
