@@ -18,12 +18,14 @@ from pathlib import Path
 
 import uvicorn
 
+from shared.bus import Bus
 from shared.config import default_token_file, load_or_create_token
 from shared.errors import ServiceError
 from shared.process import (
     Service,
     add_bus_arguments,
     bus_options,
+    open_bus,
     robot_name,
     run_service,
     serve,
@@ -89,7 +91,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 class PanelServer(Service):
     """uvicorn serving the panel on a socket already bound, as a service: `start()` sets it
     serving, `run()` returns if it ends by itself (its app failed to start), `stop()` has it
-    close its connections and return. The app's lifespan opens the bus and runs the hub."""
+    close its connections and return. The app's lifespan runs the hub on the bus `main`
+    opened before it."""
 
     def __init__(
         self, config: uvicorn.Config, listening: socket.socket, where: str, panel: Panel
@@ -129,8 +132,16 @@ async def main(args: argparse.Namespace) -> None:
     token_file = args.token_file or default_token_file()
     access = Access(load_or_create_token(token_file), origins=args.allow_origin)
     panel = Panel(args.robot, access)
+    # The bus first, as every service opens it: a stop while it waits for the router ends
+    # the process then; inside uvicorn's lifespan that wait would hold the loop that a
+    # stop must reach.
+    with open_bus(args) as bus:
+        await _serve(args, panel, bus, token_file)
+
+
+async def _serve(args: argparse.Namespace, panel: Panel, bus: Bus, token_file: Path) -> None:
     config = uvicorn.Config(
-        create_app(bus_options(args), panel),
+        create_app(bus_options(args), panel, bus),
         host=args.host,
         port=args.port,
         access_log=False,

@@ -367,16 +367,18 @@ class Panel:
         return StreamingResponse(stream(), media_type="text/event-stream")
 
 
-def create_app(options: BusOptions, panel: Panel) -> Starlette:
-    """`panel` as an ASGI app. Its lifespan opens its bus and runs the hub as a service
-    (`running`, shared/process.py) on the loop that serves it, whichever server that is
-    (uvicorn in `voicectl web`, Starlette's TestClient in the tests), and closes both at
-    the end."""
+def create_app(options: BusOptions, panel: Panel, bus: Bus | None = None) -> Starlette:
+    """`panel` as an ASGI app. Its lifespan runs the hub as a service (`running`,
+    shared/process.py) on the loop that serves it, whichever server that is (uvicorn in
+    `voicectl web`, Starlette's TestClient in the tests), on `bus` when given (opened on
+    that loop before the server starts: `voicectl web` does, so that a stop while it waits
+    for the router ends it), else on a bus of its own that it opens and closes."""
 
     @contextlib.asynccontextmanager
     async def lifespan(_app: Starlette) -> AsyncIterator[None]:
-        with Bus.open(options, asyncio.get_running_loop()) as bus:
-            async with running(panel.attach(bus)):
+        with contextlib.ExitStack() as owned:
+            used = bus or owned.enter_context(Bus.open(options, asyncio.get_running_loop()))
+            async with running(panel.attach(used)):
                 yield
 
     return Starlette(routes=panel.routes(), lifespan=lifespan)
