@@ -9,7 +9,9 @@ session so that no callback thread keeps the process alive at exit.
 from __future__ import annotations
 
 import asyncio
+import collections
 import contextlib
+import functools
 import json
 import logging
 import os
@@ -20,7 +22,7 @@ import time
 from collections.abc import Awaitable, Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal, TypeVar
+from typing import Any, Generic, Literal, TypeVar
 
 import msgspec
 import zenoh
@@ -158,6 +160,8 @@ class Bus:
         self._encoder = msgspec.json.Encoder()
         self._running: set[asyncio.Task[tuple[bytes, zenoh.Encoding] | None]] = set()
         """Handler tasks in flight (the loop keeps only weak references to tasks)."""
+        self._answering: set[asyncio.Task[Message]] = set()
+        """The same, for `serve_in_turn`."""
         self._streams: set[Stream] = set()
         self._closers.callback(self._close_streams)
 
@@ -423,6 +427,114 @@ class Bus:
 
         self._answer_queries(key, respond)
 
+    def serve_in_turn(
+        self,
+        key: str,
+        decode: Decode[T],
+        handler: Callable[[str, T], Awaitable[Message]],
+        batched: Callable[[T], bool],
+        take: Callable[[list[Pending[T]]], None],
+        overtakes: Callable[[T], bool],
+    ) -> None:
+        """Like `serve_keyed`, for a burst of small requests: one wake-up of the loop for
+        every query that arrived since it last looked, not one each.
+
+        Requests are decoded on Zenoh's thread and handled in arrival order: a run of those
+        `batched` goes to `take(batch)` in one call, which must answer each `Pending`,
+        then or later, from any thread; any other goes to `handler` as `serve_keyed` would,
+        and the requests after it wait until it has started. One that `overtakes` (an
+        emergency stop) waits for none: it goes to `handler` at once. A request that does
+        not decode is answered with `Failed` on Zenoh's thread.
+        """
+        arrived: collections.deque[Pending[T]] = collections.deque()
+        scheduled = False
+        """A `look` is due on the loop and has not started: what arrives now, it takes."""
+        held = False
+        """A request's handler was started and has not run its first step yet."""
+
+        def look() -> None:  # on the loop
+            nonlocal scheduled, held
+            scheduled = False
+            if held:
+                return  # `in_turn` looks again once the held request has started
+            batch: list[Pending[T]] = []
+            while arrived:
+                pending = arrived.popleft()
+                if batched(pending.request):
+                    batch.append(pending)
+                    continue
+                if batch:
+                    give(batch)
+                held = True
+                start(pending, in_turn(pending))
+                return
+            if batch:
+                give(batch)
+
+        def give(batch: list[Pending[T]]) -> None:
+            try:
+                take(batch)
+            except Exception as exc:
+                _LOGGER.exception("handler for %s failed", key)
+                for pending in batch:
+                    pending.answer(Failed(reason=f"internal error: {exc}"))
+
+        async def in_turn(pending: Pending[T]) -> Message:
+            nonlocal held
+            held = False
+            self._loop.call_soon(look)  # runs after the handler's first step, just below
+            return await answer(pending)
+
+        async def answer(pending: Pending[T]) -> Message:
+            try:
+                return await handler(pending.key, pending.request)
+            except Exception as exc:
+                _LOGGER.exception("handler for %s failed", key)
+                return Failed(reason=f"internal error: {exc}")
+
+        def start(pending: Pending[T], answering: Awaitable[Message]) -> None:
+            task = self._loop.create_task(_awaitable(answering))
+            self._answering.add(task)
+            task.add_done_callback(functools.partial(self._answer_with, pending))
+
+        def overtake(pending: Pending[T]) -> None:
+            start(pending, answer(pending))
+
+        def on_query(query: zenoh.Query) -> None:  # on Zenoh's thread
+            nonlocal scheduled
+            query_key = str(query.key_expr)
+            raw = query.payload.to_bytes() if query.payload is not None else b""
+            try:
+                request = decode(raw)
+            except Exception as exc:
+                _LOGGER.warning("rejected undecodable request on %s: %s", query_key, exc)
+                refused: Pending[None] = Pending(query, query_key, None, self._encoder)
+                refused.answer(Failed(reason=f"undecodable request: {exc}"))
+                return
+            pending = Pending(query, query_key, request, self._encoder)
+            try:
+                if overtakes(request):
+                    self._loop.call_soon_threadsafe(overtake, pending)
+                    return
+                arrived.append(pending)
+                # A `look` that is due takes this one too; only the first of a burst wakes
+                # the loop. Under the GIL the worst race is a second `look`, finding nothing.
+                if not scheduled:
+                    scheduled = True
+                    self._loop.call_soon_threadsafe(look)
+            except RuntimeError:  # loop closed: the process is stopping
+                pending.drop()
+
+        queryable = self._session.declare_queryable(key, _direct(on_query))
+        self._closers.callback(queryable.undeclare)
+
+    def _answer_with(self, pending: Pending[Any], done: asyncio.Task[Message]) -> None:
+        self._answering.discard(done)
+        if done.cancelled():
+            pending.drop()
+        else:
+            pending.answer(done.result())
+
     def serve_now(self, key: str, decode: Decode[T], handler: Callable[[T], Message]) -> None:
         """Answer queries on `key` on Zenoh's own thread, never waiting for the loop: for
         the one request that must be answered however busy or blocked the loop is (an
@@ -573,6 +685,39 @@ class Bus:
         self._closers.callback(listener.undeclare)
         now: Any = querier.matching_status  # a MatchingStatus, whatever the stubs say
         self._call_soon(handler, now.matching)
+
+
+class Pending(Generic[T]):
+    """A request taken on Zenoh's thread, answered once, then or later, from any thread."""
+
+    __slots__ = ("_encoder", "_query", "key", "request")
+
+    def __init__(
+        self, query: zenoh.Query, key: str, request: T, encoder: msgspec.json.Encoder
+    ) -> None:
+        self.key = key
+        """The query's key (``voice/r1/supervisor`` for a queryable on ``voice/*/...``)."""
+        self.request = request
+        self._query: zenoh.Query | None = query
+        self._encoder = encoder
+
+    def answer(self, message: Message) -> None:
+        """Reply with `message`, and end the query; any later answer is ignored."""
+        query, self._query = self._query, None
+        if query is None:
+            return
+        try:
+            query.reply(query.key_expr, self._encoder.encode(message), encoding=JSON)
+        except zenoh.ZError as exc:  # the session is closing: nobody can hear it
+            _LOGGER.debug("could not answer on %s: %s", self.key, exc)
+        finally:
+            query.drop()
+
+    def drop(self) -> None:
+        """End the query without a reply (the asker hears that no one answered)."""
+        query, self._query = self._query, None
+        if query is not None:
+            query.drop()
 
 
 class Stream:

@@ -2,23 +2,28 @@
 
 from __future__ import annotations
 
+import asyncio
 import json
 import logging
+import threading
+from typing import cast
 
 import msgspec
 import pytest
 import zenoh
 
-from shared.bus import BusOptions, json_decoder
+from shared.bus import BusOptions, Pending, json_decoder
 from shared.errors import BusError
 from shared.messages import (
     Done,
+    EmergencyStop,
     ExecutorEvent,
     Failed,
     GetState,
     Message,
     OrderFinished,
     OrderStatus,
+    Submit,
     SupervisorRequest,
     Transcript,
 )
@@ -118,3 +123,71 @@ def test_an_order_cannot_finish_as_queued_or_running() -> None:
         raw = f'{{"type": "orderfinished", "order_id": "a", "status": "{status}"}}'.encode()
         with pytest.raises(msgspec.ValidationError, match=f"an order does not finish as {status}"):
             decode(raw)
+
+
+async def test_serve_in_turn_takes_a_burst_at_once_in_order_and_stop_overtakes(
+    router: str,
+) -> None:
+    key = "voice/r1/supervisor"
+    log: list[str] = []
+    arrived = threading.Semaphore(0)
+    taken: list[Pending[SupervisorRequest]] = []
+    release = asyncio.Event()
+    answers: list[str] = []  # appended on Zenoh's threads
+
+    def overtakes(request: SupervisorRequest) -> bool:  # on Zenoh's thread, once a request
+        arrived.release()
+        return isinstance(request, EmergencyStop)
+
+    def take(batch: list[Pending[SupervisorRequest]]) -> None:
+        log.append("take " + " ".join(cast(Submit, p.request).request_id for p in batch))
+        taken.extend(batch)
+
+    async def handle(_key: str, request: SupervisorRequest) -> Message:
+        name = type(request).__name__
+        log.append(name)
+        if isinstance(request, GetState):
+            await release.wait()
+        return Done(detail=name)
+
+    def on_reply(reply: zenoh.Reply) -> None:
+        assert reply.ok is not None
+        answers.append(json.loads(reply.ok.payload.to_bytes())["detail"])
+
+    with joined(router) as server, joined(router) as client:
+        server.serve_in_turn(
+            key,
+            json_decoder(SupervisorRequest),
+            handle,
+            batched=lambda request: isinstance(request, Submit),
+            take=take,
+            overtakes=overtakes,
+        )
+        served: list[bool] = []
+        client.watch_served(key, served.append)
+        await async_wait_until(lambda: served[-1:] == [True], 10.0, "the queryable")
+        sent = [
+            Submit(request_id="a", orders=[]),
+            Submit(request_id="b", orders=[]),
+            GetState(),
+            Submit(request_id="c", orders=[]),
+            EmergencyStop(),
+        ]
+        for message in sent:
+            client.session.get(key, on_reply, payload=client.encode(message))
+        # The loop is held here (on purpose) until all five have arrived: one burst.
+        for _ in sent:
+            assert arrived.acquire(timeout=10)
+        await async_wait_until(lambda: answers, 10.0, "the stop's answer")
+        # The stop was answered while the submits before it and the state were not.
+        assert answers == ["EmergencyStop"]
+        # One call for the submits before the state request, the state request's handler
+        # started before the submit after it, and the stop waited for neither.
+        assert log == ["take a b", "GetState", "EmergencyStop", "take c"]
+
+        release.set()
+        answering = threading.Thread(target=lambda: [p.answer(Done(detail="x")) for p in taken])
+        answering.start()
+        await async_wait_until(lambda: len(answers) == 5, 10.0, "every answer")
+        answering.join()
+    assert sorted(answers) == ["EmergencyStop", "GetState", "x", "x", "x"]

@@ -149,6 +149,10 @@ class RobotQueue:
             self._digests.pop(oldest, None)
         return ids
 
+    def knows(self, request_id: str) -> bool:
+        """Whether `request_id` was taken before (a submit with it again is a retry)."""
+        return request_id in self._requests
+
     def withdraw(self, request_id: str) -> None:
         """Undo a submit whose orders could not be stored: they were never accepted."""
         self._digests.pop(request_id, None)

@@ -9,12 +9,12 @@ request, event or executor token names it.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import functools
 import logging
-import sqlite3
 import time
 
-from shared.bus import Bus, json_decoder
+from shared.bus import Bus, Pending, json_decoder
 from shared.errors import BusError, ServiceError
 from shared.keys import RobotKeys, last_chunk, robot_of
 from shared.messages import (
@@ -57,7 +57,7 @@ from shared.robot.stop import Cancelled, RobotStop, prepare
 from shared.ros2 import NAVIGATE_FEEDBACK
 
 from .queue import RequestConflict, RobotQueue
-from .store import OrderStore
+from .store import Operation, OrderStore
 
 _LOGGER = logging.getLogger(__name__)
 
@@ -136,27 +136,16 @@ class RobotSupervisor:
 
     async def handle(self, request: SupervisorRequest) -> Message:
         match request:
-            case Submit(request_id=request_id, orders=orders, transcript=transcript):
-                if not request_id:
-                    return Failed(reason="submit needs a non-empty request_id")
-                if self._queue.stopped:
-                    return Failed(
-                        reason="the emergency stop is on: release it first "
-                        "(voicectl release, or Release in the panel)"
-                    )
+            case Submit():
+                # One submit alone; the service takes them by batches (`_take_submits`).
+                accepted = self.accept(request)
+                if isinstance(accepted, Failed):
+                    return accepted
+                ids, new = accepted
                 try:
-                    ids = self._queue.submit(request_id, orders, transcript)
-                except RequestConflict as exc:
-                    return Failed(reason=str(exc))
-                stored = self._changed()
-                if stored is not None:
-                    try:
-                        # Acknowledge only what is on disk: a SIGKILL from now on loses nothing.
-                        await asyncio.shield(stored)
-                    except sqlite3.Error as exc:
-                        self._queue.withdraw(request_id)
-                        self._changed()
-                        return Failed(reason=f"could not store the orders: {exc}")
+                    await asyncio.shield(self._store.write(self.changes()))
+                except Exception as exc:
+                    return self.not_stored(request, new, exc)
                 return Submitted(order_ids=ids)
             case Cancel(order_id=order_id):
                 return await self._cancel(order_id, "cancelled by user")
@@ -198,6 +187,32 @@ class RobotSupervisor:
                     self._store.history_page(self.robot, offset, limit)
                 )
                 return HistoryPage(records=records, total=total, offset=offset)
+
+    def accept(self, submit: Submit) -> tuple[list[str], bool] | Failed:
+        """Queue a submit's orders: their ids, and whether they are new (not a retry's);
+        or say why not. They are accepted only once they are stored: whoever calls this
+        writes `changes()` and answers after the commit."""
+        if not submit.request_id:
+            return Failed(reason="submit needs a non-empty request_id")
+        if self._queue.stopped:
+            return Failed(
+                reason="the emergency stop is on: release it first "
+                "(voicectl release, or Release in the panel)"
+            )
+        new = not self._queue.knows(submit.request_id)
+        try:
+            ids = self._queue.submit(submit.request_id, submit.orders, submit.transcript)
+        except RequestConflict as exc:
+            return Failed(reason=str(exc))
+        return ids, new
+
+    def not_stored(self, submit: Submit, new: bool, error: BaseException) -> Failed:
+        """A submit whose orders could not be stored: they were never accepted (a retry's
+        failure leaves the first one's orders as they are)."""
+        if new:
+            self._queue.withdraw(submit.request_id)
+            self._changed()
+        return Failed(reason=f"could not store the orders: {error}")
 
     async def _cancel(self, order_id: str, why: str) -> Message:
         if self._queue.remove_queued(order_id, why):
@@ -508,16 +523,21 @@ class RobotSupervisor:
             _LOGGER.info("%s: %s %s %s", self.robot, order_id, status, message)
             self._changed()
 
-    def _changed(self) -> asyncio.Future[None] | None:
-        """Store what changed (in order), publish soon, wake the dispatcher; the returned
-        future, if anything changed, resolves when it is committed."""
+    def _changed(self) -> None:
+        """Store what changed (in order), publish soon, wake the dispatcher."""
+        operations = self.changes()
+        if operations:
+            self._store.write(operations)
+
+    def changes(self) -> list[Operation]:
+        """What changed since the last call, as store operations to run in order; the
+        state is published soon and the dispatcher woken."""
         records, requests = self._queue.take_changes()
         operations = [self._store.save_orders(self.robot, records)] if records else []
         operations += [self._store.save_request(self.robot, r, ids) for r, ids in requests]
-        stored = self._store.write(operations) if operations else None
         self._publish_soon()
         self._wake.set()
-        return stored
+        return operations
 
     def _publish_soon(self) -> None:
         if self._publish_handle is not None:
@@ -534,6 +554,10 @@ class RobotSupervisor:
         self._bus.publish(
             self._keys.state, StateUpdate(state=self._queue.snapshot()), superseded=True
         )
+
+
+Waiting = tuple[Pending[SupervisorRequest], RobotSupervisor, Submit, tuple[list[str], bool]]
+"""A submit taken and queued, to be answered once its orders are committed."""
 
 
 class SupervisorService(Service):
@@ -583,8 +607,14 @@ class SupervisorService(Service):
         # graph announces (RobotStop.of): follow it from now on, and have the stop's codec
         # built before any STOP can arrive.
         await prepare(None, self._bus, STOP_NODE)
-        self._bus.serve_keyed(
-            RobotKeys.any_robot().supervisor, json_decoder(SupervisorRequest), self._on_request
+        # A burst of submits is taken in one go and committed once; STOP overtakes them.
+        self._bus.serve_in_turn(
+            RobotKeys.any_robot().supervisor,
+            json_decoder(SupervisorRequest),
+            self._on_request,
+            batched=lambda request: isinstance(request, Submit),
+            take=self._take_submits,
+            overtakes=lambda request: isinstance(request, EmergencyStop),
         )
         self._bus.watch(RobotKeys.any_robot().supervisor_owner("*"), self._on_owner)
         self._bus.subscribe(
@@ -652,6 +682,49 @@ class SupervisorService(Service):
         name = robot_of(key)
         if name in self._robots:
             return await self.robot(name).handle(request)
+        return self._unknown(name)
+
+    def _take_submits(self, batch: list[Pending[SupervisorRequest]]) -> None:
+        """Submits in arrival order, each queued now; those accepted are answered together,
+        from the store's thread, as soon as one commit holds them all: no order is
+        acknowledged before it is on disk, and the loop is not woken once per submit."""
+        waiting: list[Waiting] = []
+        robots: dict[str, RobotSupervisor] = {}
+        for pending in batch:
+            submit = pending.request
+            assert isinstance(submit, Submit)  # what `batched` lets through
+            name = robot_of(pending.key)
+            if name not in self._robots:
+                pending.answer(self._unknown(name))
+                continue
+            robot = self._robots[name]
+            accepted = robot.accept(submit)
+            if isinstance(accepted, Failed):
+                pending.answer(accepted)
+                continue
+            # A retry is answered after this commit too: its first one is stored by then.
+            robots[name] = robot
+            waiting.append((pending, robot, submit, accepted))
+        if not waiting:
+            return
+        operations = [operation for robot in robots.values() for operation in robot.changes()]
+        loop = asyncio.get_running_loop()
+
+        def committed(error: BaseException | None) -> None:  # on the store's thread
+            if error is None:
+                for pending, _, _, (ids, _) in waiting:
+                    pending.answer(Submitted(order_ids=ids))
+            else:
+                with contextlib.suppress(RuntimeError):  # the loop closed: nobody waits
+                    loop.call_soon_threadsafe(self._not_stored, waiting, error)
+
+        self._store.write_then(operations, committed)
+
+    def _not_stored(self, waiting: list[Waiting], error: BaseException) -> None:
+        for pending, robot, submit, (_, new) in waiting:
+            pending.answer(robot.not_stored(submit, new, error))
+
+    def _unknown(self, name: str) -> Failed:
         # A name nobody has configured or served: answer without creating a robot, so that
         # made-up names cannot grow the process without limit. Not even a STOP creates
         # one: with no executor ever heard of, there is no robot to know the keys of.

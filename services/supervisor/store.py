@@ -11,6 +11,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import fcntl
+import functools
 import logging
 import os
 import queue
@@ -81,8 +82,11 @@ class SavedRobot:
 
 
 Operation = Callable[[sqlite3.Connection], Any]
-Call = tuple[Operation, "asyncio.Future[Any]", asyncio.AbstractEventLoop]
-"""An operation, the future that gets its result, and the loop that future lives on."""
+Committed = Callable[[BaseException | None], None]
+"""Told on the writer thread, once its write is committed (None) or has failed (why)."""
+Call = tuple[Operation, Callable[[bool, Any], None]]
+"""An operation, and what to do on the writer thread with its outcome (ok, result or
+error) once its transaction has ended."""
 
 
 class OrderStore:
@@ -123,7 +127,7 @@ class OrderStore:
         """Run `operation` on the writer thread after everything queued before it."""
         loop = asyncio.get_running_loop()
         future: asyncio.Future[T] = loop.create_future()
-        self._inbox.put((operation, future, loop))
+        self._inbox.put((operation, functools.partial(_settle_soon, loop, future)))
         return await future
 
     def write(self, operations: list[Operation]) -> asyncio.Future[None]:
@@ -132,17 +136,26 @@ class OrderStore:
         loop = asyncio.get_running_loop()
         future: asyncio.Future[None] = loop.create_future()
 
-        def run_all(db: sqlite3.Connection) -> None:
-            for operation in operations:
-                operation(db)
-
         def log_failure(done: asyncio.Future[None]) -> None:
             if not done.cancelled() and done.exception() is not None:
                 _LOGGER.error("order store: write failed: %s", done.exception())
 
         future.add_done_callback(log_failure)
-        self._inbox.put((run_all, future, loop))
+        self._inbox.put((_all(operations), functools.partial(_settle_soon, loop, future)))
         return future
+
+    def write_then(self, operations: list[Operation], committed: Committed) -> None:
+        """Queue `operations` as one, and call `committed` on the writer thread when they
+        are committed or have failed: what answers a batch of submits straight from the
+        writer, without a round through the event loop. It must be quick and thread-safe;
+        a failure is logged here either way."""
+
+        def done(ok: bool, value: Any) -> None:
+            if not ok:
+                _LOGGER.error("order store: write failed: %s", value)
+            committed(None if ok else value)
+
+        self._inbox.put((_all(operations), done))
 
     # --- operations ------------------------------------------------------------------------
 
@@ -281,7 +294,7 @@ class OrderStore:
         results: list[tuple[bool, Any]] = []
         try:
             db.execute("BEGIN IMMEDIATE")
-            for operation, _, _ in batch:
+            for operation, _ in batch:
                 # A savepoint per operation: one that fails is undone alone.
                 db.execute("SAVEPOINT op")
                 try:
@@ -297,9 +310,11 @@ class OrderStore:
             if db.in_transaction:
                 db.rollback()
             results = [(False, exc)] * len(batch)
-        for (_, future, loop), (ok, value) in zip(batch, results, strict=True):
-            with contextlib.suppress(RuntimeError):  # the loop closed: nobody is waiting
-                loop.call_soon_threadsafe(_settle, future, ok, value)
+        for (_, done), (ok, value) in zip(batch, results, strict=True):
+            try:
+                done(ok, value)
+            except Exception:  # one caller's failure must not keep the others waiting
+                _LOGGER.exception("order store: reporting a write's outcome failed")
 
 
 class StoreInUse(VoicectlError, OSError):
@@ -321,6 +336,21 @@ def _exclusive(path: Path) -> IO[str]:
     handle.write(f"pid {os.getpid()}\n")
     handle.flush()
     return handle
+
+
+def _all(operations: list[Operation]) -> Operation:
+    def run_all(db: sqlite3.Connection) -> None:
+        for operation in operations:
+            operation(db)
+
+    return run_all
+
+
+def _settle_soon(
+    loop: asyncio.AbstractEventLoop, future: asyncio.Future[Any], ok: bool, value: Any
+) -> None:
+    with contextlib.suppress(RuntimeError):  # the loop closed: nobody is waiting
+        loop.call_soon_threadsafe(_settle, future, ok, value)
 
 
 def _settle(future: asyncio.Future[Any], ok: bool, value: Any) -> None:
