@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import queue
 import sqlite3
 import threading
@@ -26,7 +27,7 @@ def count_from_elsewhere(path: Path) -> int:
     return int(count)
 
 
-def test_write_then_is_told_on_the_writer_thread_once_the_write_is_committed(
+async def test_write_then_is_told_on_the_writer_thread_once_the_write_is_committed(
     tmp_path: Path,
 ) -> None:
     told: queue.SimpleQueue[Told] = queue.SimpleQueue()
@@ -38,10 +39,10 @@ def test_write_then_is_told_on_the_writer_thread_once_the_write_is_committed(
 
         records = [(record("a"), 0.0), (record("b"), 1.0)]
         store.write_then([store.save_orders("r1", records)], committed)
-        assert told.get(timeout=5) == (None, 2, "order-store")
+        assert await asyncio.to_thread(told.get, timeout=5) == (None, 2, "order-store")
 
 
-def test_write_then_is_told_why_a_write_failed_and_the_others_still_commit(
+async def test_write_then_is_told_why_a_write_failed_and_the_others_still_commit(
     tmp_path: Path,
 ) -> None:
     told: queue.SimpleQueue[Told] = queue.SimpleQueue()
@@ -55,7 +56,7 @@ def test_write_then_is_told_why_a_write_failed_and_the_others_still_commit(
 
         store.write_then([store.save_orders("r1", [(record("a"), 0.0)]), fails], committed)
         store.write_then([store.save_orders("r1", [(record("b"), 1.0)])], committed)
-        error, _, _ = told.get(timeout=5)
+        error, _, _ = await asyncio.to_thread(told.get, timeout=5)
         assert isinstance(error, sqlite3.IntegrityError)
         # The failed write is undone whole (its first operation too); the next one is kept.
-        assert told.get(timeout=5)[:2] == (None, 1)
+        assert (await asyncio.to_thread(told.get, timeout=5))[:2] == (None, 1)

@@ -534,7 +534,8 @@ class RobotSupervisor:
         state is published soon and the dispatcher woken."""
         records, requests = self._queue.take_changes()
         operations = [self._store.save_orders(self.robot, records)] if records else []
-        operations += [self._store.save_request(self.robot, r, ids) for r, ids in requests]
+        if requests:
+            operations.append(self._store.save_requests(self.robot, requests))
         self._publish_soon()
         self._wake.set()
         return operations

@@ -97,6 +97,8 @@ class OrderStore:
         self._durability = durability
         self._inbox: queue.SimpleQueue[Call | None] = queue.SimpleQueue()
         """Calls in order; None stops the writer thread."""
+        self._outbox: list[Call] = []
+        """Calls made during this turn of the event loop, handed over at its end."""
         self._thread: threading.Thread | None = None
         self._encoder = msgspec.json.Encoder()
         self._decoder = msgspec.json.Decoder(OrderRecord)
@@ -115,6 +117,7 @@ class OrderStore:
         return self
 
     def __exit__(self, *_exc: object) -> None:
+        self._flush()
         self._inbox.put(None)
         if self._thread is not None:
             self._thread.join(timeout=10)
@@ -127,7 +130,7 @@ class OrderStore:
         """Run `operation` on the writer thread after everything queued before it."""
         loop = asyncio.get_running_loop()
         future: asyncio.Future[T] = loop.create_future()
-        self._inbox.put((operation, functools.partial(_settle_soon, loop, future)))
+        self._send((operation, functools.partial(_settle_soon, loop, future)))
         return await future
 
     def write(self, operations: list[Operation]) -> asyncio.Future[None]:
@@ -141,7 +144,7 @@ class OrderStore:
                 _LOGGER.error("order store: write failed: %s", done.exception())
 
         future.add_done_callback(log_failure)
-        self._inbox.put((_all(operations), functools.partial(_settle_soon, loop, future)))
+        self._send((_all(operations), functools.partial(_settle_soon, loop, future)))
         return future
 
     def write_then(self, operations: list[Operation], committed: Committed) -> None:
@@ -155,7 +158,21 @@ class OrderStore:
                 _LOGGER.error("order store: write failed: %s", value)
             committed(None if ok else value)
 
-        self._inbox.put((_all(operations), done))
+        self._send((_all(operations), done))
+
+    def _send(self, call: Call) -> None:
+        """Hand `call` to the writer thread once the callbacks already due on the loop have
+        run, in order with every other call. Woken at once, the writer would take the GIL
+        from the loop just as it dispatches the order that was just submitted (measured:
+        180 us of the 250 us between a submit's arrival and its dispatch)."""
+        self._outbox.append(call)
+        if len(self._outbox) == 1:
+            asyncio.get_running_loop().call_soon(self._flush)
+
+    def _flush(self) -> None:
+        calls, self._outbox = self._outbox, []
+        for call in calls:
+            self._inbox.put(call)
 
     # --- operations ------------------------------------------------------------------------
 
@@ -186,13 +203,14 @@ class OrderStore:
 
         return save
 
-    def save_request(self, robot: str, request_id: str, order_ids: list[str]) -> Operation:
-        ids = self._encoder.encode(order_ids)
+    def save_requests(self, robot: str, requests: list[tuple[str, list[str]]]) -> Operation:
+        """Request ids with the ids of the orders they queued, to answer retries."""
+        rows = [(robot, request_id, self._encoder.encode(ids)) for request_id, ids in requests]
 
         def save(db: sqlite3.Connection) -> None:
-            db.execute(
+            db.executemany(
                 "INSERT OR IGNORE INTO requests (robot, request_id, order_ids) VALUES (?, ?, ?)",
-                (robot, request_id, ids),
+                rows,
             )
 
         return save
