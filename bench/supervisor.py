@@ -1,17 +1,21 @@
 """Supervisor overhead: submit round trip, submit-to-dispatch latency and orders accepted
-per second with durability on, beside a raw Zenoh request/reply measured in the same run.
+per second with durability on, beside a raw Zenoh request/reply measured in the same run,
+and a raw Zenoh relay (a query that sends a query on: the two hops of a submit and its
+dispatch, with nothing in between).
 
     .venv/bin/python bench/supervisor.py [--orders 10000] [--durability process|power] [--quick]
 
 Everything runs on loopback: a router and the supervisor as their own processes, a raw
-echo queryable as its own process (the baseline), and this process as client and as the
-robot's executor (it accepts every order and reports it done at once).
+echo and relay queryable as its own process (the baselines), and this process as client
+and as the robot's executor (it accepts every order and reports it done at once).
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
+import os
 import subprocess
 import sys
 import tempfile
@@ -53,7 +57,14 @@ conf.insert_json5("connect/timeout_ms", "-1")
 with zenoh.open(conf) as session:
     def echo(query):
         query.reply(query.key_expr, query.payload.to_bytes() if query.payload is not None else b"")
+    # Replies to the relayed query are not waited for, on Zenoh's own thread (a plain
+    # function would start a Python thread for each query).
+    ignore = zenoh.handlers.Callback(lambda reply: None, indirect=False)
+    def relay(query):
+        session.get("bench/relayed", ignore, payload=query.payload.to_bytes())
+        query.reply(query.key_expr, b"")
     queryable = session.declare_queryable("bench/echo", echo)
+    relayer = session.declare_queryable("bench/relay", relay)
     print("ready", flush=True)
     sys.stdin.read()
 """
@@ -66,6 +77,26 @@ def free_port() -> int:
         sock.bind(("127.0.0.1", 0))
         port: int = sock.getsockname()[1]
         return port
+
+
+def cpu_seconds(pid: int) -> float:
+    """CPU time (user and system) a process has used so far, from /proc (Linux)."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+class CpuUse:
+    """CPU time per request of the processes taking part in a burst."""
+
+    def __init__(self, pids: dict[str, int]) -> None:
+        self._pids = pids
+        self._start = {name: cpu_seconds(pid) for name, pid in pids.items()}
+        self._own = time.process_time()
+
+    def per_request(self, count: int) -> str:
+        used = {name: cpu_seconds(pid) - self._start[name] for name, pid in self._pids.items()}
+        used["this client"] = time.process_time() - self._own
+        return ", ".join(f"{name} {seconds / count * 1e6:.0f}" for name, seconds in used.items())
 
 
 def percentile(values: list[float], q: float) -> float:
@@ -86,6 +117,37 @@ async def raw_round_trips(bus: Bus, count: int) -> list[float]:
         start = time.perf_counter()
         await bus.request_bytes("bench/echo", payload, 5.0)
         times.append(time.perf_counter() - start)
+    return times
+
+
+async def relayed_times(bus: Bus, count: int) -> list[float]:
+    """From a query to the relay to the relayed query's handler here, as an order's
+    arrival at the executor is timed."""
+    arrivals: dict[bytes, float] = {}
+    arrived = asyncio.Event()
+
+    async def on_relayed(payload: bytes) -> bytes:
+        arrivals[payload] = time.perf_counter()
+        arrived.set()
+        return b""
+
+    async def relay(tag: bytes) -> float:
+        start = time.perf_counter()
+        await bus.request_bytes("bench/relay", tag, 5.0)
+        while tag not in arrivals:
+            arrived.clear()
+            await arrived.wait()
+        return arrivals[tag] - start
+
+    bus.serve_bytes("bench/relayed", on_relayed)
+    for attempt in range(100):  # until the relay's query finds this queryable
+        with contextlib.suppress(TimeoutError):
+            await asyncio.wait_for(relay(f"warm-up-{attempt}".encode()), 0.1)
+            break
+    times = []
+    for i in range(count):
+        times.append(await relay(f"relay-{i}".encode()))
+        await asyncio.sleep(0.001)
     return times
 
 
@@ -132,7 +194,7 @@ async def wait_for_executor(bus: Bus, keys: RobotKeys) -> None:
     raise SystemExit("the supervisor never saw the benchmark's executor")
 
 
-async def measure(router: str, orders: int, round_trips: int) -> None:
+async def measure(router: str, orders: int, round_trips: int, pids: dict[str, int]) -> None:
     options = BusOptions(connect=[router])
     order = Order(order="bench", label="bench", description="bench")
     decode = json_decoder(SupervisorReply)
@@ -144,6 +206,7 @@ async def measure(router: str, orders: int, round_trips: int) -> None:
             except BusError:
                 await asyncio.sleep(0.1)
         raw = await raw_round_trips(bus, round_trips)
+        relayed = await relayed_times(bus, round_trips)
 
         executor = FakeExecutor(bus, "bench")
         executor.start()
@@ -179,9 +242,11 @@ async def measure(router: str, orders: int, round_trips: int) -> None:
                 await bus.request_bytes("bench/echo", b"x" * 200, 10.0)
                 echoed += 1
 
+        cpu = CpuUse({"echo": pids["echo"], "router": pids["router"]})
         start = time.perf_counter()
         await asyncio.gather(*(echo_worker(k) for k in range(in_flight)))
         raw_rate = echoed / (time.perf_counter() - start)
+        raw_cpu = cpu.per_request(echoed)
 
         async def worker(first: int) -> None:
             nonlocal accepted
@@ -192,19 +257,25 @@ async def measure(router: str, orders: int, round_trips: int) -> None:
                 assert isinstance(reply, Submitted), reply
                 accepted += 1
 
+        cpu = CpuUse({"supervisor": pids["supervisor"], "router": pids["router"]})
         start = time.perf_counter()
         await asyncio.gather(*(worker(k) for k in range(in_flight)))
         elapsed = time.perf_counter() - start
+        order_cpu = cpu.per_request(accepted)
 
     print()
     raw50, _ = describe("raw Zenoh request/reply (baseline)", raw)
+    rel50, _ = describe("raw Zenoh query relayed to here", relayed)
     sub50, _ = describe("supervisor submit round trip", submit_times)
     dis50, _ = describe("submit to dispatch (order at the executor)", dispatch_times)
     print(f"{'raw Zenoh requests per second (64 in flight)':<42} {raw_rate:9.0f} /s  (baseline)")
     print(f"{'orders accepted per second (64 in flight)':<42} {accepted / elapsed:9.0f} /s")
     print(f"{'orders accepted / raw requests per second':<42} {accepted / elapsed / raw_rate:9.2f}")
+    print(f"CPU per raw request, us: {raw_cpu}")
+    print(f"CPU per order, us:       {order_cpu}")
     print(f"{'submit / raw round trip (p50)':<42} {sub50 / raw50:9.2f} x")
     print(f"{'submit-to-dispatch / raw round trip (p50)':<42} {dis50 / raw50:9.2f} x")
+    print(f"{'raw relay / raw round trip (p50)':<42} {rel50 / raw50:9.2f} x")
 
 
 def main() -> None:
@@ -249,7 +320,8 @@ def main() -> None:
                 f"zenoh {zenoh.__version__ if hasattr(zenoh, '__version__') else ''}, "
                 f"durability {args.durability}, {args.orders} orders in the burst"
             )
-            asyncio.run(measure(router, args.orders, args.round_trips))
+            pids = {"router": children[0].pid, "supervisor": children[1].pid, "echo": echo.pid}
+            asyncio.run(measure(router, args.orders, args.round_trips, pids))
         finally:
             if echo.stdin is not None:
                 echo.stdin.close()
