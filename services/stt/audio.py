@@ -55,6 +55,14 @@ class Loudness:
         self._needed = needed
         """Frames heard before the room's level is known; until then nothing stands out."""
 
+    def spread(self) -> float:
+        """dB between the loudest and the quietest tenth of the window: about 40 in a quiet
+        room with someone speaking, under 20 with noise 10 to 15 dB below the voice."""
+        if len(self._levels) < self._needed:
+            return math.inf
+        levels = np.fromiter(self._levels, dtype=np.float32)
+        return float(np.percentile(levels, 90) - np.percentile(levels, 10))
+
     def stands_out(self, pcm: bytes) -> bool:
         samples = np.frombuffer(pcm, dtype="<i2").astype(np.float32)
         level = 10.0 * math.log10(float(np.mean(samples * samples)) + 1.0)
@@ -63,6 +71,26 @@ class Loudness:
             return False
         room = float(np.percentile(np.fromiter(self._levels, dtype=np.float32), 10))
         return level > room + self._margin
+
+
+class Suppressor:
+    """WebRTC's noise suppression over a stream (PyPI `webrtc-noise-gain`), in 10 ms steps:
+    it follows the noise as the stream goes, so it hears every frame, speech or not."""
+
+    STEP = FRAME_BYTES // 2
+
+    def __init__(self, level: int) -> None:
+        from webrtc_noise_gain import AudioProcessor
+
+        self._processor = AudioProcessor(0, level)  # 0: no automatic gain
+        self._pending = bytearray()
+
+    def process(self, pcm: bytes) -> bytes:
+        """The same audio with less noise, as many bytes as whole 10 ms steps make; what
+        is left comes out with the next call."""
+        self._pending += pcm
+        steps = whole(self._pending, self.STEP)
+        return b"".join(self._processor.Process10ms(step).audio for step in steps)
 
 
 def seconds(pcm_bytes: int) -> float:
