@@ -85,13 +85,13 @@ ROOM_NEEDED = 10
 END_FRAMES = 8
 """It ends after this many frames without speech (0.24 s)."""
 EARLY_FRAMES = 3
+"""After this many (0.09 s) the final pass runs already; the end confirms or drops it."""
 SUPPRESSION = 3
 """WebRTC's noise suppression level (0 to 3) of the second look."""
 NOISY_SPREAD = 30.0
 """A room whose loudest and quietest tenth of the last `ROOM_WINDOW` frames are fewer dB
-apart is noisy: quiet rooms measured 38 dB and more with someone speaking, 10 to 15 dB
-of noise or babble below the voice 12 to 26."""
-"""After this many (0.09 s) the final pass runs already; the end confirms or drops it."""
+apart is noisy: on the dev split, quiet rooms measured 38 dB and more with someone speaking,
+10 to 15 dB of noise or babble below the voice 12 to 26."""
 PARTIAL_EVERY = 0.1
 """Seconds of audio between two looks at the partial hypothesis."""
 CONFIDENCE_MIDPOINT = -5.3
