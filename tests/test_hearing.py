@@ -21,6 +21,7 @@ from services.stt.engine import EngineOptions, Final, load_engine
 from services.stt.judge import OFF, Thresholds, Vocabulary, Word, judge
 
 from .conftest import Speak, voicectl
+from .support import finals
 
 
 def transcribe(*files: Path) -> list[dict[str, object]]:
@@ -284,18 +285,9 @@ def test_a_command_in_noise_rejected_at_first_is_taken_when_a_second_look_agrees
     engine = load_engine(EngineOptions())
     engine.use_grammar(build_grammar(OrderSet.load(Path(__file__).parents[1] / "orders")))
 
-    def finals() -> list[Final]:
-        recogniser = engine.recogniser(15.0)
-        try:
-            events = [e for frame in frames(pcm) for e in recogniser.accept(frame)]
-            events += recogniser.finish()
-        finally:
-            recogniser.close()
-        return [e for e in events if isinstance(e, Final)]
-
-    [final] = finals()
+    [final] = finals(engine, pcm)
     assert (final.text, final.rejection) == ("move forward", "")
     monkeypatch.setattr(sphinx, "NOISY_SPREAD", -1.0)  # no room is noisy: no second look
-    [first] = finals()
+    [first] = finals(engine, pcm)
     assert first.text == "move forward"
     assert "not sure" in first.rejection

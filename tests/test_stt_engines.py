@@ -22,7 +22,7 @@ from hypothesis import strategies as st
 from services.converter.grammar import build_grammar
 from services.converter.orders import OrderSet
 from services.stt.audio import AudioError, frames, read_wav
-from services.stt.engine import Engine, EngineError, EngineOptions, Final, Heard, load_engine
+from services.stt.engine import EngineError, EngineOptions, Final, Heard, load_engine
 from services.stt.lexicon import (
     espeak_pronunciations,
     ipa_to_arpabet,
@@ -34,6 +34,7 @@ from services.stt.wordgraph import GrammarError, compile_jsgf
 from shared.messages import FRAME_BYTES, AudioChunk, AudioMessage
 
 from .conftest import REPO, Speak, voicectl
+from .support import finals
 
 ORDERS = REPO / "orders"
 
@@ -295,22 +296,12 @@ def test_the_recogniser_switches_grammars_between_utterances(speech: Speak) -> N
     assert texts[1][0][1] != ""  # forced towards "reach kitchen" or nothing: either way rejected
 
 
-def _finals(engine: Engine, pcm: bytes) -> list[Final]:
-    recogniser = engine.recogniser(15.0)
-    try:
-        events = [e for frame in frames(pcm) for e in recogniser.accept(frame)]
-        events += recogniser.finish()
-    finally:
-        recogniser.close()
-    return [e for e in events if isinstance(e, Final)]
-
-
 def test_worker_processes_decode_sessions_at_once_as_one_process_does(speech: Speak) -> None:
     pcm = read_wav(speech("turn left then reach the kitchen", "flite:slt"))
     grammar = build_grammar(OrderSet.load(ORDERS))
     local = load_engine(EngineOptions())
     local.use_grammar(grammar)
-    [expected] = _finals(local, pcm)
+    [expected] = finals(local, pcm)
     assert expected.text == "turn left then reach the kitchen"
     engine = load_engine(EngineOptions(workers=2))
     try:
@@ -318,11 +309,11 @@ def test_worker_processes_decode_sessions_at_once_as_one_process_does(speech: Sp
             engine.recogniser(15.0)
         engine.use_grammar(grammar)
         with ThreadPoolExecutor(3) as pool:
-            assert list(pool.map(lambda _: _finals(engine, pcm), range(3))) == [[expected]] * 3
+            assert list(pool.map(lambda _: finals(engine, pcm), range(3))) == [[expected]] * 3
         broken = msgspec.structs.replace(grammar, jsgf="#JSGF V1.0;\ngrammar x;\n", version="x")
         with pytest.raises(EngineError, match="grammar x"):
             engine.use_grammar(broken)
-        assert _finals(engine, pcm) == [expected]  # the previous grammar stays in use
+        assert finals(engine, pcm) == [expected]  # the previous grammar stays in use
     finally:
         engine.close()
     assert not [p for p in multiprocessing.active_children() if p.name.startswith("stt-worker")]
