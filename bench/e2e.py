@@ -31,7 +31,6 @@ import json
 import os
 import platform
 import random
-import signal
 import sys
 import tempfile
 import threading
@@ -48,7 +47,7 @@ sys.path.insert(0, str(REPO))
 
 import httpx  # noqa: E402
 import websockets  # noqa: E402
-from soak import children, start_up  # noqa: E402
+from soak import children, stack_up  # noqa: E402
 from stt import cpu_seconds, raw_latency  # noqa: E402
 
 from harness.speech_set import Utterance, Voice, speak  # noqa: E402
@@ -386,8 +385,8 @@ def main() -> None:
     if args.quick:
         args.utterances, args.clients, args.requests = 10, 5, 10
         args.speakers, args.rounds = "1,2", 1
-    up, _lines, data, port, router = start_up("voicectl-e2e-", "--workers", str(args.workers))
-    try:
+    with stack_up("voicectl-e2e-", "--workers", str(args.workers)) as stack:
+        up, _lines, data, port, router = stack
         token = (data / "token").read_text().strip()
         figures, raw = asyncio.run(
             voice_to_motion(port, token, router, args.utterances, args.speech)
@@ -396,9 +395,6 @@ def main() -> None:
         counts = [int(n) for n in args.speakers.split(",")]
         crowd = asyncio.run(speakers(port, token, args.speech, stt, counts, args.rounds))
         load, errors = api_load(port, token, args.clients, args.requests)
-    finally:
-        up.send_signal(signal.SIGINT)
-        up.wait(60)
     print(
         f"e2e: {time.strftime('%Y-%m-%d')}, {platform.processor() or platform.machine()}, "
         f"{os.cpu_count()} cores, Python {platform.python_version()}; voicectl up, "

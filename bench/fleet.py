@@ -21,6 +21,7 @@ import asyncio
 import os
 import platform
 import random
+import shutil
 import signal
 import subprocess
 import sys
@@ -55,15 +56,15 @@ from shared.messages import (  # noqa: E402
 
 class Fleet:
     """The site's processes: a router, a converter, a supervisor, and per robot a
-    simulator and an executor; logs in a directory of their own."""
+    simulator and an executor; their data and their logs in directories of their own."""
 
-    def __init__(self, robots: int, logs: Path, per_process: int = 0) -> None:
+    def __init__(self, robots: int, data: Path, logs: Path, per_process: int = 0) -> None:
         self.names = [f"bot{k}" for k in range(robots)]
         self.per_process = per_process
         """Robots per bench/robots.py process; 0: two processes per robot, as on a site."""
         self.router = f"tcp/127.0.0.1:{free_port()}"
         self.logs = logs
-        self.data = Path(tempfile.mkdtemp(prefix="voicectl-fleet-"))
+        self.data = data
         self.processes: dict[str, subprocess.Popen[bytes]] = {}
 
     def start(self, name: str, *args: str, program: tuple[str, ...] = ("-m", "voicectl")) -> None:
@@ -237,14 +238,19 @@ def main() -> None:
     args = parser.parse_args()
     if args.quick:
         args.robots, args.seconds = 3, 8.0
+    # The logs are kept when something went wrong, to be read; the data never is.
     logs = Path(tempfile.mkdtemp(prefix="voicectl-fleet-logs-"))
-    fleet = Fleet(args.robots, logs, args.per_process)
     started = time.monotonic()
-    try:
-        fleet.up()
-        results, raw, usage = asyncio.run(measure(fleet, args.seconds, args.period))
-    finally:
-        fleet.stop()
+    with tempfile.TemporaryDirectory(prefix="voicectl-fleet-", ignore_cleanup_errors=True) as data:
+        fleet = Fleet(args.robots, Path(data), logs, args.per_process)
+        try:
+            fleet.up()
+            results, raw, usage = asyncio.run(measure(fleet, args.seconds, args.period))
+        except BaseException:
+            print(f"logs in {logs}", file=sys.stderr)
+            raise
+        finally:
+            fleet.stop()
     every = [t for times in results.to_motion.values() for t in times]
     worst = max(
         (percentile(t, 0.99) for t in results.to_motion.values() if t), default=float("nan")
@@ -267,9 +273,11 @@ def main() -> None:
         print(f"  {name:<32} {value:8.1f}")
     for problem in results.problems[:20]:
         print(f"  ! {problem}")
-    print(f"  ({len(results.problems)} problems; logs in {logs})")
     if results.problems:
+        print(f"  ({len(results.problems)} problems; logs in {logs})")
         sys.exit(1)
+    shutil.rmtree(logs, ignore_errors=True)
+    print("  (0 problems; logs removed)")
 
 
 if __name__ == "__main__":

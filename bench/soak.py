@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import collections
+import contextlib
 import json
 import os
 import random
@@ -27,6 +28,7 @@ import threading
 import time
 import urllib.error
 import urllib.request
+from collections.abc import Iterator
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
@@ -79,38 +81,46 @@ def rss_mb(pid: int, field: str = "VmRSS") -> float:
     return float("nan")
 
 
-def start_up(prefix: str, *flags: str) -> tuple[subprocess.Popen[str], list[str], Path, int, str]:
+@contextlib.contextmanager
+def stack_up(
+    prefix: str, *flags: str
+) -> Iterator[tuple[subprocess.Popen[str], list[str], Path, int, str]]:
     """`voicectl up` with a data directory and free ports of its own, once it says it is
     ready: the process, its output lines (kept as they come), the data directory, the
-    panel's port and the router's endpoint. Exits saying why when it does not come up."""
-    data = Path(tempfile.mkdtemp(prefix=prefix))
-    port, router = free_port(), f"tcp/127.0.0.1:{free_port()}"
-    env = {**os.environ, "VOICECTL_DATA": str(data), "PYTHONUNBUFFERED": "1"}
-    env.pop("VOICECTL_TOKEN", None)
-    up = subprocess.Popen(
-        [sys.executable, "-m", "voicectl", "up", "--router", router, "--port", str(port), *flags],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-        env=env,
-        cwd=REPO,
-    )
-    lines: list[str] = []
-    ready = threading.Event()
+    panel's port and the router's endpoint. Exits saying why when it does not come up. On
+    leaving, the stack is stopped with SIGINT, as a person would, and its data directory
+    removed, however the benchmark ended."""
+    with tempfile.TemporaryDirectory(prefix=prefix, ignore_cleanup_errors=True) as data:
+        port, router = free_port(), f"tcp/127.0.0.1:{free_port()}"
+        env = {**os.environ, "VOICECTL_DATA": data, "PYTHONUNBUFFERED": "1"}
+        env.pop("VOICECTL_TOKEN", None)
+        up_command = ["voicectl", "up", "--router", router, "--port", str(port), *flags]
+        up = subprocess.Popen(
+            [sys.executable, "-m", *up_command],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+            env=env,
+            cwd=REPO,
+        )
+        lines: list[str] = []
+        ready = threading.Event()
 
-    def pump() -> None:
-        assert up.stdout is not None
-        for line in up.stdout:
-            lines.append(line.rstrip())
-            if "voicectl up: ready" in line:
-                ready.set()
+        def pump() -> None:
+            assert up.stdout is not None
+            for line in up.stdout:
+                lines.append(line.rstrip())
+                if "voicectl up: ready" in line:
+                    ready.set()
 
-    threading.Thread(target=pump, daemon=True).start()
-    if not ready.wait(120):
-        up.send_signal(signal.SIGINT)
-        up.wait(60)
-        sys.exit("the stack did not come up:\n" + "\n".join(lines[-30:]))
-    return up, lines, data, port, router
+        threading.Thread(target=pump, daemon=True).start()
+        try:
+            if not ready.wait(120):
+                sys.exit("the stack did not come up:\n" + "\n".join(lines[-30:]))
+            yield up, lines, Path(data), port, router
+        finally:
+            up.send_signal(signal.SIGINT)
+            up.wait(60)
 
 
 def main() -> None:
@@ -121,8 +131,7 @@ def main() -> None:
     args = parser.parse_args()
     if args.quick:
         args.minutes = 0.5
-    up, lines, data, port, _router = start_up("voicectl-soak-", "--time-scale", "10")
-    try:
+    with stack_up("voicectl-soak-", "--time-scale", "10") as (up, lines, data, port, _router):
         token = (data / "token").read_text().strip()
         base = f"http://127.0.0.1:{port}"
         answers: collections.Counter[str] = collections.Counter()
@@ -171,9 +180,6 @@ def main() -> None:
             time.sleep(max(0.0, 1.0 / args.rate - (time.monotonic() - now)))
         pids = children(up.pid)
         samples.append(((time.monotonic() - started) / 60, {n: rss_mb(p) for n, p in pids.items()}))
-    finally:
-        up.send_signal(signal.SIGINT)
-        up.wait(60)
     names = sorted({n for _, sample in samples for n in sample})
     print(f"soak: {args.minutes:g} min at {args.rate:g} requests/s, {time.strftime('%Y-%m-%d')}")
     print("minute " + " ".join(f"{n:>11}" for n in names) + "   (RSS, MB)")

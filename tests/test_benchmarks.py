@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
 from pathlib import Path
@@ -41,15 +42,20 @@ QUICK = {
 @pytest.mark.timeout(300)
 @pytest.mark.parametrize("bench", sorted(QUICK))
 def test_a_benchmark_runs_quickly(bench: str, tmp_path: Path) -> None:
-    # The speech e2e makes goes to a directory of the test's own.
+    # The speech e2e makes goes to a directory of the test's own; so do the temporary
+    # directories of the benchmark and its services, to see that none is left behind.
     extra = ["--speech", str(tmp_path)] if bench == "e2e" else []
+    temporary = tmp_path / "tmp"
+    temporary.mkdir()
     done = subprocess.run(
         [sys.executable, f"bench/{bench}.py", "--quick", *extra],
         capture_output=True,
         text=True,
         cwd=REPO,
+        env={**os.environ, "TMPDIR": str(temporary)},
         timeout=280,
     )
     assert done.returncode == 0, done.stdout[-3000:] + done.stderr[-3000:]
     for figure in QUICK[bench]:
         assert figure in done.stdout, done.stdout
+    assert not list(temporary.iterdir())
