@@ -105,45 +105,40 @@ def describe(name: str, seconds: list[float]) -> tuple[float, float]:
     return p50, p99
 
 
-async def raw_round_trips(bus: Bus, count: int) -> list[float]:
-    payload = b"x" * 200
-    times = []
-    for _ in range(count):
-        start = time.perf_counter()
-        await bus.request_bytes("bench/echo", payload, 5.0)
-        times.append(time.perf_counter() - start)
-    return times
+async def raw_round_trip(bus: Bus) -> float:
+    start = time.perf_counter()
+    await bus.request_bytes("bench/echo", b"x" * 200, 5.0)
+    return time.perf_counter() - start
 
 
-async def relayed_times(bus: Bus, count: int) -> list[float]:
+class Relay:
     """From a query to the relay to the relayed query's handler here, as an order's
     arrival at the executor is timed."""
-    arrivals: dict[bytes, float] = {}
-    arrived = asyncio.Event()
 
-    async def on_relayed(payload: bytes) -> bytes:
-        arrivals[payload] = time.perf_counter()
-        arrived.set()
+    def __init__(self, bus: Bus) -> None:
+        self._bus = bus
+        self._arrivals: dict[bytes, float] = {}
+        self._arrived = asyncio.Event()
+
+    async def start(self) -> None:
+        self._bus.serve_bytes("bench/relayed", self._on_relayed)
+        for attempt in range(100):  # until the relay's query finds this queryable
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(self.time(f"warm-up-{attempt}".encode()), 0.1)
+                return
+
+    async def _on_relayed(self, payload: bytes) -> bytes:
+        self._arrivals[payload] = time.perf_counter()
+        self._arrived.set()
         return b""
 
-    async def relay(tag: bytes) -> float:
+    async def time(self, tag: bytes) -> float:
         start = time.perf_counter()
-        await bus.request_bytes("bench/relay", tag, 5.0)
-        while tag not in arrivals:
-            arrived.clear()
-            await arrived.wait()
-        return arrivals[tag] - start
-
-    bus.serve_bytes("bench/relayed", on_relayed)
-    for attempt in range(100):  # until the relay's query finds this queryable
-        with contextlib.suppress(TimeoutError):
-            await asyncio.wait_for(relay(f"warm-up-{attempt}".encode()), 0.1)
-            break
-    times = []
-    for i in range(count):
-        times.append(await relay(f"relay-{i}".encode()))
-        await asyncio.sleep(0.001)
-    return times
+        await self._bus.request_bytes("bench/relay", tag, 5.0)
+        while tag not in self._arrivals:
+            self._arrived.clear()
+            await self._arrived.wait()
+        return self._arrivals[tag] - start
 
 
 class FakeExecutor:
@@ -200,17 +195,22 @@ async def measure(router: str, orders: int, round_trips: int, pids: dict[str, in
                 break
             except BusError:
                 await asyncio.sleep(0.1)
-        raw = await raw_round_trips(bus, round_trips)
-        relayed = await relayed_times(bus, round_trips)
-
+        relay = Relay(bus)
+        await relay.start()
         executor = FakeExecutor(bus, "bench")
         executor.start()
         keys = RobotKeys("bench")
         await wait_for_executor(bus, keys)
 
+        # One of each in turn, so that the load of the machine, which changes over a run,
+        # weighs on the baselines and on the supervisor alike.
+        raw: list[float] = []
+        relayed: list[float] = []
         submit_times: list[float] = []
         dispatch_times: list[float] = []
         for i in range(round_trips):
+            raw.append(await raw_round_trip(bus))
+            relayed.append(await relay.time(f"relay-{i}".encode()))
             start = time.perf_counter()
             reply = await bus.request(
                 keys.supervisor, Submit(request_id=f"rt{i}", orders=[order]), decode, 5.0
