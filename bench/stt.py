@@ -19,6 +19,9 @@ Two passes per engine:
    exactly the right orders, doubts, wrong orders, non-commands rejected, end of speech
    to final transcript and to the converter's proposal, the service's CPU per second of
    audio, its start-up time and peak RSS, and a raw Zenoh put/subscribe beside them.
+
+`--ceiling` instead: the most any judge could reach with pocketsphinx's model, every
+grammar result taken as it is, on the original audio and after noise suppression.
 """
 
 from __future__ import annotations
@@ -47,10 +50,10 @@ from services.converter.grammar import build_grammar  # noqa: E402
 from services.converter.orders import OrderSet  # noqa: E402
 from services.converter.parser import Parser  # noqa: E402
 from services.stt.__main__ import add_engine_arguments, engine_options  # noqa: E402
-from services.stt.audio import NoiseFloor, frames, read_wav  # noqa: E402
-from services.stt.engine import EngineOptions, Final, load_engine  # noqa: E402
+from services.stt.audio import NoiseFloor, Suppressor, frames, read_wav  # noqa: E402
+from services.stt.engine import Engine, EngineOptions, Final, load_engine  # noqa: E402
 from services.stt.judge import OFF  # noqa: E402
-from services.stt.sphinx import PocketsphinxEngine  # noqa: E402
+from services.stt.sphinx import SUPPRESSION, PocketsphinxEngine  # noqa: E402
 from shared.bus import Bus, BusOptions, json_decoder  # noqa: E402
 from shared.keys import RobotKeys  # noqa: E402
 from shared.messages import (  # noqa: E402
@@ -201,21 +204,9 @@ def offline(
         for utterance in utterances:
             pcm = read_wav(directory / utterance.file)
             begin = time.thread_time()
-            recogniser = engine.recogniser(15.0)
-            events = [e for frame in frames(pcm) for e in recogniser.accept(frame)]
-            events += recogniser.finish()
-            recogniser.close()
+            outcomes.append(decoded(engine, parser, utterance, pcm))
             cpu += time.thread_time() - begin
             audio += len(pcm) / 32000
-            finals = [e for e in events if isinstance(e, Final)]
-            text = " ".join(f.text for f in finals if f.text)
-            result = parser.parse(text) if text else None
-            whole = len(finals) == 1 and not finals[0].rejection
-            outcome = Outcome(utterance, text, heard=" ".join(f.heard for f in finals))
-            if result is not None and not result.errors and result.orders and whole:
-                outcome.orders, outcome.rejected = result.orders, False
-                outcome.doubts = finals[0].doubts
-            outcomes.append(outcome)
         what = "with the second opinion" if second_opinion else "grammar alone (judge off)"
         report(
             f"{options.name}, offline, {what}: loaded in {loaded:.2f} s, "
@@ -227,6 +218,58 @@ def offline(
             misses(outcomes, parser)
     if options.name == "pocketsphinx":
         baseline(grammar.jsgf, parser, utterances, directory)
+
+
+def decoded(engine: Engine, parser: Parser, utterance: Utterance, pcm: bytes) -> Outcome:
+    """`pcm` streamed through a fresh recogniser in 20 ms frames: what became of it."""
+    recogniser = engine.recogniser(15.0)
+    events = [e for frame in frames(pcm) for e in recogniser.accept(frame)]
+    events += recogniser.finish()
+    recogniser.close()
+    finals = [e for e in events if isinstance(e, Final)]
+    text = " ".join(f.text for f in finals if f.text)
+    result = parser.parse(text) if text else None
+    whole = len(finals) == 1 and not finals[0].rejection
+    outcome = Outcome(utterance, text, heard=" ".join(f.heard for f in finals))
+    if result is not None and not result.errors and result.orders and whole:
+        outcome.orders, outcome.rejected = result.orders, False
+        outcome.doubts = finals[0].doubts
+    return outcome
+
+
+def ceiling(orders: OrderSet, utterances: list[Utterance], directory: Path) -> None:
+    """The most any judge could reach with pocketsphinx's acoustic model: every grammar
+    result accepted (judge off, no confidence floor), on the original audio and after
+    WebRTC's noise suppression. Counts the commands whose grammar result holds exactly the
+    right orders, and those it turned into other orders."""
+    parser = Parser(orders)
+    engine = PocketsphinxEngine(min_confidence=0.0, thresholds=OFF)
+    engine.use_grammar(build_grammar(orders))
+    verdicts: dict[str, list[tuple[str, str]]] = {}
+    for utterance in (u for u in utterances if u.command):
+        pcm = read_wav(directory / utterance.file)
+        quieter = Suppressor(SUPPRESSION).process(pcm)
+        original, suppressed = (
+            accepted(engine, parser, utterance, audio) for audio in (pcm, quieter)
+        )
+        verdicts.setdefault(utterance.condition, []).append((original, suppressed))
+    print("ceiling: every grammar result accepted; commands right (wrong orders)")
+    print(f"  {'condition':<10}{'original':>16}{'suppressed':>16}{'either':>10}")
+    for condition, pairs in sorted(verdicts.items()):
+        right = [sum(v[k] == "right" for v in pairs) for k in (0, 1)]
+        wrong = [sum(v[k] == "wrong" for v in pairs) for k in (0, 1)]
+        either = sum("right" in v for v in pairs)
+        print(
+            f"  {condition:<10}{right[0]:>6}/{len(pairs):<3}({wrong[0]:>2}){right[1]:>8}/"
+            f"{len(pairs):<3}({wrong[1]:>2}){either:>6}/{len(pairs)}"
+        )
+
+
+def accepted(engine: Engine, parser: Parser, utterance: Utterance, pcm: bytes) -> str:
+    """How `pcm` is judged if its grammar result is taken as it is, doubts and all."""
+    outcome = decoded(engine, parser, utterance, pcm)
+    outcome.doubts = []
+    return judged(outcome, parser)
 
 
 def baseline(jsgf: str, parser: Parser, utterances: list[Utterance], directory: Path) -> None:
@@ -477,6 +520,11 @@ def main() -> None:
     add_engine_arguments(parser)
     parser.add_argument("--offline-only", action="store_true")
     parser.add_argument("--service-only", action="store_true")
+    parser.add_argument(
+        "--ceiling",
+        action="store_true",
+        help="only the most any judge could reach: every grammar result accepted",
+    )
     parser.add_argument("--threads", action="store_true", help="CPU of each service thread")
     parser.add_argument("--every", type=int, default=1, help="only every Nth utterance")
     parser.add_argument("--quick", action="store_true", help="every 20th utterance")
@@ -503,6 +551,9 @@ def main() -> None:
         f"{os.cpu_count()} cores, "
         f"Python {platform.python_version()}, pocketsphinx {version('pocketsphinx')}"
     )
+    if args.ceiling:
+        ceiling(orders, utterances, args.set)
+        return
     if not args.service_only:
         offline(engine_options(args), orders, utterances, args.set)
     if not args.offline_only:
