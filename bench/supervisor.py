@@ -64,11 +64,25 @@ with zenoh.open(conf) as session:
     def relay(query):
         session.get("bench/relayed", ignore, payload=query.payload.to_bytes())
         query.reply(query.key_expr, b"")
+    # The same, sent on from an event loop's thread, as a service whose state one loop
+    # owns must: the floor for the supervisor's dispatch.
+    import asyncio, threading
+    loop = asyncio.new_event_loop()
+    threading.Thread(target=loop.run_forever, daemon=True).start()
+    def send_on(payload):
+        session.get("bench/relayed", ignore, payload=payload)
+    def loop_relay(query):
+        loop.call_soon_threadsafe(send_on, query.payload.to_bytes())
+        query.reply(query.key_expr, b"")
     queryable = session.declare_queryable("bench/echo", echo)
     relayer = session.declare_queryable("bench/relay", relay)
+    loop_relayer = session.declare_queryable("bench/loop-relay", loop_relay)
     print("ready", flush=True)
     sys.stdin.read()
 """
+
+PAUSE = 0.001
+"""Between two timed requests: an order has finished by then."""
 
 
 def free_port() -> int:
@@ -112,8 +126,8 @@ async def raw_round_trip(bus: Bus) -> float:
 
 
 class Relay:
-    """From a query to the relay to the relayed query's handler here, as an order's
-    arrival at the executor is timed."""
+    """From a query to a relay (`through` one of its keys) to the relayed query's handler
+    here, as an order's arrival at the executor is timed."""
 
     def __init__(self, bus: Bus) -> None:
         self._bus = bus
@@ -122,22 +136,24 @@ class Relay:
 
     async def start(self) -> None:
         self._bus.serve_bytes("bench/relayed", self._on_relayed)
-        for attempt in range(100):  # until the relay's query finds this queryable
-            with contextlib.suppress(TimeoutError):
-                await asyncio.wait_for(self.time(f"warm-up-{attempt}".encode()), 0.1)
-                return
+        for through in ("bench/relay", "bench/loop-relay"):
+            for attempt in range(100):  # until the relay's query finds this queryable
+                with contextlib.suppress(TimeoutError, BusError):
+                    tag = f"warm-up-{through}-{attempt}".encode()
+                    await asyncio.wait_for(self.time(through, tag), 0.1)
+                    break
 
     async def _on_relayed(self, payload: bytes) -> bytes:
         self._arrivals[payload] = time.perf_counter()
         self._arrived.set()
         return b""
 
-    async def time(self, tag: bytes) -> float:
+    async def time(self, through: str, tag: bytes) -> float:
         start = time.perf_counter()
-        await self._bus.request_bytes("bench/relay", tag, 5.0)
-        while tag not in self._arrivals:
+        await self._bus.request_bytes(through, tag, 5.0)
+        while tag not in self._arrivals:  # a relayed query lost ends the run, not hangs it
             self._arrived.clear()
-            await self._arrived.wait()
+            await asyncio.wait_for(self._arrived.wait(), 5.0)
         return self._arrivals[tag] - start
 
 
@@ -203,14 +219,21 @@ async def measure(router: str, orders: int, round_trips: int, pids: dict[str, in
         await wait_for_executor(bus, keys)
 
         # One of each in turn, so that the load of the machine, which changes over a run,
-        # weighs on the baselines and on the supervisor alike.
+        # weighs on the baselines and on the supervisor alike; each after the same pause,
+        # so that none finds the processes busier or idler than the others do.
         raw: list[float] = []
         relayed: list[float] = []
+        loop_relayed: list[float] = []
         submit_times: list[float] = []
         dispatch_times: list[float] = []
         for i in range(round_trips):
+            await asyncio.sleep(PAUSE)
             raw.append(await raw_round_trip(bus))
-            relayed.append(await relay.time(f"relay-{i}".encode()))
+            await asyncio.sleep(PAUSE)
+            relayed.append(await relay.time("bench/relay", f"relay-{i}".encode()))
+            await asyncio.sleep(PAUSE)
+            loop_relayed.append(await relay.time("bench/loop-relay", f"loop-{i}".encode()))
+            await asyncio.sleep(PAUSE)  # the order before has finished by now
             start = time.perf_counter()
             reply = await bus.request(
                 keys.supervisor, Submit(request_id=f"rt{i}", orders=[order]), decode, 5.0
@@ -222,7 +245,6 @@ async def measure(router: str, orders: int, round_trips: int, pids: dict[str, in
                 executor.arrived.clear()
                 await executor.arrived.wait()
             dispatch_times.append(executor.arrivals[order_id] - start)
-            await asyncio.sleep(0.001)  # let the order finish before the next submit
 
         # Throughput: a robot without an executor, so every order stays queued (and stored);
         # beside it, the same number of raw requests to the echo, as many in flight.
@@ -261,6 +283,7 @@ async def measure(router: str, orders: int, round_trips: int, pids: dict[str, in
     print()
     raw50, _ = describe("raw Zenoh request/reply (baseline)", raw)
     rel50, _ = describe("raw Zenoh query relayed to here", relayed)
+    loop50, _ = describe("the same, relayed from an event loop", loop_relayed)
     sub50, _ = describe("supervisor submit round trip", submit_times)
     dis50, _ = describe("submit to dispatch (order at the executor)", dispatch_times)
     print(f"{'raw Zenoh requests per second (64 in flight)':<42} {raw_rate:9.0f} /s  (baseline)")
@@ -271,6 +294,7 @@ async def measure(router: str, orders: int, round_trips: int, pids: dict[str, in
     print(f"{'submit / raw round trip (p50)':<42} {sub50 / raw50:9.2f} x")
     print(f"{'submit-to-dispatch / raw round trip (p50)':<42} {dis50 / raw50:9.2f} x")
     print(f"{'raw relay / raw round trip (p50)':<42} {rel50 / raw50:9.2f} x")
+    print(f"{'relay from a loop / raw round trip (p50)':<42} {loop50 / raw50:9.2f} x")
 
 
 def main() -> None:
