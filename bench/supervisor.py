@@ -1,7 +1,8 @@
 """Supervisor overhead: submit round trip, submit-to-dispatch latency and orders accepted
 per second with durability on, beside a raw Zenoh request/reply measured in the same run,
 and a raw Zenoh relay (a query that sends a query on: the two hops of a submit and its
-dispatch, with nothing in between).
+dispatch, with nothing in between), from Zenoh's thread and from an event loop's. The
+latencies are taken in turn, one of each after the same pause.
 
     .venv/bin/python bench/supervisor.py [--orders 10000] [--durability process|power] [--quick]
 
