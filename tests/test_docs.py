@@ -84,7 +84,15 @@ def documented_stack(up_args: list[str], cwd: Path, data: Path) -> Iterator[Voic
         )
 
     try:
-        wait_until(lambda: '"executor_online": true' in voicectl("state").stdout, 60.0, "stack")
+        # The converter too: `say` asks it, and under load it can come up last.
+        wait_until(
+            lambda: (
+                '"executor_online": true' in voicectl("state").stdout
+                and voicectl("health", "converter").returncode == 0
+            ),
+            60.0,
+            "stack",
+        )
         yield voicectl
     finally:
         stack.send_signal(signal.SIGINT)

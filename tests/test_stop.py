@@ -66,7 +66,15 @@ async def test_stop_stops_the_robot_at_once_and_for_good(
             assert "navigation cancelled every goal" in outcome.stopped.detail
             assert outcome.stopped.confirmed
             return
-        assert outcome.stopped.confirmed, outcome
+        if case == "executor-killed" and not outcome.stopped.confirmed:
+            # Asked as the executor dies, before the supervisor has heard it go (under
+            # load that can take longer than the stop): the latch finds no executor, and
+            # the supervisor rightly says it could not confirm that part; the robot was
+            # stopped all the same (above).
+            assert "EXECUTOR: executor unreachable" in outcome.stopped.detail, outcome
+            assert "navigation cancelled every goal" in outcome.stopped.detail, outcome
+        else:
+            assert outcome.stopped.confirmed, outcome
         reply = await client.ask(ROBOT, GetState())
         assert isinstance(reply, StateReply)
         assert reply.state.stopped
