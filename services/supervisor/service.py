@@ -68,6 +68,10 @@ RESUME_GRACE = 3.0
 order interrupted."""
 LOST_GRACE = 0.5
 """After the executor's token goes, how long its running order may still report a result."""
+SETTLE = 0.5
+"""After an executor that was lost is heard again, how long it must stay so before it is
+handed an order: a link that has just come back can drop again at once, and an order sent
+then reaches nobody and fails."""
 PUBLISH_INTERVAL = 0.02
 CONFIRM_WAIT = 0.3
 """How long an emergency stop waits for navigation and the executor to confirm before it
@@ -94,6 +98,9 @@ class RobotSupervisor:
         self._holding: asyncio.Future[None] | None = None
         self._lost_pending = False
         """The executor's token went while an order ran, and the grace has not run out."""
+        self._settled_at: float | None = None
+        """When an executor back after a loss may be handed an order (loop time); None
+        before the executor was first heard, when it may be at once."""
         self._token = False
         """The executor's liveliness token is alive."""
         self._served: dict[str, bool] = {}
@@ -384,11 +391,23 @@ class RobotSupervisor:
         while True:
             await self._wake.wait()
             self._wake.clear()
+            if self._settling():
+                continue
             record = self._queue.start_next()
             if record is None:
                 continue
             self._changed()
             await self._dispatch(record.id, Execute(order_id=record.id, order=record.order))
+
+    def _settling(self) -> bool:
+        """Whether an executor back after a loss is still within `SETTLE`; the dispatcher
+        is woken again when it has settled."""
+        loop = asyncio.get_running_loop()
+        left = (self._settled_at or 0.0) - loop.time()
+        if not self._queue.executor_online or left <= 0:
+            return False
+        loop.call_later(left, self._wake.set)
+        return True
 
     async def _dispatch(self, order_id: str, execute: Execute) -> None:
         try:
@@ -455,6 +474,8 @@ class RobotSupervisor:
         self._queue.executor_online = alive
         current = self._queue.current
         loop = asyncio.get_running_loop()
+        if alive:
+            self._settled_at = 0.0 if self._settled_at is None else loop.time() + SETTLE
         if alive and current is not None and self._lost_pending:
             # Back (or a new one) before the grace ran out: ask it whether it still runs it.
             self._lost_pending = False
