@@ -155,6 +155,25 @@ async def test_running_order_is_interrupted_when_no_executor_runs_it(site: Site)
         assert (await client.finished(other)).message == "5 x 5 = 25"
 
 
+class StandIn:
+    """The executor's two services on a session of the test's own, a stand-in at the bus
+    seam: it accepts every order it is handed and keeps it in `taken`."""
+
+    def __init__(self) -> None:
+        self.taken: asyncio.Queue[Execute] = asyncio.Queue()
+
+    def serve(self, bus: Bus, keys: RobotKeys) -> None:
+        bus.serve(keys.executor_execute, json_decoder(Execute), self._execute)
+        bus.serve(keys.executor_control, json_decoder(ControlRequest), self._control)
+
+    async def _execute(self, request: Execute) -> Message:
+        await self.taken.put(request)
+        return Accepted(order_id=request.order_id)
+
+    async def _control(self, request: ControlRequest) -> Message:
+        return Running()
+
+
 async def test_an_order_waits_until_the_executor_can_be_reached_not_only_heard(site: Site) -> None:
     """After a link comes back, an executor's token can arrive before its services are
     reachable: an order dispatched in between reached nobody, and failed."""
@@ -171,42 +190,25 @@ async def test_an_order_waits_until_the_executor_can_be_reached_not_only_heard(s
         assert not state.executor_online
         assert [r.id for r in state.queue] == [waiting]
 
-        taken: asyncio.Queue[Execute] = asyncio.Queue()
-
-        async def execute(request: Execute) -> Message:
-            await taken.put(request)
-            return Accepted(order_id=request.order_id)
-
-        async def control(request: ControlRequest) -> Message:
-            return Running()
-
-        bus.serve(keys.executor_execute, json_decoder(Execute), execute)
-        bus.serve(keys.executor_control, json_decoder(ControlRequest), control)
-        assert (await asyncio.wait_for(taken.get(), 10.0)).order_id == waiting
+        stand_in = StandIn()
+        stand_in.serve(bus, keys)
+        assert (await asyncio.wait_for(stand_in.taken.get(), 10.0)).order_id == waiting
         await client.wait_state(lambda s: s.executor_online, "the executor to be online")
 
 
 async def test_an_executor_back_after_a_loss_gets_an_order_only_once_it_stays(site: Site) -> None:
     """A link that has just come back can drop again at once: an order handed over in that
     moment reached nobody and failed (seen across hosts, tests/test_cross_host.py, under
-    load). The executor here is this test's own session, a stand-in at the bus seam: its
-    token and its two services, there and gone as the test says."""
+    load). The executor is a stand-in (`StandIn`) with its token, there and gone as the
+    test says."""
     site.start_supervisor()
     keys = RobotKeys("r1")
-    taken: asyncio.Queue[Execute] = asyncio.Queue()
-
-    async def execute(request: Execute) -> Message:
-        await taken.put(request)
-        return Accepted(order_id=request.order_id)
-
-    async def control(request: ControlRequest) -> Message:
-        return Running()
+    stand_in = StandIn()
 
     @contextlib.contextmanager
     def executor() -> Iterator[None]:
         with site.joined() as bus:
-            bus.serve(keys.executor_execute, json_decoder(Execute), execute)
-            bus.serve(keys.executor_control, json_decoder(ControlRequest), control)
+            stand_in.serve(bus, keys)
             bus.announce(keys.alive("executor"))
             yield
 
@@ -223,11 +225,11 @@ async def test_an_executor_back_after_a_loss_gets_an_order_only_once_it_stays(si
         await client.wait_state(lambda s: not s.executor_online, "the executor to go again")
         state = await client.state()
         assert [r.id for r in state.queue] == [waiting], state
-        assert taken.empty()
+        assert stand_in.taken.empty()
 
         with executor():  # back for good
             back = time.monotonic()
-            assert (await asyncio.wait_for(taken.get(), 10.0)).order_id == waiting
+            assert (await asyncio.wait_for(stand_in.taken.get(), 10.0)).order_id == waiting
             assert time.monotonic() - back >= SETTLE
 
 
