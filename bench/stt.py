@@ -51,7 +51,7 @@ from services.converter.orders import OrderSet  # noqa: E402
 from services.converter.parser import Parser  # noqa: E402
 from services.stt.__main__ import add_engine_arguments, engine_options  # noqa: E402
 from services.stt.audio import NoiseFloor, Suppressor, frames, read_wav  # noqa: E402
-from services.stt.engine import Engine, EngineOptions, Final, load_engine  # noqa: E402
+from services.stt.engine import Engine, EngineOptions, finals, load_engine  # noqa: E402
 from services.stt.judge import OFF  # noqa: E402
 from services.stt.sphinx import SUPPRESSION, PocketsphinxEngine  # noqa: E402
 from shared.bus import Bus, BusOptions, json_decoder  # noqa: E402
@@ -222,18 +222,14 @@ def offline(
 
 def decoded(engine: Engine, parser: Parser, utterance: Utterance, pcm: bytes) -> Outcome:
     """`pcm` streamed through a fresh recogniser in 20 ms frames: what became of it."""
-    recogniser = engine.recogniser(15.0)
-    events = [e for frame in frames(pcm) for e in recogniser.accept(frame)]
-    events += recogniser.finish()
-    recogniser.close()
-    finals = [e for e in events if isinstance(e, Final)]
-    text = " ".join(f.text for f in finals if f.text)
+    heard = finals(engine, pcm)
+    text = " ".join(f.text for f in heard if f.text)
     result = parser.parse(text) if text else None
-    whole = len(finals) == 1 and not finals[0].rejection
-    outcome = Outcome(utterance, text, heard=" ".join(f.heard for f in finals))
+    whole = len(heard) == 1 and not heard[0].rejection
+    outcome = Outcome(utterance, text, heard=" ".join(f.heard for f in heard))
     if result is not None and not result.errors and result.orders and whole:
         outcome.orders, outcome.rejected = result.orders, False
-        outcome.doubts = finals[0].doubts
+        outcome.doubts = heard[0].doubts
     return outcome
 
 

@@ -9,8 +9,6 @@ from collections.abc import AsyncIterator, Callable, Coroutine
 from pathlib import Path
 from typing import Any, TypeVar
 
-from services.stt.audio import frames
-from services.stt.engine import Engine, Final
 from shared.bus import Bus, BusOptions, json_decoder
 from shared.client import VoicectlClient
 from shared.errors import BusError
@@ -276,14 +274,3 @@ def start_robot(
         str(photos),
         *executor_args,
     )
-
-
-def finals(engine: Engine, pcm: bytes) -> list[Final]:
-    """What one stream of `pcm`, in 20 ms frames, comes to: its final results."""
-    recogniser = engine.recogniser(15.0)
-    try:
-        events = [e for frame in frames(pcm) for e in recogniser.accept(frame)]
-        events += recogniser.finish()
-    finally:
-        recogniser.close()
-    return [e for e in events if isinstance(e, Final)]

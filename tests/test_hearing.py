@@ -17,11 +17,10 @@ from services.converter.grammar import build_grammar
 from services.converter.orders import OrderSet
 from services.stt import sphinx
 from services.stt.audio import Loudness, Suppressor, frames, read_wav
-from services.stt.engine import EngineOptions, Final, load_engine
+from services.stt.engine import EngineOptions, Final, finals, load_engine
 from services.stt.judge import OFF, Thresholds, Vocabulary, Word, judge
 
 from .conftest import Speak, voicectl
-from .support import finals
 
 
 def transcribe(*files: Path) -> list[dict[str, object]]:

@@ -22,7 +22,7 @@ from hypothesis import strategies as st
 from services.converter.grammar import build_grammar
 from services.converter.orders import OrderSet
 from services.stt.audio import AudioError, frames, read_wav
-from services.stt.engine import EngineError, EngineOptions, Final, Heard, load_engine
+from services.stt.engine import EngineError, EngineOptions, Final, Heard, finals, load_engine
 from services.stt.lexicon import (
     espeak_pronunciations,
     ipa_to_arpabet,
@@ -34,7 +34,6 @@ from services.stt.wordgraph import GrammarError, compile_jsgf
 from shared.messages import FRAME_BYTES, AudioChunk, AudioMessage
 
 from .conftest import REPO, Speak, voicectl
-from .support import finals
 
 ORDERS = REPO / "orders"
 

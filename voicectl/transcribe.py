@@ -12,8 +12,8 @@ from pathlib import Path
 
 import msgspec
 
-from services.stt.audio import AudioError, frames, read_wav
-from services.stt.engine import Engine, Final
+from services.stt.audio import AudioError, read_wav
+from services.stt.engine import Engine, finals
 from shared.messages import Doubt, Order, ParseProblem, ParseResult
 
 MAX_FILE_SECONDS = 600.0
@@ -56,15 +56,9 @@ def transcribe(
         except AudioError as exc:
             yield Unreadable(file=str(path), error=str(exc))
             continue
-        recogniser = engine.recogniser(MAX_FILE_SECONDS, segment=False)
-        try:
-            events = [e for frame in frames(pcm) for e in recogniser.accept(frame)]
-            events += recogniser.finish()
-        finally:
-            recogniser.close()
-        finals = [e for e in events if isinstance(e, Final)]
-        text = " ".join(f.text for f in finals if f.text)
-        engine_reason = next((f.rejection for f in finals if f.rejection), "")
+        heard = finals(engine, pcm, MAX_FILE_SECONDS, segment=False)
+        text = " ".join(f.text for f in heard if f.text)
+        engine_reason = next((f.rejection for f in heard if f.rejection), "")
         result = parse(text) if text else None
         reason = engine_reason
         if not reason and result is not None and (result.errors or not result.orders):
@@ -76,10 +70,10 @@ def transcribe(
             transcript=text,
             rejected=bool(reason),
             reason=reason,
-            confidence=min((f.confidence for f in finals), default=None),
+            confidence=min((f.confidence for f in heard), default=None),
             orders=result.orders if result is not None else [],
             errors=result.errors if result is not None else [],
-            heard=" ".join(f.heard for f in finals if f.heard),
-            word_confidences=[c for f in finals for c in f.confidences],
-            doubts=[] if reason or len(finals) != 1 else finals[0].doubts,
+            heard=" ".join(f.heard for f in heard if f.heard),
+            word_confidences=[c for f in heard for c in f.confidences],
+            doubts=[] if reason or len(heard) != 1 else heard[0].doubts,
         )

@@ -27,6 +27,8 @@ from msgspec import Struct
 from shared.errors import VoicectlError
 from shared.messages import Doubt, Grammar
 
+from .audio import frames
+
 
 class EngineError(VoicectlError):
     """An engine that cannot start or cannot use a grammar; the text says how to fix it."""
@@ -180,6 +182,20 @@ def load_engine(options: EngineOptions) -> Engine:
         ) from exc
     load: Callable[[EngineOptions], Engine] = importlib.import_module(kind.module).load
     return load(options)
+
+
+def finals(
+    engine: Engine, pcm: bytes, max_utterance: float = 15.0, segment: bool = True
+) -> list[Final]:
+    """What one stream of `pcm` comes to, sent in 20 ms frames as a microphone sends it:
+    its final results, in order (`voicectl transcribe`, the tests, the speech benchmark)."""
+    recogniser = engine.recogniser(max_utterance, segment)
+    try:
+        events = [e for frame in frames(pcm) for e in recogniser.accept(frame)]
+        events += recogniser.finish()
+    finally:
+        recogniser.close()
+    return [e for e in events if isinstance(e, Final)]
 
 
 def logistic(value: float, midpoint: float, width: float) -> float:
