@@ -86,5 +86,9 @@ RUN apt-get update \
 COPY --from=host-install /opt/voicectl /opt/voicectl
 USER voicectl
 WORKDIR /home/voicectl
+# Moonshine's model, prepared for onnxruntime once here (services/stt/moonshine.py), not at
+# every start of a container.
+RUN python3 -c "from services.stt.moonshine import cache_root, prepare, weights_dir; \
+prepare(weights_dir(), cache_root())"
 ENTRYPOINT ["voicectl"]
 CMD ["--help"]

@@ -29,6 +29,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import contextlib
+import itertools
 import math
 import os
 import platform
@@ -37,8 +38,11 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+
+import msgspec
 
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
@@ -46,13 +50,23 @@ sys.path.insert(0, str(REPO))
 import pocketsphinx  # noqa: E402
 
 from harness.speech_set import Utterance, generate  # noqa: E402
+from services.converter.decide import (  # noqa: E402
+    SHIPPED,
+    Decision,
+    Rule,
+    decide,
+    free_reading,
+    grammar_reading,
+    readings,
+)
 from services.converter.grammar import build_grammar  # noqa: E402
 from services.converter.orders import OrderSet  # noqa: E402
 from services.converter.parser import Parser  # noqa: E402
 from services.stt.__main__ import add_engine_arguments, engine_options  # noqa: E402
 from services.stt.audio import NoiseFloor, Suppressor, frames, read_wav  # noqa: E402
-from services.stt.engine import Engine, EngineOptions, finals, load_engine  # noqa: E402
+from services.stt.engine import Engine, EngineOptions, Final, finals, load_engine  # noqa: E402
 from services.stt.judge import OFF  # noqa: E402
+from services.stt.service import transcript_of  # noqa: E402
 from services.stt.sphinx import SUPPRESSION, PocketsphinxEngine  # noqa: E402
 from shared.bus import Bus, BusOptions, json_decoder  # noqa: E402
 from shared.keys import RobotKeys  # noqa: E402
@@ -185,8 +199,118 @@ def misses(outcomes: list[Outcome], parser: Parser) -> None:
 
 
 def offline(
+    args: argparse.Namespace, orders: OrderSet, utterances: list[Utterance], directory: Path
+) -> None:
+    options = engine_options(args)
+    parser = Parser(orders)
+    if options.name != "moonshine":
+        grammar_only(options, orders, utterances, directory)
+        return
+    if args.replay:
+        records = msgspec.json.decode(args.replay.read_bytes(), type=list[Record])
+        known = {u.file: u for u in utterances}
+        pairs = [(known[r.file], r) for r in records if r.file in known]
+        print(f"replayed {len(pairs)} decodes from {args.replay}")
+    else:
+        started = time.perf_counter()
+        engine = load_engine(options)
+        engine.use_grammar(build_grammar(orders))
+        engine.recogniser(15.0).close()  # the first decoder is part of loading
+        print(f"{options.name}: loaded in {time.perf_counter() - started:.2f} s")
+        pairs = []
+        for utterance in utterances:
+            pcm = read_wav(directory / utterance.file)
+            begin = time.process_time()  # every thread: Moonshine runs on its own
+            heard = finals(engine, pcm)
+            used = time.process_time() - begin
+            pairs.append((utterance, Record(utterance.file, heard, used, len(pcm) / 32000)))
+        engine.close()
+        if args.record:
+            args.record.write_bytes(msgspec.json.encode([r for _, r in pairs]))
+    cpu = sum(r.cpu for _, r in pairs)
+    audio = sum(r.audio for _, r in pairs)
+    print(f"real-time factor, both ears: {cpu / max(audio, 1e-9):.3f} ({audio:.0f} s of audio)")
+    views: list[tuple[str, Callable[[Utterance, Record], Outcome]]] = [
+        ("the grammar's ear alone (its judge)", lambda u, r: grammar_view(u, r, parser)),
+        ("Moonshine's ear alone", lambda u, r: moonshine_view(u, r, parser)),
+        ("the decision (shipped rule)", lambda u, r: decision_view(u, r, parser, SHIPPED)),
+    ]
+    for title, view in views:
+        outcomes = [view(u, r) for u, r in pairs]
+        report(f"{options.name}, offline: {title}", outcomes, parser)
+        misses(outcomes, parser)
+    if args.sweep:
+        sweep(pairs, parser)
+
+
+class Record(msgspec.Struct):
+    """One file's decode, kept so that decisions can be judged again without decoding."""
+
+    file: str
+    finals: list[Final]
+    cpu: float
+    audio: float
+
+
+def single(record: Record) -> Final | None:
+    """The utterance's one final result; None when the recogniser heard none or several
+    (a command is one utterance: several pieces of it are not taken as the whole)."""
+    return record.finals[0] if len(record.finals) == 1 else None
+
+
+def grammar_view(utterance: Utterance, record: Record, parser: Parser) -> Outcome:
+    final = single(record)
+    if final is None:
+        return Outcome(utterance, " / ".join(f.text for f in record.finals))
+    reading = grammar_reading(transcript_of(final), parser)
+    return from_decision(utterance, decide(reading, None), final.heard)
+
+
+def moonshine_view(utterance: Utterance, record: Record, parser: Parser) -> Outcome:
+    final = single(record)
+    if final is None or final.transcription is None:
+        return Outcome(utterance)
+    reading = free_reading(final.transcription, parser)
+    outcome = Outcome(utterance, reading.text, heard=final.heard)
+    if reading.accepted:
+        outcome.orders, outcome.rejected, outcome.doubts = reading.orders, False, reading.doubts
+    return outcome
+
+
+def decision_view(utterance: Utterance, record: Record, parser: Parser, rule: Rule) -> Outcome:
+    final = single(record)
+    if final is None:
+        return Outcome(utterance, " / ".join(f.text for f in record.finals))
+    first, second = readings(transcript_of(final), parser)
+    return from_decision(utterance, decide(first, second, rule), final.heard)
+
+
+def from_decision(utterance: Utterance, decision: Decision, heard: str) -> Outcome:
+    outcome = Outcome(utterance, decision.text, heard=heard)
+    if not decision.rejected:
+        outcome.orders, outcome.rejected, outcome.doubts = decision.orders, False, decision.doubts
+    return outcome
+
+
+def sweep(pairs: list[tuple[Utterance, Record]], parser: Parser) -> None:
+    """Every rule of a small grid, one line each: what the decision would have been."""
+    print("rule sweep: commands right + doubt, wrong orders, non-commands accepted (+ doubt)")
+    for overrule, support in itertools.product((True, False), (-0.5, -1.0, -1.5, -2.0, -2.5, -99)):
+        rule = Rule(support=support, overrule=overrule)
+        n = score([decision_view(u, r, parser, rule) for u, r in pairs], parser)
+        accepted = n["chatter"] - n["chatter_refused"] - n["chatter_doubt"]
+        print(
+            f"  overrule {overrule!s:<5} support {support:5.1f}: {n['right']:>4} + "
+            f"{n['doubt']:<3} wrong {n['wrong']:<3} non-commands accepted {accepted} "
+            f"(+ {n['chatter_doubt']})"
+        )
+
+
+def grammar_only(
     options: EngineOptions, orders: OrderSet, utterances: list[Utterance], directory: Path
 ) -> None:
+    """An engine with one ear (pocketsphinx, Vosk): with its judge, and pocketsphinx's
+    grammar with the judge off, beside pocketsphinx's own JSGF search."""
     parser = Parser(orders)
     grammar = build_grammar(orders)
     for second_opinion in (True, False):
@@ -522,6 +646,9 @@ def main() -> None:
         help="only the most any judge could reach: every grammar result accepted",
     )
     parser.add_argument("--threads", action="store_true", help="CPU of each service thread")
+    parser.add_argument("--record", type=Path, help="offline: keep every decode in this file")
+    parser.add_argument("--replay", type=Path, help="offline: judge the decodes of --record again")
+    parser.add_argument("--sweep", action="store_true", help="offline: the decision's rules, swept")
     parser.add_argument("--every", type=int, default=1, help="only every Nth utterance")
     parser.add_argument("--quick", action="store_true", help="every 20th utterance")
     parser.add_argument(
@@ -551,7 +678,7 @@ def main() -> None:
         ceiling(orders, utterances, args.set)
         return
     if not args.service_only:
-        offline(engine_options(args), orders, utterances, args.set)
+        offline(args, orders, utterances, args.set)
     if not args.offline_only:
         asyncio.run(through_service(args, orders, utterances, args.set))
 

@@ -145,8 +145,30 @@ class Doubt(Data):
     confidence: float = 0.0
 
 
+class Transcription(Data):
+    """A free transcript of the utterance by a second recogniser, bound to no grammar: the
+    person's words as a neural model heard them, for the converter to parse and to weigh
+    against the grammar's result (services/converter/decide.py)."""
+
+    engine: str
+    """Which model heard it ('moonshine')."""
+    text: str
+    """As the model writes it: capitals, punctuation, digits ("Go forward 10 metres.")."""
+    confidence: float = 0.0
+    """0 to 1: the geometric mean of its tokens' probabilities."""
+    support: float | None = None
+    """How likely this model finds the grammar's words beside its own: their mean
+    log-probability per token minus that of its own words, in nats (0: as likely; -1: a
+    token in e times less likely). None when the grammar heard no words."""
+
+
 class Transcript(Message):
-    """A final transcript: one per spoken utterance, from the recogniser."""
+    """A final transcript: one per spoken utterance, from the recogniser.
+
+    `text` and the fields after it are the grammar's result and its own verdict;
+    `transcription`, when the recogniser has a second ear, is what that one heard. The
+    converter decides from both whether and which orders the speech becomes.
+    """
 
     text: str
     confidence: float | None = None
@@ -155,7 +177,7 @@ class Transcript(Message):
     """The audio session it came from; empty for text that was not spoken."""
     utterance: int = 0
     rejected: bool = False
-    """True when the speech was not a command: it must never become orders."""
+    """True when the grammar's result is not a command by the recogniser's own judgement."""
     reason: str = ""
     """Why it was rejected, in one line."""
     speech_start: float | None = None
@@ -169,6 +191,7 @@ class Transcript(Message):
     the word's posterior in the grammar's lattice, or the open decode's when higher)."""
     doubts: list[Doubt] = msgspec.field(default_factory=list)
     """Values to ask the person about; a transcript with doubts is never sent by itself."""
+    transcription: Transcription | None = None
 
 
 class SttStatus(Message):
@@ -193,6 +216,18 @@ class SessionEnded(Message):
     refused: bool = False
 
 
+class Hearing(Data):
+    """One ear's reading of an utterance, as the converter judged it."""
+
+    ear: str
+    """'grammar' (pocketsphinx bound to the orders) or the second ear's model ('moonshine')."""
+    text: str
+    accepted: bool
+    """Whether this ear's words alone make whole orders it vouches for."""
+    verdict: str = ""
+    """What they make, or why not, in plain words."""
+
+
 class Proposal(Message):
     """The converter's reading of a transcript, for the panel to show and confirm."""
 
@@ -206,6 +241,10 @@ class Proposal(Message):
     """The recogniser rejected the speech: no orders, one error saying why."""
     doubts: list[Doubt] = msgspec.field(default_factory=list)
     """The transcript's doubtful values: the panel asks, and never sends these by itself."""
+    hearings: list[Hearing] = msgspec.field(default_factory=list)
+    """What each ear of the recogniser heard, for speech heard by more than one."""
+    decision: str = ""
+    """Why the speech became these orders, a doubt or nothing, in one line for a person."""
 
 
 class ParseRequest(Message):

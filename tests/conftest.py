@@ -17,6 +17,7 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import hypothesis
 import pytest
 import zenoh
 
@@ -26,6 +27,11 @@ from shared.bus import BusOptions
 from shared.robot import TransportKind
 
 REPO = Path(__file__).resolve().parents[1]
+
+# Speed is measured in bench/, not here: on a busy machine hypothesis' default deadline (200
+# ms per example) failed parses that take 2 ms on a quiet one.
+hypothesis.settings.register_profile("voicectl", deadline=None)
+hypothesis.settings.load_profile("voicectl")
 
 
 def free_ports(count: int) -> list[int]:

@@ -213,13 +213,21 @@ def test_speak_a_command_and_a_non_command(stack: Stack, speech: Speak, tmp_path
     with panel(stack, tmp_path / "speak", microphone=command) as page:
         login(page, stack)
         # what the recogniser listens with is shown beside the microphone
-        expect(page.locator("#stt-status")).to_contain_text("pocketsphinx · grammar ")
+        expect(page.locator("#stt-status")).to_contain_text("moonshine · grammar ")
         expect(page.locator("#stt-status")).to_contain_text("listening for")
         page.click("#mic")
         expect(page.locator("#mic")).to_have_attribute("aria-pressed", "true")
         expect(page.locator("#heard")).to_have_text("turn left then reach kitchen")
         expect(page.locator("#heard")).to_have_class("heard final")
         expect(page.locator("#staged li .what")).to_have_text(["turn left", "reach kitchen"])
+        # what each ear heard, and why the orders are these
+        ears = page.locator("#ears li")
+        expect(ears).to_have_count(3)
+        expect(ears.nth(0)).to_contain_text("grammar")
+        expect(ears.nth(0)).to_contain_text("turn left then reach kitchen")
+        expect(ears.nth(1)).to_contain_text("moonshine")
+        expect(ears.nth(1)).to_contain_text("turn left; reach kitchen")
+        expect(ears.nth(2)).to_contain_text("both heard")
         page.click("#mic")  # stop listening
         page.click("#send")
         history = page.locator("#history tr")
@@ -235,6 +243,7 @@ def test_speak_a_command_and_a_non_command(stack: Stack, speech: Speak, tmp_path
         page.click("#mic")
         expect(page.locator("#heard")).to_have_class("heard rejected")
         expect(page.locator("#heard")).to_contain_text("not a command")
+        expect(page.locator("#ears li").nth(1)).to_contain_text("what is the weather like")
         expect(page.locator("#staged li")).to_have_count(0)
         page.screenshot(path=str(ARTIFACTS / "panel-rejected.png"), full_page=True)
         # on a phone's screen STOP stays in view while the page scrolls

@@ -191,6 +191,61 @@ def test_a_number_makes_the_order_more_specific_than_the_demo_one() -> None:
     assert ALL.parse("move forward 12 meters").orders == []
 
 
+def test_and_joins_commands_as_the_separator_does() -> None:
+    assert names("turn right and move forward one meter", ALL) == [
+        ("rotation", "right"),
+        ("drive", "forward"),
+    ]
+    assert names("Turn left, and then reach the kitchen.", ALL) == [
+        ("rotation", "left"),
+        ("goal", "kitchen"),
+    ]
+    assert names("turn left and reach the kitchen and take a picture", ALL) == [
+        ("rotation", "left"),
+        ("goal", "kitchen"),
+        ("take_photo", None),
+    ]
+
+
+def test_and_inside_a_number_stays_in_the_number() -> None:
+    result = ALL.parse("move forward one hundred and five meters")
+    assert result.orders == []
+    assert [e.reason for e in result.errors] == ["distance 105 is out of range: 0.1 to 10 m"]
+
+
+def test_a_last_and_says_more_was_to_come_and_stays_an_error() -> None:
+    result = ALL.parse("turn left and")
+    assert result.orders == []
+    assert "'and'" in result.errors[0].reason
+
+
+@pytest.mark.parametrize(
+    ("text", "description"),
+    [
+        ("Move forward 4.5 m", "move forward 4.5 m"),
+        ("go forward 2.5m.", "move forward 2.5 m"),
+        ("Turn left 90°.", "turn left 90 degrees"),
+        ("turn right 45 deg", "turn right 45 degrees"),
+        ("wait 10 s", "wait 10 s"),
+        ("wait 10s", "wait 10 s"),
+    ],
+)
+def test_unit_symbols_after_a_number_are_read_as_the_unit(text: str, description: str) -> None:
+    assert [o.description for o in ALL.parse(text).orders] == [description]
+
+
+def test_a_unit_symbol_that_an_alias_uses_is_left_as_it_is() -> None:
+    orders = OrderSet.from_yaml(
+        "orders:\n"
+        "  hop:\n"
+        "    voice_alias: 'hop {d} m'\n"
+        "    label: x\n"
+        "    slots: {d: {type: number, unit: m, min: 1, max: 5, to: x}}\n"
+    )
+    assert [o.order for o in Parser(orders).parse("hop 2 m").orders] == ["hop"]
+    assert Parser(orders).parse("hop 2 meters").orders == []
+
+
 def test_normalise_keeps_a_minus_sign_starting_a_number() -> None:
     assert normalise("Wait -3 seconds, x-ray") == "wait -3 seconds x ray"
 

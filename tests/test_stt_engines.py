@@ -258,11 +258,18 @@ def test_transcribe_prints_one_json_line_per_file_in_the_parse_contract(
         "heard",
         "word_confidences",
         "doubts",
+        "hearings",
+        "decision",
     }
     assert first["transcript"] == "reach the kitchen then take a picture"
     assert len(first["word_confidences"]) == len(first["transcript"].split())
     assert first["doubts"] == []
     assert first["rejected"] is False
+    grammar, moonshine = first["hearings"]
+    assert (grammar["ear"], moonshine["ear"]) == ("grammar", "moonshine")
+    assert grammar["accepted"], first["hearings"]
+    assert moonshine["accepted"], first["hearings"]
+    assert first["decision"].startswith("both heard")
     parsed = json.loads(voicectl("parse", first["transcript"]).stdout)
     assert (first["orders"], first["errors"]) == (parsed["orders"], parsed["errors"])
     assert set(gone) == {"file", "error"}

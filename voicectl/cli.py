@@ -388,7 +388,7 @@ def _transcribe(args: argparse.Namespace) -> int:
     unreadable = 0
     try:
         engine.use_grammar(build_grammar(orders))
-        for line in transcribe(engine, Parser(orders).parse, args.audio):
+        for line in transcribe(engine, Parser(orders), args.audio):
             unreadable += isinstance(line, Unreadable)
             print(_ENCODER.encode(line).decode(), flush=True)
     except EngineError as exc:

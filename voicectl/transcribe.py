@@ -2,41 +2,50 @@
 
 Integrators use it to check their YAML against real recordings before they run anything:
 each file is one utterance, and the result says what the engine heard, whether it would be
-rejected, and the orders and errors the converter makes of it.
+rejected, what each ear heard, and the orders and errors the converter makes of it.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from pathlib import Path
 
 import msgspec
 
+from services.converter.decide import decide, problem, readings
+from services.converter.parser import Parser
 from services.stt.audio import AudioError, read_wav
 from services.stt.engine import Engine, finals
-from shared.messages import Doubt, Order, ParseProblem, ParseResult
+from services.stt.service import transcript_of
+from shared.messages import Doubt, Hearing, Order, ParseProblem
 
 MAX_FILE_SECONDS = 600.0
 
 
-class Transcription(msgspec.Struct):
+class FileTranscript(msgspec.Struct):
     """One file's line of `voicectl transcribe` output."""
 
     file: str
     transcript: str
+    """The words the decision rests on (one ear's, or both's when they agree)."""
     rejected: bool
     reason: str
     """Why it is rejected; empty when it is not."""
     confidence: float | None
+    """The grammar's confidence, 0..1."""
     orders: list[Order]
-    """What `voicectl parse` makes of the transcript (never dispatched if rejected)."""
+    """The orders the speech becomes (never dispatched if rejected)."""
     errors: list[ParseProblem]
     heard: str = ""
-    """What an unconstrained decode heard: the person's words, command or not."""
+    """What pocketsphinx's unconstrained decode heard."""
     word_confidences: list[float] = msgspec.field(default_factory=list)
-    """Per word of the transcript, 0..1."""
+    """Per word of the grammar's result, 0..1."""
     doubts: list[Doubt] = msgspec.field(default_factory=list)
     """Values to ask about: a transcript with doubts is never sent by itself."""
+    hearings: list[Hearing] = msgspec.field(default_factory=list)
+    """What each ear heard and made of it."""
+    decision: str = ""
+    """Why the speech became these orders, or nothing."""
 
 
 class Unreadable(msgspec.Struct):
@@ -47,9 +56,9 @@ class Unreadable(msgspec.Struct):
 
 
 def transcribe(
-    engine: Engine, parse: Callable[[str], ParseResult], files: list[Path]
-) -> Iterator[Transcription | Unreadable]:
-    """Each file's transcription, in order, with what `parse` makes of the transcript."""
+    engine: Engine, parser: Parser, files: list[Path]
+) -> Iterator[FileTranscript | Unreadable]:
+    """Each file's transcription, in order, decided as the converter decides (decide.py)."""
     for path in files:
         try:
             pcm = read_wav(path)
@@ -57,23 +66,22 @@ def transcribe(
             yield Unreadable(file=str(path), error=str(exc))
             continue
         heard = finals(engine, pcm, MAX_FILE_SECONDS, segment=False)
-        text = " ".join(f.text for f in heard if f.text)
-        engine_reason = next((f.rejection for f in heard if f.rejection), "")
-        result = parse(text) if text else None
-        reason = engine_reason
-        if not reason and result is not None and (result.errors or not result.orders):
-            reason = "not a command" + (f": {result.errors[0].reason}" if result.errors else "")
-        if not text:
-            reason = reason or "no command heard"
-        yield Transcription(
+        decisions = [decide(*readings(transcript_of(final), parser)) for final in heard]
+        rejected = [d for d in decisions if d.rejected]
+        reason = rejected[0].reason if rejected else ""
+        if not heard:
+            reason = "no command heard"
+        yield FileTranscript(
             file=str(path),
-            transcript=text,
+            transcript=" ".join(d.text for d in decisions if d.text),
             rejected=bool(reason),
             reason=reason,
             confidence=min((f.confidence for f in heard), default=None),
-            orders=result.orders if result is not None else [],
-            errors=result.errors if result is not None else [],
+            orders=[] if reason else [o for d in decisions for o in d.orders],
+            errors=[problem(d) for d in rejected],
             heard=" ".join(f.heard for f in heard if f.heard),
             word_confidences=[c for f in heard for c in f.confidences],
-            doubts=[] if reason or len(heard) != 1 else heard[0].doubts,
+            doubts=[] if reason or len(decisions) != 1 else decisions[0].doubts,
+            hearings=[h for d in decisions for h in d.hearings],
+            decision="; ".join(d.reason for d in decisions if d.reason),
         )

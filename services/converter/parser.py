@@ -5,10 +5,17 @@ Skip words ("the", "please") may stand between and around a command's words; any
 word outside the matched command makes the segment an error, never a silent drop.
 Only the commands whose key word is in the segment are tried: an index built from the
 expanded aliases keeps a parse of a 200-order file to a handful of regex searches.
+
+People join commands with "and" as often as with the orders' separator ("turn right and
+move forward one meter"): a segment that is not one order is tried split at its "and"s,
+and taken only if every piece is an order, so that "one hundred and five" stays a number.
+Unit symbols after a number are read as the unit's word ("4.5 m", "90°", "30 s"), unless
+an alias itself uses the symbol.
 """
 
 from __future__ import annotations
 
+import itertools
 import re
 import time
 from collections import Counter
@@ -52,6 +59,27 @@ def _finditer(matcher: _Matcher, segment: str, deadline: float) -> Iterator[rege
             "match: its alias backtracks too much; simplify it"
         ) from None
 
+
+CONJUNCTION = "and"
+MAX_CONJUNCTIONS = 4
+"""A segment with more "and"s is not tried split: 2**4 ways are enough for speech."""
+UNIT_SYMBOLS = {
+    "m": "meters",
+    "cm": "centimeters",
+    "mm": "millimeters",
+    "deg": "degrees",
+    "°": "degrees",
+    "rad": "radians",
+    "s": "seconds",
+    "sec": "seconds",
+    "secs": "seconds",
+    "min": "minutes",
+    "mins": "minutes",
+}
+_SYMBOL_AFTER_NUMBER = re.compile(
+    r"(?<=\d)\s*(?:°|(?:" + "|".join(k for k in UNIT_SYMBOLS if k != "°") + r")(?!\w))",
+    re.IGNORECASE,
+)
 
 _NUMBER = "\x00number"
 """Index key of commands that start with a slot."""
@@ -141,17 +169,37 @@ class Parser:
 
     def __init__(self, orders: OrderSet, use_index: bool = True) -> None:
         self.orders = orders
-        self._separator = re.compile(whole_words(orders.separator), re.IGNORECASE)
+        self._separator = re.compile(
+            whole_words(f"(?:{CONJUNCTION} )?(?:{orders.separator})"), re.IGNORECASE
+        )
+        """The orders' separator, "and then" as well."""
         self._skip_words = frozenset(orders.skip_words)
         self._commands = _Index(orders.commands, orders.skip_words, use_index)
         self._prefixes = _Index(orders.prefixes, orders.skip_words, use_index)
         self._suggester = Suggester(orders.commands, self._parse_alone)
+        alias_words = {
+            word.casefold()
+            for command in orders.commands
+            for template in command.expansion.templates
+            for word in template
+            if isinstance(word, str)
+        }
+        self._symbols = {k: v for k, v in UNIT_SYMBOLS.items() if k not in alias_words}
+        """Unit symbols read as words: those no alias uses itself."""
+        self.unit_words = frozenset(
+            word.casefold()
+            for command in orders.commands
+            for template in command.expansion.templates
+            for before, word in itertools.pairwise(template)
+            if isinstance(before, SlotRef) and isinstance(word, str)
+        )
+        """Words that follow a spoken number in some command ("meters", "degrees")."""
 
     def parse(self, text: str) -> ParseResult:
         if len(text) > MAX_TEXT_CHARS:
             reason = f"text too long: {len(text)} characters, at most {MAX_TEXT_CHARS}"
             return ParseResult(errors=[ParseProblem(text=text[:80], reason=reason)])
-        clean = normalise(text)
+        clean = normalise(self.spell_units(text))
         if not clean:
             return ParseResult(errors=[ParseProblem(text="", reason="empty text")])
         result = ParseResult()
@@ -160,8 +208,11 @@ class Parser:
             segment = segment.strip()
             if not segment:
                 continue
+            parsed: Order | ParseProblem | list[Order]
             try:
                 parsed = self._parse_segment(segment, suggest=True, deadline=deadline)
+                if isinstance(parsed, ParseProblem):
+                    parsed = self._joined(segment, deadline) or parsed
             except _TooSlow as exc:
                 parsed = ParseProblem(text=segment[:80], reason=str(exc))
             match parsed:
@@ -169,7 +220,43 @@ class Parser:
                     result.orders.append(order)
                 case ParseProblem() as error:
                     result.errors.append(error)
+                case list() as orders:
+                    result.orders.extend(orders)
         return result
+
+    def spell_units(self, text: str) -> str:
+        """Unit symbols right after a number as the unit's word: "4.5 m" -> "4.5 meters"."""
+
+        def word(found: re.Match[str]) -> str:
+            symbol = found.group(0).strip()
+            spelled = self._symbols.get(symbol.casefold())
+            return f" {spelled}" if spelled else found.group(0)
+
+        return _SYMBOL_AFTER_NUMBER.sub(word, text)
+
+    def _joined(self, segment: str, deadline: float) -> list[Order] | None:
+        """The orders of a segment that is commands joined by "and", if splitting at some
+        of its "and"s makes every piece one order (the fewest pieces first)."""
+        words = segment.split(" ")
+        while words[:1] == [CONJUNCTION]:  # "... then and turn left"; a last "and" says
+            words = words[1:]  # that more was to come, and stays an error
+        joints = [i for i, word in enumerate(words) if word == CONJUNCTION]
+        stripped = len(words) < len(segment.split(" "))
+        if len(joints) > MAX_CONJUNCTIONS or not (joints or stripped):
+            return None
+        for count in range(len(joints) + 1):
+            for chosen in itertools.combinations(joints, count):
+                bounds = [-1, *chosen, len(words)]
+                pieces = [" ".join(words[a + 1 : b]) for a, b in itertools.pairwise(bounds)]
+                orders = []
+                for piece in pieces:
+                    parsed = self._parse_segment(piece, False, deadline) if piece else None
+                    if not isinstance(parsed, Order):
+                        break
+                    orders.append(parsed)
+                else:
+                    return orders
+        return None
 
     def _parse_alone(self, phrase: str) -> Order | None:
         """The order `phrase` makes as one segment, if it makes one."""

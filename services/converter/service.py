@@ -17,7 +17,6 @@ from shared.messages import (
     Grammar,
     Message,
     OrdersStatus,
-    ParseProblem,
     ParseReply,
     ParseRequest,
     Places,
@@ -27,6 +26,7 @@ from shared.messages import (
 )
 from shared.process import Service
 
+from .decide import decide, problem, readings
 from .grammar import build_grammar
 from .orders import OrderSet, OrdersInvalid
 from .parser import Parser
@@ -171,53 +171,27 @@ class ConverterService(Service):
                 return self._loaded.grammar
 
     def _on_transcript(self, key: str, transcript: Transcript) -> None:
+        """The one decision on what was said (decide.py): the grammar's result, and what
+        the recogniser's second ear heard, read by this converter's parser. Speech must make
+        whole orders: unlike typed text, a part that did not parse is a sign the rest was
+        misheard too. Speech that is not a command never becomes orders."""
         robot = robot_of(key)
-        if transcript.rejected:
-            # Speech that is not a command never becomes orders, however it would parse.
-            reason = transcript.reason or "not a command"
-            if "not a command" not in reason:
-                reason = f"not a command: {reason}"
-            proposal = Proposal(
-                transcript=transcript.text,
-                errors=[ParseProblem(text=transcript.text, reason=reason)],
-                rejected=True,
-                session=transcript.session,
-                utterance=transcript.utterance,
-            )
-            _LOGGER.info("%s: %s rejected by the recogniser", robot, excerpt(transcript.text))
-        else:
-            # The one parse of what was said. Speech must make whole orders: unlike typed
-            # text, a part that did not parse is a sign the rest was misheard too.
-            result = self._loaded.parser.parse(transcript.text)
-            _LOGGER.info(
-                "%s: %s -> %d order(s), %d error(s)",
-                robot,
-                excerpt(transcript.text),
-                len(result.orders),
-                len(result.errors),
-            )
-            if result.errors or not result.orders:
-                problem = result.errors[0] if result.errors else None
-                why = f" ('{problem.text}': {problem.reason})" if problem else ""
-                proposal = Proposal(
-                    transcript=transcript.text,
-                    errors=[
-                        ParseProblem(
-                            text=transcript.text,
-                            reason=f"I heard '{transcript.text}': not a command{why}",
-                            candidates=problem.candidates if problem else [],
-                        )
-                    ],
-                    rejected=True,
-                    session=transcript.session,
-                    utterance=transcript.utterance,
-                )
-            else:
-                proposal = Proposal(
-                    transcript=transcript.text,
-                    orders=result.orders,
-                    session=transcript.session,
-                    utterance=transcript.utterance,
-                    doubts=transcript.doubts,
-                )
+        decision = decide(*readings(transcript, self._loaded.parser))
+        proposal = Proposal(
+            transcript=decision.text,
+            orders=decision.orders,
+            errors=[problem(decision)] if decision.rejected else [],
+            session=transcript.session,
+            utterance=transcript.utterance,
+            rejected=decision.rejected,
+            doubts=decision.doubts,
+            hearings=decision.hearings if len(decision.hearings) > 1 else [],
+            decision=decision.reason,
+        )
+        _LOGGER.info(
+            "%s: %s -> %s",
+            robot,
+            " / ".join(f"{h.ear} {excerpt(h.text)}" for h in decision.hearings),
+            f"nothing ({decision.reason})" if decision.rejected else decision.reason,
+        )
         self._bus.publish(RobotKeys(robot).proposal, proposal)

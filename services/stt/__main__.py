@@ -21,7 +21,7 @@ def add_engine_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--engine",
         choices=list(ENGINES),
-        default="pocketsphinx",
+        default=EngineOptions.name,
         help="speech engine (default %(default)s)",
     )
     for kind in ENGINES.values():

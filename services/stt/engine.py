@@ -25,7 +25,7 @@ from typing import Any, Protocol
 from msgspec import Struct
 
 from shared.errors import VoicectlError
-from shared.messages import Doubt, Grammar
+from shared.messages import Doubt, Grammar, Transcription
 
 from .audio import frames
 
@@ -62,6 +62,8 @@ class Final(Struct, frozen=True, tag=True):
     confidences: list[float] = []
     """Per word of `text`, 0..1: how surely the engine heard it (judge.py's Verdict)."""
     doubts: list[Doubt] = []
+    transcription: Transcription | None = None
+    """What a second ear heard of the same utterance (the moonshine engine's)."""
 
 
 RecognitionEvent = SpeechStarted | Heard | Final
@@ -125,6 +127,9 @@ class EngineKind:
 ENGINES: dict[str, EngineKind] = {
     kind.name: kind
     for kind in (
+        EngineKind(
+            "moonshine", "services.stt.moonshine_engine", requires="onnxruntime", extra="stt"
+        ),
         EngineKind("pocketsphinx", "services.stt.sphinx", requires="pocketsphinx", extra="stt"),
         EngineKind(
             "vosk",
@@ -146,7 +151,7 @@ ENGINES: dict[str, EngineKind] = {
 
 @dataclass(frozen=True)
 class EngineOptions:
-    name: str = "pocketsphinx"
+    name: str = "moonshine"
     min_confidence: float = 0.5
     """Utterances whose confidence is lower are rejected."""
     workers: int = 0

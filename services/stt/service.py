@@ -375,22 +375,28 @@ class SttService(Service):
                 self.bus.publish(self._keys.transcript, transcript)
 
     def _judge(self, session: str, final: Final) -> Transcript:
-        reason = final.rejection
-        if not reason and not self._grammar:
-            reason = "no grammar yet: is the converter running?"
-        return Transcript(
-            text=final.text,
-            confidence=final.confidence,
-            session=session,
-            utterance=final.utterance,
-            rejected=bool(reason),
-            reason=reason,
-            speech_start=round(final.speech_start, 3),
-            speech_end=round(final.speech_end, 3),
-            heard=final.heard,
-            word_confidences=final.confidences,
-            doubts=[] if reason else final.doubts,
-        )
+        reason = "" if self._grammar else "no grammar yet: is the converter running?"
+        return transcript_of(final, session, reason)
+
+
+def transcript_of(final: Final, session: str = "", refused: str = "") -> Transcript:
+    """The bus message of a recogniser's final result; `refused` rejects it whatever the
+    engine said (no grammar yet), the second ear's transcript included."""
+    reason = final.rejection or refused
+    return Transcript(
+        text=final.text,
+        confidence=final.confidence,
+        session=session,
+        utterance=final.utterance,
+        rejected=bool(reason),
+        reason=reason,
+        speech_start=round(final.speech_start, 3),
+        speech_end=round(final.speech_end, 3),
+        heard=final.heard,
+        word_confidences=final.confidences,
+        doubts=[] if reason else final.doubts,
+        transcription=None if refused else final.transcription,
+    )
 
 
 class _Recent:

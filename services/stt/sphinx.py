@@ -44,11 +44,11 @@ import threading
 from collections import deque
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, Protocol
 
 import pocketsphinx
 
-from shared.messages import Grammar
+from shared.messages import Grammar, Transcription
 
 from .audio import Loudness, NoiseFloor, Suppressor, seconds, whole
 from .engine import (
@@ -86,6 +86,8 @@ END_FRAMES = 8
 """It ends after this many frames without speech (0.24 s)."""
 EARLY_FRAMES = 3
 """After this many (0.09 s) the final pass runs already; the end confirms or drops it."""
+LISTENER_FRAMES = 1
+"""After this many a second ear (`Listener`) is told that the speech paused."""
 SUPPRESSION = 3
 """WebRTC's noise suppression level (0 to 3) of the second look."""
 NOISY_SPREAD = 30.0
@@ -104,6 +106,22 @@ search, ~60 MB; the language model itself is loaded once and shared)."""
 OPEN_SEARCH = "open"
 FRAME_BYTES = 320
 """One 10 ms feature frame of 16 kHz 16-bit audio."""
+
+
+class Listener(Protocol):
+    """A second ear that hears each utterance this recogniser finds (moonshine_engine.py):
+    told when the speech pauses, so that it can start before the end is confirmed."""
+
+    def pause(self, audio: bytes) -> None:
+        """The speech paused: `audio` is the utterance so far, perhaps all of it."""
+
+    def drop(self) -> None:
+        """The speech went on after the pause, or was no utterance: forget that audio."""
+
+    def result(self, audio: bytes, grammar: str) -> Transcription:
+        """The utterance ended with `audio`, which the grammar heard as `grammar`: what
+        was heard (the paused audio's result if nothing but silence followed it), and how
+        likely the grammar's words are. Blocks until it is known."""
 
 
 @dataclass(frozen=True)
@@ -262,10 +280,12 @@ class PocketsphinxEngine:
         )
         return found.unpronounceable
 
-    def recogniser(self, max_utterance: float, segment: bool = True) -> SphinxRecogniser:
+    def recogniser(
+        self, max_utterance: float, segment: bool = True, listener: Listener | None = None
+    ) -> SphinxRecogniser:
         if self._compiled is None:
             raise EngineError("no grammar yet")
-        return SphinxRecogniser(self, max_utterance, segment)
+        return SphinxRecogniser(self, max_utterance, segment, listener)
 
     def borrow(self) -> _Decoder:
         with self._lock:
@@ -299,6 +319,9 @@ class _Utterance:
         self.audio = bytearray()
         self.suppressed = bytearray()
         """`audio` after noise suppression, for the second look in a noisy room."""
+        self.raw = bytearray()
+        """`audio` as it came, without the noise floor: for a second ear (`Listener`), which
+        the floor misleads (Moonshine heard nothing in a word padded with it)."""
         self.unfed = bytearray()
         """Audio of the first pass not yet given to the decoder."""
         self.partial = ""
@@ -333,8 +356,15 @@ class SphinxRecogniser:
     grammar's final pass at the end (started early, when the speech pauses), and the
     judgement of one by the other."""
 
-    def __init__(self, engine: PocketsphinxEngine, max_utterance: float, segment: bool) -> None:
+    def __init__(
+        self,
+        engine: PocketsphinxEngine,
+        max_utterance: float,
+        segment: bool,
+        listener: Listener | None = None,
+    ) -> None:
         self._engine = engine
+        self._listener = listener
         self._max_bytes = int(max_utterance * 32000)
         self._segment = segment
         self._decoder: _Decoder | None = None
@@ -346,8 +376,9 @@ class SphinxRecogniser:
         self._suppressor = Suppressor(SUPPRESSION)
         self._flags: deque[bool] = deque(maxlen=START_WINDOW)
         self._pending = bytearray()
-        self._recent: deque[tuple[float, bytes, bytes]] = deque()
-        """(start, frame, suppressed frame) of the last second and the pre-roll."""
+        self._pending_raw = bytearray()
+        self._recent: deque[tuple[float, bytes, bytes, bytes]] = deque()
+        """(start, frame, suppressed frame, raw frame) of the last second and the pre-roll."""
         self._clock = 0.0
         """Seconds of audio consumed."""
         self._utterance: _Utterance | None = None
@@ -359,21 +390,27 @@ class SphinxRecogniser:
     def accept(self, pcm: bytes) -> list[RecognitionEvent]:
         events: list[RecognitionEvent] = []
         self._pending += self._noise.add(pcm)
-        for frame in whole(self._pending, self._vad.frame_bytes):
-            self._frame(frame, events)
+        self._pending_raw += pcm
+        size = self._vad.frame_bytes
+        pieces = zip(whole(self._pending, size), whole(self._pending_raw, size), strict=True)
+        for frame, raw in pieces:
+            self._frame(frame, raw, events)
         return events
 
     def finish(self) -> list[RecognitionEvent]:
         events: list[RecognitionEvent] = []
         if self._pending and self._utterance is not None:
             pcm = bytes(self._pending)
-            self._feed(pcm, self._suppressor.process(pcm), events)
+            self._feed(pcm, self._suppressor.process(pcm), bytes(self._pending_raw), events)
         self._pending.clear()
+        self._pending_raw.clear()
         if self._utterance is not None:
             self._end(self._clock, events)
         return events
 
     def close(self) -> None:
+        if self._listener is not None:
+            self._listener.drop()
         if self._decoder is not None:
             if self._utterance is not None:
                 self._decoder.decoder.end_utt()
@@ -383,18 +420,18 @@ class SphinxRecogniser:
 
     # --- per frame -------------------------------------------------------------------------
 
-    def _frame(self, frame: bytes, events: list[RecognitionEvent]) -> None:
+    def _frame(self, frame: bytes, raw: bytes, events: list[RecognitionEvent]) -> None:
         start = self._clock
         self._clock += seconds(len(frame))
         suppressed = self._suppressor.process(frame)
-        self._recent.append((start, frame, suppressed))
+        self._recent.append((start, frame, suppressed, raw))
         while self._recent and self._recent[0][0] < self._clock - 1.0 - PRE_ROLL:
             self._recent.popleft()
         if not self._segment:
             if self._utterance is None:
                 self._begin(0.0, events)
             else:
-                self._feed(frame, suppressed, events)
+                self._feed(frame, suppressed, raw, events)
             return
         # `&`, not `and`: the room hears every frame, speech or not.
         speech = bool(self._vad.is_speech(frame)) & self._room.stands_out(frame)
@@ -405,17 +442,22 @@ class SphinxRecogniser:
                 first = len(self._flags) - list(self._flags).index(True)
                 self._begin(self._clock - first * VAD_FRAME, events)
             return
-        if speech and not utterance.live:  # the pause was not the end
+        if speech and utterance.quiet and self._listener is not None:
+            self._listener.drop()  # the pause was not the end
+        if speech and not utterance.live:
             self._resume(utterance)
-        self._feed(frame, suppressed, events)
+        self._feed(frame, suppressed, raw, events)
         if speech:
             utterance.speech += 1
             utterance.quiet = 0
             utterance.speech_end = self._clock
         else:
             utterance.quiet += 1
-            if utterance.quiet == EARLY_FRAMES and utterance.speech >= MIN_SPEECH_FRAMES:
-                utterance.early = self._final_pass(utterance)
+            if utterance.speech >= MIN_SPEECH_FRAMES:
+                if utterance.quiet == LISTENER_FRAMES and self._listener is not None:
+                    self._listener.pause(bytes(utterance.raw))
+                if utterance.quiet == EARLY_FRAMES:
+                    utterance.early = self._final_pass(utterance)
         if utterance.quiet >= END_FRAMES:
             self._end(utterance.speech_end, events)
         elif len(utterance.audio) >= self._max_bytes:
@@ -435,16 +477,19 @@ class SphinxRecogniser:
         decoder = self._decoder.decoder
         decoder.set_cmn(self._prior or self._decoder.prior)
         decoder.start_utt()
-        for begins, frame, suppressed in self._recent:
+        for begins, frame, suppressed, raw in self._recent:
             if begins >= speech_start - PRE_ROLL:
-                self._feed(frame, suppressed, events)
+                self._feed(frame, suppressed, raw, events)
 
-    def _feed(self, pcm: bytes, suppressed: bytes, events: list[RecognitionEvent]) -> None:
+    def _feed(
+        self, pcm: bytes, suppressed: bytes, raw: bytes, events: list[RecognitionEvent]
+    ) -> None:
         utterance = self._utterance
         assert utterance is not None
         assert self._decoder is not None
         utterance.audio += pcm
         utterance.suppressed += suppressed
+        utterance.raw += raw
         if not utterance.live:
             return
         utterance.unfed += pcm
@@ -470,8 +515,13 @@ class SphinxRecogniser:
         if self._segment and utterance.speech < MIN_SPEECH_FRAMES:
             self._decoder.decoder.end_utt()
             self._count -= 1  # numbers count utterances that got a result
+            if self._listener is not None:
+                self._listener.drop()
             return
         result = utterance.early or self._final_pass(utterance)
+        transcription = None
+        if self._listener is not None:
+            transcription = self._listener.result(bytes(utterance.raw), result.text)
         self._prior = result.mean
         verdict = result.verdict
         events.append(
@@ -485,6 +535,7 @@ class SphinxRecogniser:
                 heard=verdict.heard,
                 confidences=verdict.confidences,
                 doubts=verdict.doubts,
+                transcription=transcription,
             )
         )
 

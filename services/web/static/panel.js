@@ -284,15 +284,12 @@ function handle(message) {
     case "places": view.places = message.places; redraw(); break;
     case "robotmap": showMap(message); break;
     case "sttstatus": showStt(message); break;
-    case "partialtranscript": if (mine) showHeard(message.text, "partial"); break;
+    case "partialtranscript":
+      if (mine) { showHeard(message.text, "partial"); showEars(null); }
+      break;
     case "transcript":
-      if (mine && message.rejected) {
-        const heard = message.text ? ` (heard “${message.text}”)` : "";
-        showHeard(message.reason.startsWith("I heard") ? message.reason
-          : `not a command${heard}: ${message.reason}`, "rejected");
-      } else if (mine) {
-        showHeard(message.text, "final");
-      }
+      // What was heard; whether it is a command is the converter's proposal, next.
+      if (mine) showHeard((message.transcription || {}).text || message.text, "final");
       break;
     case "proposal": if (mine) propose(message); break;
     default: break;
@@ -388,7 +385,22 @@ function showHeard(text, kind) {
 
 // --- checking: staging, errors, suggestions ---------------------------------------------------
 
+function showEars(proposal) {
+  // Each ear's words and verdict, and why the decision went the way it did.
+  const box = $("ears");
+  const hearings = proposal ? proposal.hearings || [] : [];
+  box.hidden = !hearings.length;
+  box.replaceChildren(...hearings.map((hearing) => {
+    const item = el("li", "", hearing.accepted ? "ear accepted" : "ear refused");
+    item.append(el("span", hearing.ear === "grammar" ? "grammar" : hearing.ear, "ear-name"), " ",
+      el("q", hearing.text || "(nothing)"), " ", el("span", hearing.verdict, "muted"));
+    return item;
+  }));
+  if (hearings.length && proposal.decision) box.append(el("li", proposal.decision, "ear-decision"));
+}
+
 function propose(proposal) {
+  showEars(proposal);
   if (proposal.rejected) {
     // Why, in plain words, on the line that showed what was heard ("I heard '…': not a
     // command"); a suggestion, if the converter had one, below it.
@@ -406,6 +418,7 @@ function propose(proposal) {
     return;
   }
   showDoubt(null);
+  showHeard(proposal.transcript, "final"); // the words the orders stand on
   if (store.autoSend && proposal.orders.length && !proposal.errors.length) {
     submit(proposal.orders.map((order) => ({ order, said: proposal.transcript })));
     showErrors(proposal.transcript, []);

@@ -1,0 +1,130 @@
+"""Two ears: pocketsphinx bound to the orders' grammar, and Moonshine's free transcript.
+
+pocketsphinx does what it is good at, as the pocketsphinx engine alone does: it finds the
+utterances in the stream, gives partial transcripts while the person speaks, and the
+grammar's result with its own verdict. Moonshine transcribes every utterance beside it,
+started on a thread of its own when the speech pauses (`LISTENER_FRAMES` in sphinx.py), so
+that its result is ready when the end is confirmed; if the speech goes on, that run is
+dropped. The two results travel together in one `Final`; the converter, which parses, decides
+from both (services/converter/decide.py).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import math
+import threading
+from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass
+
+from shared.messages import Grammar, Transcription
+
+from .engine import EngineOptions, Recogniser
+from .moonshine import Cancelled, Moonshine, Transcript, cache_root, prepare, weights_dir
+from .sphinx import PocketsphinxEngine
+
+_LOGGER = logging.getLogger(__name__)
+
+RUNS_AT_ONCE = 2
+"""Transcriptions a process runs at once, one onnxruntime thread each (two cores)."""
+
+
+@dataclass
+class Runs:
+    """What the second ears of an engine have done: each utterance is transcribed once,
+    at its pause or at its end, plus the runs started at pauses the speech went on from."""
+
+    at_pause: int = 0
+    dropped: int = 0
+    """Started at a pause, then dropped: the speech went on."""
+    at_end: int = 0
+    """Started only when the utterance ended (it ended without a pause: cut, or stopped)."""
+
+
+def load(options: EngineOptions) -> MoonshineEngine:
+    """The engine registry's entry point (engine.py's ENGINES)."""
+    source = weights_dir()
+    model = Moonshine(source, prepare(source, cache_root()))
+    return MoonshineEngine(PocketsphinxEngine(min_confidence=options.min_confidence), model)
+
+
+class MoonshineEngine:
+    """pocketsphinx's engine with Moonshine as the second ear of every recogniser."""
+
+    name = "moonshine"
+
+    def __init__(self, grammar: PocketsphinxEngine, model: Moonshine) -> None:
+        self._grammar = grammar
+        self._model = model
+        self._pool = ThreadPoolExecutor(RUNS_AT_ONCE, thread_name_prefix="moonshine")
+        self.runs = Runs()
+
+    def use_grammar(self, grammar: Grammar) -> list[str]:
+        return self._grammar.use_grammar(grammar)
+
+    def recogniser(self, max_utterance: float, segment: bool = True) -> Recogniser:
+        ear = _Ear(self._model, self._pool, self.runs)
+        return self._grammar.recogniser(max_utterance, segment, ear)
+
+    def close(self) -> None:
+        self._pool.shutdown(wait=True, cancel_futures=True)
+
+
+class _Ear:
+    """One stream's second ear (sphinx.py's `Listener`): at most one run in flight."""
+
+    def __init__(self, model: Moonshine, pool: ThreadPoolExecutor, runs: Runs) -> None:
+        self._model = model
+        self._pool = pool
+        self._runs = runs
+        self._run: Future[Transcript] | None = None
+        self._cancel = threading.Event()
+
+    def pause(self, audio: bytes) -> None:
+        self.drop()
+        self._cancel = threading.Event()
+        self._run = self._pool.submit(self._model.transcribe, audio, self._cancel)
+        self._runs.at_pause += 1
+
+    def drop(self) -> None:
+        if self._run is not None:
+            self._cancel.set()
+            self._run = None
+            self._runs.dropped += 1
+
+    def result(self, audio: bytes, grammar: str) -> Transcription:
+        heard = None
+        run, self._run = self._run, None
+        if run is not None:
+            with contextlib.suppress(Cancelled):  # never set for a run still wanted
+                heard = run.result()
+        if heard is None:
+            self._runs.at_end += 1
+            heard = self._model.transcribe(audio)
+        support = None
+        if grammar and heard.audio is not None:
+            # Its own words' mean log-probability is what `confidence` is the exponential of.
+            own = (
+                math.log(heard.confidence)
+                if heard.text
+                else self._model.likelihood(heard.audio, "")
+            )
+            support = self._model.likelihood(heard.audio, written(grammar)) - own
+        _LOGGER.debug(
+            "moonshine heard %r in %.3f s; the grammar's words %s",
+            heard.text,
+            heard.seconds,
+            "none" if support is None else f"{support:+.2f} nats a token",
+        )
+        return Transcription(
+            engine="moonshine",
+            text=heard.text,
+            confidence=round(heard.confidence, 3),
+            support=None if support is None else round(support, 3),
+        )
+
+
+def written(words: str) -> str:
+    """The grammar's words as the model writes a sentence: "Turn left." for "turn left"."""
+    return words[:1].upper() + words[1:] + "."
