@@ -225,6 +225,12 @@ def offline(
             used = time.process_time() - begin
             pairs.append((utterance, Record(utterance.file, heard, used, len(pcm) / 32000)))
         engine.close()
+        runs = getattr(engine, "runs", None)
+        if runs is not None:
+            print(
+                f"Moonshine's runs: {runs.at_pause} started at a pause ({runs.dropped} dropped: "
+                f"the speech went on), {runs.at_end} at the end of an utterance"
+            )
         if args.record:
             args.record.write_bytes(msgspec.json.encode([r for _, r in pairs]))
     cpu = sum(r.cpu for _, r in pairs)

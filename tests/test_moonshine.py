@@ -8,7 +8,6 @@ import importlib.metadata
 import os
 from pathlib import Path
 
-import onnxruntime
 import pytest
 
 from harness.speech_set import in_pink_noise
@@ -18,8 +17,9 @@ from services.converter.parser import Parser
 from services.stt import moonshine
 from services.stt.audio import frames, read_wav
 from services.stt.engine import EngineError, EngineOptions, Final, load_engine
-from services.stt.moonshine import Moonshine, cache_root, prepare, weights_dir
+from services.stt.moonshine import Moonshine, prepare, weights_dir
 from services.stt.moonshine_engine import MoonshineEngine
+from shared.config import cache_dir
 
 from .conftest import REPO, Speak, voicectl
 
@@ -30,7 +30,7 @@ PARSER = Parser(ORDERS)
 @pytest.fixture(scope="module")
 def model() -> Moonshine:
     source = weights_dir()
-    return Moonshine(source, prepare(source, cache_root()))
+    return Moonshine.prepared(source, prepare(source, cache_dir()))
 
 
 def drives(text: str) -> list[float]:
@@ -53,16 +53,7 @@ def test_the_prepared_model_hears_what_the_shipped_one_hears(
 ) -> None:
     """The int8 products (`quantized_products`) compute with the very weights shipped: the
     same words as the ORT-format model as it comes, run as it is."""
-    source = weights_dir()
-    options = onnxruntime.SessionOptions()
-    options.log_severity_level = 3
-    shipped = Moonshine.__new__(Moonshine)
-    shipped._encoder = onnxruntime.InferenceSession(str(source / "encoder_model.ort"), options)
-    shipped._decoder = onnxruntime.InferenceSession(
-        str(source / "decoder_model_merged.ort"), options
-    )
-    shipped._outputs = [output.name for output in shipped._decoder.get_outputs()]
-    shipped.tokenizer = model.tokenizer
+    shipped = Moonshine.shipped(weights_dir())
     for path in (people["real-goforward"], speech("turn left then reach the kitchen", "flite:slt")):
         pcm = read_wav(path)
         assert model.transcribe(pcm).text.rstrip(".") == shipped.transcribe(pcm).text.rstrip(".")
@@ -125,3 +116,10 @@ def test_moonshine_starts_at_the_pause_and_an_utterance_is_transcribed_once(
     assert runs.at_pause >= 2, runs  # at the pause inside, and at the end
     assert runs.at_pause - runs.dropped == 1, runs  # only the last one was used
     assert runs.at_end == 0, runs
+
+
+def test_a_cache_that_cannot_be_written_is_one_line_saying_what_to_set(tmp_path: Path) -> None:
+    blocked = tmp_path / "a-file"
+    blocked.write_text("not a folder")
+    with pytest.raises(EngineError, match="set VOICECTL_CACHE to a folder this user may write"):
+        prepare(weights_dir(), blocked)

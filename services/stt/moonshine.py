@@ -100,14 +100,6 @@ def weights_dir() -> Path:
     return folder
 
 
-def cache_root() -> Path:
-    """`$VOICECTL_CACHE`, else `$XDG_CACHE_HOME/voicectl`, else `~/.cache/voicectl`."""
-    if explicit := os.environ.get("VOICECTL_CACHE"):
-        return Path(explicit)
-    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
-    return Path(base) / "voicectl"
-
-
 def prepare(source: Path, cache: Path) -> Path:
     """The prepared encoder.onnx and decoder.onnx for the model in `source`, made once into
     a folder of `cache` named after the weights and the onnxruntime that prepared them.
@@ -125,8 +117,14 @@ def prepare(source: Path, cache: Path) -> Path:
     if (target / "decoder.onnx").is_file():
         return target
     _LOGGER.info("preparing Moonshine's model once into %s", target)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    staging = Path(tempfile.mkdtemp(prefix=".preparing-", dir=target.parent))
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        staging = Path(tempfile.mkdtemp(prefix=".preparing-", dir=target.parent))
+    except OSError as exc:
+        raise EngineError(
+            f"cannot prepare Moonshine's model in {target.parent} ({exc.strerror}): "
+            "set VOICECTL_CACHE to a folder this user may write"
+        ) from exc
     try:
         for name, kind in zip(FILES[:2], ("encoder", "decoder"), strict=True):
             _convert(source / name, staging / f"{kind}.onnx")
@@ -377,23 +375,34 @@ class Moonshine:
     of its own (`threads`): on two cores, two runs at once beat one run on two threads.
     """
 
-    def __init__(self, source: Path, prepared: Path, threads: int = 1) -> None:
+    def __init__(
+        self, encoder: Path, decoder: Path, tokens: Path, threads: int = 1, arena: bool = True
+    ) -> None:
         import onnxruntime
 
         options = onnxruntime.SessionOptions()
         options.intra_op_num_threads = threads
         options.inter_op_num_threads = 1
+        options.enable_cpu_mem_arena = arena
         options.log_severity_level = 3
         options.add_session_config_entry("session.intra_op.allow_spinning", "0")
         providers = ["CPUExecutionProvider"]
-        self._encoder = onnxruntime.InferenceSession(
-            str(prepared / "encoder.onnx"), options, providers=providers
-        )
-        self._decoder = onnxruntime.InferenceSession(
-            str(prepared / "decoder.onnx"), options, providers=providers
-        )
+        self._encoder = onnxruntime.InferenceSession(str(encoder), options, providers=providers)
+        self._decoder = onnxruntime.InferenceSession(str(decoder), options, providers=providers)
         self._outputs = [output.name for output in self._decoder.get_outputs()]
-        self.tokenizer = Tokenizer(source / "tokenizer.bin")
+        self.tokenizer = Tokenizer(tokens)
+
+    @classmethod
+    def prepared(cls, source: Path, folder: Path, threads: int = 1) -> Moonshine:
+        """The model `prepare` made into `folder` from the files in `source`."""
+        encoder, decoder = folder / "encoder.onnx", folder / "decoder.onnx"
+        return cls(encoder, decoder, source / "tokenizer.bin", threads)
+
+    @classmethod
+    def shipped(cls, source: Path, threads: int = 1) -> Moonshine:
+        """The ORT-format files as they come (slow: for comparison, bench/moonshine.py)."""
+        encoder, decoder, tokens = (source / name for name in FILES)
+        return cls(encoder, decoder, tokens, threads)
 
     def transcribe(self, pcm: bytes, cancel: threading.Event | None = None) -> Transcript:
         """`pcm` (16 kHz, 16-bit) transcribed; raises Cancelled when `cancel` is set

@@ -18,10 +18,11 @@ import threading
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 
+from shared.config import cache_dir
 from shared.messages import Grammar, Transcription
 
 from .engine import EngineOptions, Recogniser
-from .moonshine import Cancelled, Moonshine, Transcript, cache_root, prepare, weights_dir
+from .moonshine import Cancelled, Moonshine, Transcript, prepare, weights_dir
 from .sphinx import PocketsphinxEngine
 
 _LOGGER = logging.getLogger(__name__)
@@ -45,7 +46,7 @@ class Runs:
 def load(options: EngineOptions) -> MoonshineEngine:
     """The engine registry's entry point (engine.py's ENGINES)."""
     source = weights_dir()
-    model = Moonshine(source, prepare(source, cache_root()))
+    model = Moonshine.prepared(source, prepare(source, cache_dir()))
     return MoonshineEngine(PocketsphinxEngine(min_confidence=options.min_confidence), model)
 
 

@@ -1,4 +1,4 @@
-"""The embedded engine: pocketsphinx 5 with its US-English model, bound to the orders' grammar.
+"""The grammar's ear: pocketsphinx 5 with its US-English model, bound to the orders' grammar.
 
 Per utterance, measured on generated speech (bench/stt.py), these choices mattered:
 
