@@ -132,3 +132,36 @@ def test_a_submit_that_could_not_be_stored_is_withdrawn(queue: RobotQueue) -> No
     again = queue.submit("req-2", [order("b")], "")  # the retry is a new submit
     assert len(again) == 1
     assert [r.id for r in queue.queue] == [kept, *again]
+
+
+def test_an_order_whose_start_was_not_recorded_goes_back_to_the_head(queue: RobotQueue) -> None:
+    a, b = queue.submit("req-1", [order("a"), order("b")], "")
+    started = queue.start_next()
+    assert started is not None
+    assert started.id == a
+    assert not queue.unstart(b)  # not the current one: nothing changes
+    assert queue.unstart(a)
+    assert queue.current is None
+    assert [(r.id, r.status, r.started_at) for r in queue.queue] == [
+        (a, OrderStatus.QUEUED, None),
+        (b, OrderStatus.QUEUED, None),
+    ]
+    again = queue.start_next()
+    assert again is not None
+    assert again.id == a
+
+
+def test_withdrawing_a_submit_also_drops_its_order_whose_start_is_being_written(
+    queue: RobotQueue,
+) -> None:
+    (kept,) = queue.submit("req-0", [order("k")], "")
+    queue.start_next()
+    queue.finish(kept, OrderStatus.SUCCEEDED)
+    a, _ = queue.submit("req-1", [order("a"), order("b")], "")
+    started = queue.start_next()
+    assert started is not None
+    assert started.id == a
+    queue.withdraw("req-1")
+    assert queue.current is None
+    assert not queue.queue
+    assert not queue.unstart(a)

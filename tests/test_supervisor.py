@@ -5,36 +5,26 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import signal
 import sqlite3
-import subprocess
 import time
 from collections.abc import Iterator
 from pathlib import Path
 
-import pytest
-
 from services.executor.runner import SUPERVISOR_LOST
 from services.supervisor.service import SETTLE
-from shared.bus import Bus, json_decoder
 from shared.errors import BusError
 from shared.keys import RobotKeys, RobotNames
 from shared.messages import (
-    Accepted,
     Cancel,
-    ControlRequest,
     Done,
     EmergencyStop,
-    Execute,
     Failed,
     GetHistory,
     GetState,
-    Message,
     Order,
     OrderStatus,
     Reorder,
     Resume,
-    Running,
     Stopped,
     Submit,
     Submitted,
@@ -42,50 +32,8 @@ from shared.messages import (
 )
 from shared.ros2 import Odometry, Ros2Codec, RosDistro
 
-from .conftest import Processes, async_wait_until
-from .support import Client, client_wait_ready, joined, order
-
-EXECUTORS = ["--executor", "tests.executors_for_tests:Slow=slow"]
-
-
-class Site:
-    """A router, a supervisor with a database that outlives it, executors per robot."""
-
-    def __init__(self, router: str, processes: Processes, db: Path) -> None:
-        self.router = router
-        self.processes = processes
-        self.db = db
-        self.supervisor: subprocess.Popen[bytes] | None = None
-        self.executors: dict[str, subprocess.Popen[bytes]] = {}
-
-    def start_supervisor(self, *extra: str) -> None:
-        """A supervisor serving r1 from the start (other robots once an executor comes)."""
-        self.supervisor = self.processes.start(
-            "services.supervisor",
-            *("--connect", self.router, "--db", str(self.db), "--robot", "r1", *extra),
-        )
-
-    def kill_supervisor(self) -> None:
-        assert self.supervisor is not None
-        self.supervisor.send_signal(signal.SIGKILL)
-        self.supervisor.wait()
-
-    def start_executor(self, robot: str = "r1") -> None:
-        self.executors[robot] = self.processes.start(
-            "services.executor", "--connect", self.router, "--robot", robot, *EXECUTORS
-        )
-
-    def kill_executor(self, robot: str = "r1") -> None:
-        self.executors[robot].send_signal(signal.SIGKILL)
-        self.executors[robot].wait()
-
-    def joined(self) -> Bus:
-        return joined(self.router)
-
-
-@pytest.fixture
-def site(router: str, processes: Processes, tmp_path: Path) -> Site:
-    return Site(router, processes, tmp_path / "supervisor.sqlite3")
+from .conftest import async_wait_until
+from .support import Client, Site, StandIn, client_wait_ready, order
 
 
 async def test_sigkill_with_orders_in_flight_loses_nothing_and_resumes(site: Site) -> None:
@@ -153,25 +101,6 @@ async def test_running_order_is_interrupted_when_no_executor_runs_it(site: Site)
         site.start_executor()
         assert isinstance(await client.ask(Resume()), Done)
         assert (await client.finished(other)).message == "5 x 5 = 25"
-
-
-class StandIn:
-    """The executor's two services on a session of the test's own, a stand-in at the bus
-    seam: it accepts every order it is handed and keeps it in `taken`."""
-
-    def __init__(self) -> None:
-        self.taken: asyncio.Queue[Execute] = asyncio.Queue()
-
-    def serve(self, bus: Bus, keys: RobotKeys) -> None:
-        bus.serve(keys.executor_execute, json_decoder(Execute), self._execute)
-        bus.serve(keys.executor_control, json_decoder(ControlRequest), self._control)
-
-    async def _execute(self, request: Execute) -> Message:
-        await self.taken.put(request)
-        return Accepted(order_id=request.order_id)
-
-    async def _control(self, request: ControlRequest) -> Message:
-        return Running()
 
 
 async def test_an_order_waits_until_the_executor_can_be_reached_not_only_heard(site: Site) -> None:

@@ -154,12 +154,31 @@ class RobotQueue:
         return request_id in self._requests
 
     def withdraw(self, request_id: str) -> None:
-        """Undo a submit whose orders could not be stored: they were never accepted."""
+        """Undo a submit whose orders could not be stored: they were never accepted. One
+        of them may be current, its start being written: it was never sent, and is not
+        current any more."""
         self._digests.pop(request_id, None)
         ids = set(self._requests.pop(request_id, []))
         for record in [r for r in self.queue if r.id in ids]:
             self.queue.remove(record)
             self._positions.pop(record.id, None)
+        if self.current is not None and self.current.id in ids:
+            self._positions.pop(self.current.id, None)
+            self._changed.pop(self.current.id, None)
+            self.current = None
+
+    def unstart(self, order_id: str) -> bool:
+        """Put the current order `order_id` back at the head of the queue, as queued: its
+        start could not be recorded, so it was never sent. False if it is not current."""
+        if self.current is None or self.current.id != order_id:
+            return False
+        record = msgspec.structs.replace(
+            self.current, status=OrderStatus.QUEUED, started_at=None, progress=None
+        )
+        self.current = None
+        self._changed.pop(order_id, None)  # the store still has it queued
+        self.queue.appendleft(record)
+        return True
 
     def start_next(self) -> OrderRecord | None:
         """The next order to hand to the executor, now marked running; None if not now."""

@@ -39,6 +39,7 @@ from shared.messages import (
     Message,
     OrderFinished,
     OrderProgress,
+    OrderRecord,
     OrderStatus,
     Rejected,
     Release,
@@ -169,7 +170,7 @@ class RobotSupervisor:
                 if not self._queue.stopped:
                     return Done(detail="the emergency stop was not on")
                 self._queue.release()
-                self._store.write([self._store.save_stopped(self.robot, False)])
+                self._store.keep([self._store.save_stopped(self.robot, False)])
                 self._changed()
                 match await self._latch_executor(False):
                     case Failed(reason=reason):
@@ -191,7 +192,7 @@ class RobotSupervisor:
                 return StateReply(state=self._queue.snapshot())
             case GetHistory(offset=offset, limit=limit):
                 records, total = await self._store.call(
-                    self._store.history_page(self.robot, offset, limit)
+                    self._store.history_page(self.robot, offset, limit), reads=True
                 )
                 return HistoryPage(records=records, total=total, offset=offset)
 
@@ -214,12 +215,13 @@ class RobotSupervisor:
         return ids, new
 
     def not_stored(self, submit: Submit, new: bool, error: BaseException) -> Failed:
-        """A submit whose orders could not be stored: they were never accepted (a retry's
-        failure leaves the first one's orders as they are)."""
+        """A submit whose orders could not be stored: they were never accepted, and none
+        of them ran, since an order starts only once it is stored (`_recorded`); a
+        retry's failure leaves the first one's orders as they are."""
         if new:
             self._queue.withdraw(submit.request_id)
             self._changed()
-        return Failed(reason=f"could not store the orders: {error}")
+        return Failed(reason=f"could not store the orders, so none was queued or run: {error}")
 
     async def _cancel(self, order_id: str, why: str) -> Message:
         if self._queue.remove_queued(order_id, why):
@@ -263,7 +265,7 @@ class RobotSupervisor:
         queue cleared, the robot held still; returns how many orders were cleared."""
         self._queue.stopped = True
         cleared = self._queue.clear_queue("emergency stop")
-        self._store.write([self._store.save_stopped(self.robot, True)])
+        self._store.keep([self._store.save_stopped(self.robot, True)])
         self._hold()
         return cleared
 
@@ -393,11 +395,36 @@ class RobotSupervisor:
             self._wake.clear()
             if self._settling():
                 continue
+            pending = self._pending()  # goes first, kept, and not into the start's write
+            if pending:
+                self._store.keep(pending)
             record = self._queue.start_next()
             if record is None:
                 continue
-            self._changed()
-            await self._dispatch(record.id, Execute(order_id=record.id, order=record.order))
+            if await self._recorded(record):
+                await self._dispatch(record.id, Execute(order_id=record.id, order=record.order))
+
+    async def _recorded(self, record: OrderRecord) -> bool:
+        """Write that `record` starts, and say whether it may be sent to the executor now:
+        nothing runs that is not recorded. Its submit must have committed (it commits in
+        the same transaction, or earlier), and the start too; otherwise it goes back to
+        the head of the queue (or is gone, with its refused submit), and the queue pauses
+        saying why. Things that happened meanwhile (a STOP, a cancel) win."""
+        try:
+            await self._store.write([self._store.require_stored(record.id), *self.changes()])
+        except Exception as exc:
+            if self._queue.unstart(record.id):
+                self._queue.paused = f"order {record.id} could not start: {exc}; then resume"
+                _LOGGER.error("%s: %s", self.robot, self._queue.paused)
+                self._changed()
+            return False
+        current = self._queue.current
+        if current is None or current.id != record.id:
+            return False  # cancelled while its start was written
+        if self._queue.stopped:
+            self._finish(record.id, OrderStatus.CANCELLED, "emergency stop")
+            return False
+        return True
 
     def _settling(self) -> bool:
         """Whether an executor back after a loss is still within `SETTLE`; the dispatcher
@@ -548,17 +575,22 @@ class RobotSupervisor:
         """Store what changed (in order), publish soon, wake the dispatcher."""
         operations = self.changes()
         if operations:
-            self._store.write(operations)
+            self._store.keep(operations)
 
     def changes(self) -> list[Operation]:
         """What changed since the last call, as store operations to run in order; the
         state is published soon and the dispatcher woken."""
+        operations = self._pending()
+        self._publish_soon()
+        self._wake.set()
+        return operations
+
+    def _pending(self) -> list[Operation]:
+        """What changed since the last call, as store operations, and nothing else."""
         records, requests = self._queue.take_changes()
         operations = [self._store.save_orders(self.robot, records)] if records else []
         if requests:
             operations.append(self._store.save_requests(self.robot, requests))
-        self._publish_soon()
-        self._wake.set()
         return operations
 
     def _publish_soon(self) -> None:

@@ -4,6 +4,11 @@ The supervisor's state lives in memory and every change is also written here; a 
 acknowledged only once its orders are committed, so an accepted order survives a SIGKILL
 at any moment. Writes that pile up while a transaction commits go into the next one
 together: a burst of submits costs one commit per batch, not one per order.
+
+A write is either answered (a submit: told once whether it committed, never retried) or
+kept (a change of state, such as an order's end: retried in order until it commits). When
+the disk is full, answered writes fail at once in plain words, and kept ones wait and are
+written, in their order, once there is space again.
 """
 
 from __future__ import annotations
@@ -25,7 +30,7 @@ from typing import IO, Any, TypeVar
 
 import msgspec
 
-from shared.errors import VoicectlError
+from shared.errors import StoreError
 from shared.messages import OrderRecord
 
 _LOGGER = logging.getLogger(__name__)
@@ -55,6 +60,8 @@ CREATE TABLE IF NOT EXISTS requests (
 """
 BATCH_LIMIT = 2000
 """Most operations in one transaction."""
+RETRY_EVERY = 1.0
+"""Seconds between two tries to write what a full (or failing) disk refused."""
 
 
 class Durability(StrEnum):
@@ -84,9 +91,28 @@ class SavedRobot:
 Operation = Callable[[sqlite3.Connection], Any]
 Committed = Callable[[BaseException | None], None]
 """Told on the writer thread, once its write is committed (None) or has failed (why)."""
-Call = tuple[Operation, Callable[[bool, Any], None]]
-"""An operation, and what to do on the writer thread with its outcome (ok, result or
-error) once its transaction has ended."""
+
+
+@dataclass(frozen=True, slots=True)
+class Call:
+    """An operation, and what to do on the writer thread with its outcome (ok, result or
+    error) once its transaction has ended."""
+
+    operation: Operation
+    done: Callable[[bool, Any], None]
+    kept: bool = False
+    """Retried in order with every other kept call until it commits, instead of failing."""
+    reads: bool = False
+    """Only reads: when the disk refuses a transaction it is run again alone, since a
+    read needs no space (history stays readable while the disk is full)."""
+
+
+class StoreFull(StoreError):
+    """The disk under the store is full (or failing): nothing can be written now."""
+
+
+class NotStored(StoreError):
+    """An order that should be in the store is not: its submit never committed."""
 
 
 class OrderStore:
@@ -97,6 +123,11 @@ class OrderStore:
         self._durability = durability
         self._inbox: queue.SimpleQueue[Call | None] = queue.SimpleQueue()
         """Calls in order; None stops the writer thread."""
+        self._backlog: list[Call] = []
+        """Kept calls the disk refused, in order: they go first into every transaction
+        until they commit (writer thread only)."""
+        self.trouble: str | None = None
+        """Why the store cannot write now, in words; None while it writes."""
         self._outbox: list[Call] = []
         """Calls made during this turn of the event loop, handed over at its end."""
         self._thread: threading.Thread | None = None
@@ -126,25 +157,34 @@ class OrderStore:
 
     # --- calls from the event loop -------------------------------------------------------
 
-    async def call(self, operation: Callable[[sqlite3.Connection], T]) -> T:
-        """Run `operation` on the writer thread after everything queued before it."""
+    async def call(self, operation: Callable[[sqlite3.Connection], T], reads: bool = False) -> T:
+        """Run `operation` on the writer thread after everything queued before it; one
+        that only `reads` is answered even while the disk refuses writes."""
         loop = asyncio.get_running_loop()
         future: asyncio.Future[T] = loop.create_future()
-        self._send((operation, functools.partial(_settle_soon, loop, future)))
+        self._send(Call(operation, functools.partial(_settle_soon, loop, future), reads=reads))
         return await future
 
+    def keep(self, operations: list[Operation]) -> None:
+        """Queue `operations` as one, to be committed whatever it takes: when the disk
+        refuses them they are tried again, in order with every other kept write, until
+        they commit. For changes of state nobody waits for (an order's end, the stop)."""
+        self._send(Call(_all(operations), _ignore, kept=True))
+
     def write(self, operations: list[Operation]) -> asyncio.Future[None]:
-        """Queue `operations` as one; the future resolves when they are committed. Nobody
-        has to await it: a failure is logged either way."""
+        """Queue `operations` as one, tried once; the future resolves when they are
+        committed, or fails saying why (StoreFull in plain words when the disk is full).
+        Nobody has to await it: a failure is logged either way."""
         loop = asyncio.get_running_loop()
         future: asyncio.Future[None] = loop.create_future()
 
         def log_failure(done: asyncio.Future[None]) -> None:
-            if not done.cancelled() and done.exception() is not None:
-                _LOGGER.error("order store: write failed: %s", done.exception())
+            error = None if done.cancelled() else done.exception()
+            if error is not None and not isinstance(error, StoreError):  # said once already
+                _LOGGER.error("order store: write failed: %s", error)
 
         future.add_done_callback(log_failure)
-        self._send((_all(operations), functools.partial(_settle_soon, loop, future)))
+        self._send(Call(_all(operations), functools.partial(_settle_soon, loop, future)))
         return future
 
     def write_then(self, operations: list[Operation], committed: Committed) -> None:
@@ -154,11 +194,11 @@ class OrderStore:
         a failure is logged here either way."""
 
         def done(ok: bool, value: Any) -> None:
-            if not ok:
+            if not ok and not isinstance(value, StoreError):  # a full disk is said once
                 _LOGGER.error("order store: write failed: %s", value)
             committed(None if ok else value)
 
-        self._send((_all(operations), done))
+        self._send(Call(_all(operations), done))
 
     def _send(self, call: Call) -> None:
         """Hand `call` to the writer thread once the callbacks already due on the loop have
@@ -192,6 +232,17 @@ class OrderStore:
             )
 
         return save
+
+    def require_stored(self, order_id: str) -> Operation:
+        """Fails (NotStored) unless order `order_id` is in the store: written before an
+        order's start, in the same transaction, so that no order runs whose submit did not
+        commit (its rows are gone, its submitter told so)."""
+
+        def require(db: sqlite3.Connection) -> None:
+            if db.execute("SELECT 1 FROM orders WHERE id = ?", (order_id,)).fetchone() is None:
+                raise NotStored(f"order {order_id} was never stored: its submit failed")
+
+        return require
 
     def save_stopped(self, robot: str, stopped: bool) -> Operation:
         def save(db: sqlite3.Connection) -> None:
@@ -284,7 +335,11 @@ class OrderStore:
         self._ready.set()
         try:
             while True:
-                first = self._inbox.get()
+                try:
+                    first = self._inbox.get(timeout=RETRY_EVERY if self._backlog else None)
+                except queue.Empty:  # nothing new: try the backlog alone
+                    self._run_batch(db, [])
+                    continue
                 if first is None:
                     return
                 batch = [first]
@@ -302,40 +357,82 @@ class OrderStore:
                 if stop:
                     return
         finally:
+            if self._backlog:
+                _LOGGER.error(
+                    "order store: %d change(s) never reached the disk (%s)",
+                    len(self._backlog),
+                    self.trouble,
+                )
             db.close()
 
-    def _run_batch(
-        self,
-        db: sqlite3.Connection,
-        batch: list[Call],
-    ) -> None:
+    def _run_batch(self, db: sqlite3.Connection, new: list[Call]) -> None:
+        """One transaction: the backlog of kept calls first, then `new`, in order. A call
+        that fails on its own (a bad operation) is undone alone; when the disk fails, the
+        whole transaction is undone, kept calls wait in the backlog for the next try and
+        the others are told, in plain words."""
+        batch, self._backlog = [*self._backlog, *new], []
+        if not batch:
+            return
         results: list[tuple[bool, Any]] = []
         try:
             db.execute("BEGIN IMMEDIATE")
-            for operation, _ in batch:
+            for call in batch:
                 # A savepoint per operation: one that fails is undone alone.
                 db.execute("SAVEPOINT op")
                 try:
-                    results.append((True, operation(db)))
+                    results.append((True, call.operation(db)))
                     db.execute("RELEASE op")
                 except Exception as exc:
+                    # A full disk can make SQLite undo the whole transaction by itself:
+                    # then there is no savepoint left, and the disk is what to report.
+                    if _disk_trouble(exc) or not db.in_transaction:
+                        raise
                     db.execute("ROLLBACK TO op")
                     db.execute("RELEASE op")
                     results.append((False, exc))
             db.execute("COMMIT")
-        except sqlite3.Error as exc:
-            _LOGGER.error("order store: commit failed: %s", exc)
+        except Exception as exc:
             if db.in_transaction:
                 db.rollback()
-            results = [(False, exc)] * len(batch)
-        for (_, done), (ok, value) in zip(batch, results, strict=True):
-            try:
-                done(ok, value)
-            except Exception:  # one caller's failure must not keep the others waiting
-                _LOGGER.exception("order store: reporting a write's outcome failed")
+            self._refused(db, batch, self._plain(exc))
+            return
+        if self.trouble is not None:
+            _LOGGER.warning("order store: writing again, after: %s", self.trouble)
+            self.trouble = None
+        for call, (ok, value) in zip(batch, results, strict=True):
+            _report(call, ok, value)
+
+    def _refused(self, db: sqlite3.Connection, batch: list[Call], error: StoreError) -> None:
+        """The disk refused `batch`: kept calls wait for the next try, reads run alone,
+        the others fail."""
+        if self.trouble != str(error):  # once, not once a second while it lasts
+            _LOGGER.error("order store: cannot write: %s", error)
+            self.trouble = str(error)
+        self._backlog = [call for call in batch if call.kept]
+        for call in batch:
+            if call.reads:
+                try:
+                    _report(call, True, call.operation(db))
+                except Exception as exc:
+                    _report(call, False, exc)
+            elif not call.kept:
+                _report(call, False, error)
+
+    def _plain(self, exc: BaseException) -> StoreError:
+        """What went wrong, in words a person acts on (SQLite's own can read "no such
+        savepoint" when the disk filled up in the middle of a transaction)."""
+        code = getattr(exc, "sqlite_errorcode", 0) & 0xFF
+        if code == sqlite3.SQLITE_FULL:
+            return StoreFull(
+                f"the disk holding {self.path} is full: free some space there "
+                "(nothing is recorded, and no new order starts, until then)"
+            )
+        if code == sqlite3.SQLITE_IOERR:
+            return StoreFull(f"the disk holding {self.path} fails to write: {exc}")
+        return StoreError(f"the order store {self.path} refused a write: {exc}")
 
 
-class StoreInUse(VoicectlError, OSError):
+class StoreInUse(StoreError, OSError):
     """Another supervisor holds the database: two would hand the same orders out twice."""
 
 
@@ -354,6 +451,23 @@ def _exclusive(path: Path) -> IO[str]:
     handle.write(f"pid {os.getpid()}\n")
     handle.flush()
     return handle
+
+
+def _disk_trouble(exc: BaseException) -> bool:
+    """Whether `exc` is the disk's failure (full, or failing to write), not an operation's."""
+    code = getattr(exc, "sqlite_errorcode", 0) & 0xFF
+    return code in (sqlite3.SQLITE_FULL, sqlite3.SQLITE_IOERR)
+
+
+def _report(call: Call, ok: bool, value: Any) -> None:
+    try:
+        call.done(ok, value)
+    except Exception:  # one caller's failure must not keep the others waiting
+        _LOGGER.exception("order store: reporting a write's outcome failed")
+
+
+def _ignore(_ok: bool, _value: Any) -> None:
+    pass
 
 
 def _all(operations: list[Operation]) -> Operation:
