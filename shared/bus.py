@@ -670,21 +670,28 @@ class Bus:
 
         return stop
 
-    def watch_served(self, key: str, handler: Callable[[bool], None]) -> None:
+    def watch_served(self, key: str, handler: Callable[[bool], None]) -> Callable[[], None]:
         """Call `handler(served)` on the loop as a service answering queries on `key`
-        becomes reachable through the router, and as it goes. A token says a process is
-        up; this says its queries would arrive: after a link comes back the two are
-        declared apart, and a query sent between them reaches nobody."""
+        becomes reachable through the router, and as it goes, until the bus closes or the
+        returned function ends the watch. A token says a process is up; this says its
+        queries would arrive: after a link comes back the two are declared apart, and a
+        query sent between them reaches nobody."""
         querier = self._session.declare_querier(key)
 
         def on_status(status: zenoh.MatchingStatus) -> None:
             self._call_soon(handler, status.matching)
 
+        stop_querying = self._undeclare_once(querier)
         listener = querier.declare_matching_listener(_direct(on_status))
-        self._closers.callback(querier.undeclare)
-        self._closers.callback(listener.undeclare)
+        stop_listening = self._undeclare_once(listener)  # closed first: it lives in the querier
         now: Any = querier.matching_status  # a MatchingStatus, whatever the stubs say
         self._call_soon(handler, now.matching)
+
+        def stop() -> None:
+            stop_listening()
+            stop_querying()
+
+        return stop
 
 
 class Pending(Generic[T]):

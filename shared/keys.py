@@ -101,8 +101,8 @@ class RobotKeys:
         return f"{self.prefix}/supervisor/request"
 
     def supervisor_owner(self, tag: str) -> str:
-        """Liveliness token of the supervisor serving this robot (`tag`: when it started,
-        and its Zenoh id), so that a second one on the bus knows to stand down."""
+        """Liveliness token of the supervisor serving this robot (`tag`: its Zenoh id), so
+        that a second one on the bus knows to stand down."""
         return f"{self.prefix}/supervisor/owner/{tag}"
 
     @property

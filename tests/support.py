@@ -318,6 +318,11 @@ class Site:
     def joined(self) -> Bus:
         return joined(self.router)
 
+    def log(self) -> str:
+        """What the supervisor started last has written so far."""
+        assert self.supervisor is not None
+        return self.processes.log(self.supervisor)
+
 
 class StandIn:
     """The executor's two services on a session of the test's own, a stand-in at the bus

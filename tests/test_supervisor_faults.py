@@ -4,14 +4,32 @@ damaged or emptied store."""
 
 from __future__ import annotations
 
+import asyncio
+import re
 import sqlite3
 from pathlib import Path
 
+from harness.processes import rss_mb
+from services.supervisor.service import CLAIM_WINDOW, MAX_ROBOTS
+from shared.client import STOP_ANSWER, VoicectlClient
+from shared.errors import BusError
 from shared.keys import RobotKeys
-from shared.messages import Done, Execute, Failed, OrderStatus, Resume, Submitted
+from shared.messages import (
+    Done,
+    EmergencyStop,
+    Execute,
+    Failed,
+    GetState,
+    OrderStatus,
+    Resume,
+    StateReply,
+    Stopped,
+    Submitted,
+    SupervisorReply,
+)
 
-from .conftest import SmallDisk
-from .support import Client, Site, StandIn, client_wait_ready, order
+from .conftest import SmallDisk, async_wait_until
+from .support import STARTING, Client, Site, StandIn, client_wait_ready, order
 
 
 def stored_status(db: Path, order_id: str) -> str | None:
@@ -94,3 +112,165 @@ async def test_a_start_the_disk_refuses_is_not_sent_and_pauses_the_queue(
         assert isinstance(await client.ask(Resume()), Done)
         assert (await stand_in.taken.get()).order_id == waiting
         assert stand_in.witnessed[waiting] == OrderStatus.RUNNING.value
+
+
+async def served(client: Client) -> bool:
+    """Whether the supervisor serves the client's robot (it answers its state)."""
+    try:
+        return isinstance(await client.ask(GetState()), StateReply)
+    except BusError:  # no supervisor up (yet)
+        return False
+
+
+def served_robots(refusal: SupervisorReply) -> int:
+    """How many robots a supervisor serves, from its refusal of a made-up one."""
+    assert isinstance(refusal, Failed), refusal
+    listed = re.search(r"known robots: (.*?)( and (\d+) more)?\)", refusal.reason)
+    assert listed is not None, refusal.reason
+    return len(listed[1].split(", ")) + int(listed[3] or 0)
+
+
+async def test_made_up_robots_are_bounded_and_stop_stays_latched_and_fast(site: Site) -> None:
+    """Issue 32, item 2: 5,000 executor tokens, announcements and results for made-up
+    names each made a robot (queue, owner token, queriers): the supervisor went deaf for
+    minutes and grew by 210 MB, and a STOP during a flood fell back to the client's own,
+    not latched. Now such robots are served up to --max-robots (256 by default), those
+    beyond are ignored; a robot that holds a latched STOP is never let go; and a STOP
+    during the flood is the supervisor's own, latched, within a second."""
+    site.start_supervisor()
+    assert site.supervisor is not None
+    with site.joined() as bus:
+        client, held = Client(bus, "r1"), Client(bus, "held")
+        StandIn().serve(bus, RobotKeys("r1"))
+        bus.announce(RobotKeys("r1").alive("executor"))
+        await client_wait_ready(client)
+        # A robot taken on for its executor, stopped, and whose executor then goes.
+        gone = bus.announce(RobotKeys("held").alive("executor"))
+        await async_wait_until(lambda: served(held), STARTING, "held to be taken on")
+        assert isinstance(await held.ask(EmergencyStop()), Stopped)
+        gone()
+        await held.wait_state(lambda s: not s.executor_online, "held's executor to go")
+        before = rss_mb(site.supervisor.pid)
+
+        flood = site.processes.start(
+            "harness.flood", "--connect", site.router, "--robots", "5000", "--owners"
+        )
+        supervisor, nobody = site.supervisor, Client(bus, "nobody")
+        await async_wait_until(
+            lambda: (
+                "256 robots besides those configured are served already"
+                in (site.processes.log(supervisor))
+            ),
+            STARTING,
+            "the cap to be reached, and names past it turned away, in the middle of the flood",
+        )
+        loop = asyncio.get_running_loop()
+        asked = loop.time()
+        stopped = await VoicectlClient(bus).stop("r1")  # the panel's and voicectl's STOP
+        took = loop.time() - asked
+        assert not stopped.detail.startswith("SUPERVISOR DID NOT STOP IT"), stopped.detail
+        assert (await client.state()).stopped
+
+        await async_wait_until(
+            lambda: "flooding: 5000" in site.processes.log(flood), STARTING, "the whole flood"
+        )
+        grew = rss_mb(supervisor.pid) - before
+        print(f"flood of 5000 robots: STOP answered in {took * 1000:.0f} ms; RSS +{grew:.1f} MB")
+        assert took < STOP_ANSWER  # the supervisor's own answer, not the client's fallback
+        assert served_robots(await nobody.ask(GetState())) == 1 + MAX_ROBOTS  # r1, the cap
+        assert grew < 60, grew
+        assert (await held.state()).stopped  # never let go to make room
+        refused = await client.ask_submit(order("mul"))
+        assert isinstance(refused, Failed)
+        assert refused.reason.startswith("the emergency stop is on")
+
+
+async def test_a_robot_whose_executor_went_makes_room_for_a_newcomer(site: Site) -> None:
+    """Past --max-robots a newcomer is turned away while every robot served has its
+    executor; once one has gone (and holds nothing), the next newcomer takes its place."""
+    site.start_supervisor("--max-robots", "2")
+    with site.joined() as bus:
+        first, second, third = (Client(bus, name) for name in ("first", "second", "third"))
+        gone = bus.announce(first.keys.alive("executor"))
+        bus.announce(second.keys.alive("executor"))
+        for client in (first, second):
+            await async_wait_until(lambda c=client: served(c), STARTING, "a robot taken on")
+        turned_away = bus.announce(third.keys.alive("executor"))
+        await async_wait_until(
+            lambda: "robot 'third' is not served: 2 robots besides" in site.log(),
+            STARTING,
+            "the third to be turned away",
+        )
+        assert not await served(third)
+
+        gone()  # first's executor goes: first holds nothing, and may make room
+        await first.wait_state(lambda s: not s.executor_online, "first's executor to go")
+        turned_away()
+        bus.announce(third.keys.alive("executor"))  # third's executor starts again
+        await async_wait_until(lambda: served(third), STARTING, "the third to be served")
+        assert "first: no longer served: its executor has gone" in site.log()
+        assert not await served(first)
+        assert await served(second)
+
+
+async def test_a_forged_owner_token_displaces_no_supervisor_and_stops_none_starting(
+    site: Site, tmp_path: Path
+) -> None:
+    """Issue 32, item 3: one owner token that sorts first (held by no supervisor) made
+    the serving supervisor stand down, and kept the next from starting. A token counts
+    only for a supervisor that answers for the robot, and never against one serving."""
+    site.start_supervisor()
+    assert site.supervisor is not None
+    with site.joined() as bus:
+        client = Client(bus, "r1")
+        await client_wait_ready(client, executor=False)
+        # Heard within its claim's first seconds, a claim is checked (this one does not
+        # answer); after that it is a newcomer's, which never displaces the one serving.
+        withdraw = bus.announce(client.keys.supervisor_owner("0-forged"))
+        await async_wait_until(
+            lambda: "Zenoh id 0-forged" in site.log(),
+            STARTING,
+            "the serving supervisor to hear the forged claim",
+        )
+        withdraw()
+        await asyncio.sleep(CLAIM_WINDOW)  # time passing, not a peer: the window closes
+        bus.announce(client.keys.supervisor_owner("0-forged"))
+        await async_wait_until(
+            lambda: "another claim to supervise it (Zenoh id 0-forged)" in site.log(),
+            STARTING,
+            "the serving supervisor to hear the forged claim again",
+        )
+        assert site.supervisor.poll() is None
+        assert not (await client.state()).stopped  # still answering
+
+        site.kill_supervisor()
+        site.db = tmp_path / "second.sqlite3"
+        site.start_supervisor()  # the forged token is still up
+        await client_wait_ready(client, executor=False)
+        assert "Zenoh id 0-forged, which does not answer as its supervisor: ignored" in (site.log())
+
+
+async def test_a_second_supervisor_whose_clock_is_a_day_behind_stands_down_itself(
+    site: Site, tmp_path: Path
+) -> None:
+    """Issue 32, item 3: owners were ordered by their start on the wall clock, so a
+    second supervisor whose clock was a day behind displaced the one serving (and took
+    over with an empty database). No clock takes part now: the one serving keeps the
+    robot, and the second stops, naming it."""
+    site.start_supervisor()
+    assert site.supervisor is not None
+    with site.joined() as bus:
+        client = Client(bus, "r1")
+        await client_wait_ready(client, executor=False)
+        (kept,) = await client.submit(order("mul"))
+        second = site.processes.start(
+            "tests.clock_a_day_behind",
+            "services.supervisor",
+            *("--connect", site.router, "--robot", "r1", "--db", str(tmp_path / "second.db")),
+            name="skewed-supervisor",
+        )
+        await async_wait_until(lambda: second.poll() is not None, STARTING, "the second to stop")
+        assert second.returncode == 2
+        assert "robot 'r1' already has a supervisor (Zenoh id " in site.processes.log(second)
+        assert site.supervisor.poll() is None
+        assert [r.id for r in (await client.state()).queue] == [kept]
