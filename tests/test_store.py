@@ -10,6 +10,7 @@ from pathlib import Path
 
 import msgspec
 
+from services.supervisor.latch import LatchFile
 from services.supervisor.store import RETRY_EVERY, OrderStore, StoreFull
 from shared.messages import OrderRecord, OrderStatus
 
@@ -108,3 +109,24 @@ async def test_a_full_disk_is_said_in_plain_words_and_kept_writes_land_once_spac
         records, total = await store.call(history)
         assert (total, [r.id for r in records]) == (1, ["first"])
         assert count_from_elsewhere(store.path) == 1  # the refused ones never landed
+
+
+async def test_a_stop_latched_on_a_full_disk_reaches_the_latch_file(small_disk: SmallDisk) -> None:
+    """The latch file is rewritten in place (no new block needed): a STOP latched while
+    the disk is full is on disk at once, though the database takes it only later."""
+    path = small_disk.path / "orders.sqlite3"
+    latch = LatchFile(path.with_name(path.name + ".stop"))
+    with OrderStore(path) as store:
+        await store.call(store.load(10))  # the latch file is made at start
+        small_disk.fill()
+        store.set_stopped("r1", True)
+        await async_wait_until(
+            lambda: latch.read().robots == {"r1"}, 5.0, "the latch file to say r1 is stopped"
+        )
+        await async_wait_until(
+            lambda: store.trouble is not None, 5.0, "the database to refuse it for now"
+        )
+        small_disk.free()
+        await async_wait_until(lambda: store.trouble is None, 5 * RETRY_EVERY, "the database")
+        saved = await store.call(store.load(10))
+        assert saved["r1"].stopped

@@ -7,6 +7,7 @@ from __future__ import annotations
 import asyncio
 import re
 import sqlite3
+import subprocess
 from pathlib import Path
 
 from harness.processes import rss_mb
@@ -274,3 +275,86 @@ async def test_a_second_supervisor_whose_clock_is_a_day_behind_stands_down_itsel
         assert "robot 'r1' already has a supervisor (Zenoh id " in site.processes.log(second)
         assert site.supervisor.poll() is None
         assert [r.id for r in (await client.state()).queue] == [kept]
+
+
+async def stopped_exit(site: Site) -> str:
+    """Start the supervisor, which must refuse: its last line."""
+    site.start_supervisor()
+    supervisor = site.supervisor
+    assert supervisor is not None
+    await async_wait_until(lambda: supervisor.poll() is not None, STARTING, "it to refuse")
+    assert supervisor.returncode == 2, site.log()
+    return site.log().strip().splitlines()[-1]
+
+
+async def test_an_emptied_store_is_refused_and_its_latched_stop_outlives_it(site: Site) -> None:
+    """Issue 32, item 5: a database emptied to 0 bytes started empty without a word, its
+    history gone and its latched STOP released. Now the supervisor refuses it in one line
+    that says how to recover; done as it says, it starts with an empty history and the
+    robot still stopped (the latch file beside the store kept the STOP)."""
+    site.start_supervisor()
+    with site.joined() as bus:
+        client = Client(bus, "r1")
+        await client_wait_ready(client, executor=False)
+        await client.submit(order("mul"), order("mul"))
+        assert isinstance(await client.ask(EmergencyStop()), Stopped)
+        assert (await client.history()).total == 2
+        site.kill_supervisor()
+        site.db.write_bytes(b"")  # emptied, with what its journal held
+        for journal in ("-wal", "-shm"):
+            site.db.with_name(site.db.name + journal).unlink(missing_ok=True)
+
+        line = await stopped_exit(site)
+        assert line == (
+            f"voicectl supervisor: {site.db} is empty (0 bytes): it was emptied, and its "
+            "queue, history and latched STOPs are lost; restore it from a backup, or move it "
+            "away to start with an empty queue and history (robots stopped by a latched STOP "
+            f"stay stopped): mv {site.db} {site.db}.damaged"
+        )
+        mv = ["mv", str(site.db), f"{site.db}.damaged"]  # as the line says
+        moved = await asyncio.to_thread(subprocess.run, mv, check=False)
+        assert moved.returncode == 0
+        site.start_supervisor()
+        await client_wait_ready(client, executor=False)
+        state = await client.state()
+        assert state.stopped  # never released by losing the data
+        assert (await client.history()).total == 0
+        assert "robots stopped by the last latched STOP stay stopped: r1" in site.log()
+
+
+async def test_a_damaged_store_is_refused_in_one_line(site: Site) -> None:
+    """Issue 32, item 5: garbage in an index page started silently, garbage in a table
+    page ended in a traceback. The store checks itself at start and refuses either."""
+    site.start_supervisor()
+    with site.joined() as bus:
+        client = Client(bus, "r1")
+        await client_wait_ready(client, executor=False)
+        for _ in range(20):
+            await client.submit(*(order("mul", note="n" * 500) for _ in range(10)))
+    assert site.supervisor is not None
+    assert site.processes.stop(site.supervisor) == 0  # its journal folded into the file
+    pages = site.db.read_bytes()
+    page = 4096
+    for index in (2, len(pages) // page - 1):  # a page near the start, and the last
+        pages = pages[: index * page] + bytes(range(256)) * 16 + pages[(index + 1) * page :]
+    site.db.write_bytes(pages)
+
+    line = await stopped_exit(site)
+    assert line.startswith(f"voicectl supervisor: {site.db} is damaged (")
+    assert line.endswith(f"mv {site.db} {site.db}.damaged")
+    assert "Traceback" not in site.log()
+
+
+async def test_an_unreadable_latch_file_holds_every_robot_stopped(site: Site) -> None:
+    """A latch file that cannot be read (a write torn by a power cut) may have held any
+    robot's STOP: the supervisor starts with every robot it serves stopped, and says so."""
+    site.start_supervisor()
+    with site.joined() as bus:
+        client = Client(bus, "r1")
+        await client_wait_ready(client, executor=False)
+        site.kill_supervisor()
+        site.db.with_name(site.db.name + ".stop").write_bytes(b'{"stopped": ["r')
+        site.start_supervisor()
+        await client_wait_ready(client, executor=False)
+        assert (await client.state()).stopped
+        assert "the latch file cannot be read" in site.log()

@@ -10,7 +10,7 @@ import sys
 from pathlib import Path
 
 from shared.config import data_dir
-from shared.errors import ServiceError
+from shared.errors import ServiceError, StoreError
 from shared.process import (
     add_bus_arguments,
     open_bus,
@@ -21,7 +21,7 @@ from shared.process import (
 )
 
 from .service import MAX_ROBOTS, SupervisorService
-from .store import Durability, OrderStore, StoreInUse
+from .store import Durability, OrderStore
 
 _LOGGER = logging.getLogger(__name__)
 
@@ -73,7 +73,7 @@ async def main(args: argparse.Namespace) -> None:
     with contextlib.ExitStack() as closing:
         try:
             store = closing.enter_context(OrderStore(db_path, args.durability))
-        except StoreInUse as exc:
+        except StoreError as exc:  # in use, damaged or emptied: said in one line
             raise ServiceError(str(exc)) from exc
         except (sqlite3.Error, OSError) as exc:
             raise ServiceError(f"cannot open {db_path}: {exc}") from exc

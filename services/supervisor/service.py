@@ -165,6 +165,11 @@ class RobotSupervisor:
             self._publish_handle.cancel()
 
     @property
+    def stopped(self) -> bool:
+        """The emergency stop is latched."""
+        return self._queue.stopped
+
+    @property
     def holds_orders(self) -> bool:
         """Whether it has orders or a latched stop: what must not be dropped."""
         queue = self._queue
@@ -205,7 +210,7 @@ class RobotSupervisor:
                 if not self._queue.stopped:
                     return Done(detail="the emergency stop was not on")
                 self._queue.release()
-                self._store.keep([self._store.save_stopped(self.robot, False)])
+                self._store.set_stopped(self.robot, False)
                 self._changed()
                 match await self._latch_executor(False):
                     case Failed(reason=reason):
@@ -300,7 +305,7 @@ class RobotSupervisor:
         queue cleared, the robot held still; returns how many orders were cleared."""
         self._queue.stopped = True
         cleared = self._queue.clear_queue("emergency stop")
-        self._store.keep([self._store.save_stopped(self.robot, True)])
+        self._store.set_stopped(self.robot, True)
         self._hold()
         return cleared
 
@@ -727,16 +732,23 @@ class SupervisorService(Service):
         for name, rival in zip(kept, await asyncio.gather(*map(self._rival, kept)), strict=True):
             if rival is not None:
                 raise ServiceError(_taken(name, rival))
+        # A latch file that cannot be read may have held any robot's STOP: all stopped.
+        unsure = bool(self._store.latched.unreadable)
         for name, robot in saved.items():
             queue = self._new_queue(name)
             queue.restore(robot.open_orders, robot.history, robot.requests)
-            queue.stopped = robot.stopped
+            queue.stopped = robot.stopped or unsure
             self._add(queue, kept=True)
             if robot.open_orders:
                 _LOGGER.info("%s: restored %d open order(s)", name, len(robot.open_orders))
         for name in robots:
             if name not in self._robots:
-                self._add(self._new_queue(name), kept=True)
+                queue = self._new_queue(name)
+                queue.stopped = unsure
+                self._add(queue, kept=True)
+        for name, served in self._robots.items():
+            if served.stopped:  # said again: the latch file is written afresh
+                self._store.set_stopped(name, True)
         # A robot whose executor this supervisor never hears is stopped on the keys its
         # graph announces (RobotStop.of): follow it from now on, and have the stop's codec
         # built before any STOP can arrive.

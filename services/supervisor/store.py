@@ -9,6 +9,12 @@ A write is either answered (a submit: told once whether it committed, never retr
 kept (a change of state, such as an order's end: retried in order until it commits). When
 the disk is full, answered writes fail at once in plain words, and kept ones wait and are
 written, in their order, once there is space again.
+
+The store checks itself when it opens (`PRAGMA quick_check`) and refuses a database that
+is damaged, or was emptied after use, in one line that says how to recover; the latched
+STOPs are also kept in a latch file beside it (latch.py), which an emptied database
+cannot lose. A new database is made under another name and renamed into place once it
+holds its tables, so that an empty file where the store should be is never one of ours.
 """
 
 from __future__ import annotations
@@ -32,6 +38,8 @@ import msgspec
 
 from shared.errors import StoreError
 from shared.messages import OrderRecord
+
+from .latch import Latched, LatchFile, sync_directory
 
 _LOGGER = logging.getLogger(__name__)
 T = TypeVar("T")
@@ -105,6 +113,8 @@ class Call:
     reads: bool = False
     """Only reads: when the disk refuses a transaction it is run again alone, since a
     read needs no space (history stays readable while the disk is full)."""
+    latched: frozenset[str] | None = None
+    """The robots latched from this call on, for the latch file (None: unchanged)."""
 
 
 class StoreFull(StoreError):
@@ -113,6 +123,10 @@ class StoreFull(StoreError):
 
 class NotStored(StoreError):
     """An order that should be in the store is not: its submit never committed."""
+
+
+class StoreDamaged(StoreError):
+    """The database cannot be trusted: damaged, emptied, or not a database at all."""
 
 
 class OrderStore:
@@ -136,6 +150,13 @@ class OrderStore:
         self._ready = threading.Event()
         self._open_error: BaseException | None = None
         self._lock: IO[str] | None = None
+        self._latch = LatchFile(path.with_name(path.name + ".stop"))
+        self.latched = Latched()
+        """What the latch file said at start."""
+        self._latched_now: frozenset[str] = frozenset()
+        """The robots latched now, as the loop knows them."""
+        self._latch_unwritten: frozenset[str] | None = None
+        """What the latch file should say and the disk refused (writer thread)."""
 
     def __enter__(self) -> OrderStore:
         self.path.parent.mkdir(parents=True, exist_ok=True)
@@ -244,7 +265,14 @@ class OrderStore:
 
         return require
 
-    def save_stopped(self, robot: str, stopped: bool) -> Operation:
+    def set_stopped(self, robot: str, stopped: bool) -> None:
+        """Keep `robot`'s emergency stop latched (or released), in the database and in the
+        latch file, whatever it takes (a kept write)."""
+        if stopped:
+            self._latched_now |= {robot}
+        else:
+            self._latched_now -= {robot}
+
         def save(db: sqlite3.Connection) -> None:
             db.execute(
                 "INSERT INTO robots (robot, stopped) VALUES (?, ?)"
@@ -252,7 +280,7 @@ class OrderStore:
                 (robot, int(stopped)),
             )
 
-        return save
+        self._send(Call(save, _ignore, kept=True, latched=self._latched_now))
 
     def save_requests(self, robot: str, requests: list[tuple[str, list[str]]]) -> Operation:
         """Request ids with the ids of the orders they queued, to answer retries."""
@@ -308,6 +336,11 @@ class OrderStore:
                 saved.requests[request_id] = ids_decoder.decode(ids)
             for robot, stopped in db.execute("SELECT robot, stopped FROM robots"):
                 robots.setdefault(robot, SavedRobot()).stopped = bool(stopped)
+            # Stopped in either the database or the latch file: stopped.
+            for robot in self.latched.robots:
+                robots.setdefault(robot, SavedRobot()).stopped = True
+            self._latched_now = frozenset(r for r, saved in robots.items() if saved.stopped)
+            self._write_latch(self._latched_now)
             return robots
 
         return load
@@ -315,9 +348,17 @@ class OrderStore:
     # --- the writer thread -------------------------------------------------------------------
 
     def _connect(self) -> sqlite3.Connection:
-        # It holds what people said: readable by its owner only, like the token file
-        # (SQLite gives its -wal and -shm files the database's permissions).
-        os.close(os.open(self.path, os.O_WRONLY | os.O_CREAT, 0o600))
+        self.latched = self._latch.read()
+        if self.latched.unreadable:
+            _LOGGER.error(
+                "the latch file cannot be read (%s): every robot served from the start is "
+                "held stopped; release each once it is safe",
+                self.latched.unreadable,
+            )
+        if self.path.exists():
+            self._check()
+        else:
+            self._create()
         db = sqlite3.connect(self.path, isolation_level=None, check_same_thread=True)
         db.execute("PRAGMA journal_mode = WAL")
         sync = "FULL" if self._durability is Durability.POWER else "NORMAL"
@@ -325,18 +366,88 @@ class OrderStore:
         db.executescript(SCHEMA)
         return db
 
+    def _check(self) -> None:
+        """Refuse a database that is empty, damaged or stripped of its tables: starting
+        on it would forget the queue, the history and a latched STOP without a word."""
+        recover = (
+            "restore it from a backup, or move it away to start with an empty queue and "
+            f"history (robots stopped by a latched STOP stay stopped): mv {self.path} "
+            f"{self.path}.damaged"
+        )
+        if self.path.stat().st_size == 0:
+            raise StoreDamaged(
+                f"{self.path} is empty (0 bytes): it was emptied, and its queue, history and "
+                f"latched STOPs are lost; {recover}"
+            )
+        try:
+            with contextlib.closing(sqlite3.connect(self.path)) as db:
+                found = db.execute("PRAGMA quick_check").fetchall()
+                tables = {row[0] for row in db.execute("SELECT name FROM sqlite_master")}
+        except sqlite3.DatabaseError as exc:
+            raise StoreDamaged(f"{self.path} is damaged ({exc}); {recover}") from exc
+        if found != [("ok",)]:
+            raise StoreDamaged(f"{self.path} is damaged ({found[0][0]}); {recover}")
+        if "orders" not in tables and self.latched.found:
+            raise StoreDamaged(
+                f"{self.path} holds none of the supervisor's tables, though it has been used "
+                f"(see {self._latch.path}): it was emptied; {recover}"
+            )
+
+    def _create(self) -> None:
+        """A new database: made under another name, then renamed into place. It holds what
+        people said: readable by its owner only, like the token file (SQLite gives its
+        -wal and -shm files the database's permissions)."""
+        if self.latched.found:
+            _LOGGER.warning(
+                "no order store at %s: a new, empty one is made; robots stopped by the last "
+                "latched STOP stay stopped: %s",
+                self.path,
+                ", ".join(sorted(self.latched.robots)) or "none",
+            )
+        fresh = self.path.with_name(self.path.name + ".new")
+        for leftover in (self.path.name + suffix for suffix in ("-wal", "-shm")):
+            # Without their database these belong to none; moved aside, never applied to
+            # the new one.
+            with contextlib.suppress(FileNotFoundError):
+                os.replace(self.path.with_name(leftover), self.path.with_name(leftover + ".orphan"))
+        for stale in (fresh.name, fresh.name + "-wal", fresh.name + "-shm"):
+            with contextlib.suppress(FileNotFoundError):
+                self.path.with_name(stale).unlink()
+        os.close(os.open(fresh, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600))
+        with contextlib.closing(sqlite3.connect(fresh, isolation_level=None)) as db:
+            db.execute("PRAGMA journal_mode = WAL")
+            db.executescript(SCHEMA)
+            db.execute("PRAGMA wal_checkpoint(TRUNCATE)")
+        os.replace(fresh, self.path)
+        sync_directory(self.path.parent)
+
+    def _write_latch(self, robots: frozenset[str]) -> None:
+        """The latch file says `robots` from now on, or will as soon as the disk lets it
+        (writer thread)."""
+        try:
+            self._latch.write(robots)
+        except OSError as exc:
+            if self._latch_unwritten is None:
+                _LOGGER.error("cannot write the latch file %s: %s", self._latch.path, exc)
+            self._latch_unwritten = robots
+            return
+        if self._latch_unwritten is not None:
+            _LOGGER.warning("the latch file %s is written again", self._latch.path)
+        self._latch_unwritten = None
+
     def _run(self) -> None:
         try:
             db = self._connect()
-        except (sqlite3.Error, OSError) as exc:
+        except (sqlite3.Error, OSError, StoreError) as exc:
             self._open_error = exc
             self._ready.set()
             return
         self._ready.set()
         try:
             while True:
+                behind = self._backlog or self._latch_unwritten is not None
                 try:
-                    first = self._inbox.get(timeout=RETRY_EVERY if self._backlog else None)
+                    first = self._inbox.get(timeout=RETRY_EVERY if behind else None)
                 except queue.Empty:  # nothing new: try the backlog alone
                     self._run_batch(db, [])
                     continue
@@ -370,6 +481,9 @@ class OrderStore:
         that fails on its own (a bad operation) is undone alone; when the disk fails, the
         whole transaction is undone, kept calls wait in the backlog for the next try and
         the others are told, in plain words."""
+        latched = [call.latched for call in new if call.latched is not None]
+        if latched or self._latch_unwritten is not None:
+            self._write_latch(latched[-1] if latched else self._latch_unwritten or frozenset())
         batch, self._backlog = [*self._backlog, *new], []
         if not batch:
             return
