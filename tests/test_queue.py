@@ -165,3 +165,21 @@ def test_withdrawing_a_submit_also_drops_its_order_whose_start_is_being_written(
     assert queue.current is None
     assert not queue.queue
     assert not queue.unstart(a)
+
+
+def test_an_order_ended_by_a_loss_cancels_the_rest_of_its_utterance_whatever_its_status(
+    queue: RobotQueue,
+) -> None:
+    """After the supervisor's loss the executor ends an order that moved the robot as
+    cancelled; after the executor's loss the supervisor ends it as failed. Either way the
+    rest of the utterance is cancelled: one rule, the safe one."""
+    a, b = queue.submit("req-1", [order("a"), order("b")], "")
+    c, d = queue.submit("req-2", [order("c"), order("d")], "")
+    queue.start_next()
+    queue.finish(a, OrderStatus.CANCELLED, "supervisor lost", lost=True)
+    assert [r.id for r in queue.queue] == [c, d]
+    assert queue.history[0].id == b
+    assert queue.history[0].status == OrderStatus.CANCELLED
+    queue.start_next()
+    queue.finish(c, OrderStatus.SUCCEEDED, "done while away", lost=True)  # it did happen
+    assert [r.id for r in queue.queue] == [d]

@@ -37,6 +37,10 @@ from .support import Client, Site, StandIn, client_wait_ready, order
 
 
 async def test_sigkill_with_orders_in_flight_loses_nothing_and_resumes(site: Site) -> None:
+    """Killed while a drive runs: the drive's end is fetched from the executor, the rest of
+    its utterance is cancelled (as after an executor's loss: nobody saw how the drive
+    ended, and the next steps assume it happened), and another utterance's orders wait,
+    paused, and run once resumed."""
     site.processes.start("services.sim", "--connect", site.router)
     site.start_supervisor()
     site.start_executor()
@@ -46,11 +50,11 @@ async def test_sigkill_with_orders_in_flight_loses_nothing_and_resumes(site: Sit
         await client_wait_ready(client)
         (done_before,) = await client.submit(order("mul", first=2, second=2))
         await client.finished(done_before)
-        running, queued_1, queued_2 = await client.submit(
-            order("drive", distance=5.0),
-            order("mul", first=3, second=3),
-            order("mul", first=4, second=4),
+        running, then = await client.submit(
+            order("drive", distance=5.0), order("mul", first=3, second=3)
         )
+        (queued_1,) = await client.submit(order("mul", first=4, second=4))
+        (queued_2,) = await client.submit(order("mul", first=5, second=5))
         await client.wait_state(
             lambda s: s.current is not None and s.current.progress is not None,
             "the drive to command the robot",
@@ -67,15 +71,20 @@ async def test_sigkill_with_orders_in_flight_loses_nothing_and_resumes(site: Sit
         assert f"{running} ended while the supervisor restarted" in site.processes.log(
             site.supervisor
         )
+        rest = await client.finished(then)
+        assert (rest.status, rest.message) == (
+            OrderStatus.CANCELLED,
+            f"an earlier order of the same command ended cancelled: {running}",
+        )
         state = await client.state()
         assert state.current is None
         assert [r.id for r in state.queue] == [queued_1, queued_2]
         assert state.paused  # nothing new starts after a restart unasked
 
         assert isinstance(await client.ask(Resume()), Done)
-        assert (await client.finished(queued_2)).message == "4 x 4 = 16"
+        assert (await client.finished(queued_2)).message == "5 x 5 = 25"
         page = await client.history()
-        assert [r.id for r in page.records] == [queued_2, queued_1, running, done_before]
+        assert [r.id for r in page.records] == [queued_2, queued_1, then, running, done_before]
 
 
 async def test_running_order_is_interrupted_when_no_executor_runs_it(site: Site) -> None:

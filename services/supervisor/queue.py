@@ -27,7 +27,9 @@ FINAL = frozenset(
     }
 )
 BREAKS_SEQUENCE = frozenset({OrderStatus.FAILED, OrderStatus.REJECTED, OrderStatus.INTERRUPTED})
-"""Results after which the rest of the same utterance is cancelled (unless configured not to)."""
+"""Results after which the rest of the same utterance is cancelled (unless configured not to).
+An order ended by a loss (of its executor, or of the supervisor while it ran) breaks it too,
+whatever its status says: see `finish`."""
 SNAPSHOT_QUEUE = 20
 SNAPSHOT_HISTORY = 20
 
@@ -201,8 +203,15 @@ class RobotQueue:
         self.current = msgspec.structs.replace(self.current, progress=progress)
         return True
 
-    def finish(self, order_id: str, status: OrderStatus, message: str = "") -> bool:
-        """End the current order; False if `order_id` is not the current one (stale event)."""
+    def finish(
+        self, order_id: str, status: OrderStatus, message: str = "", lost: bool = False
+    ) -> bool:
+        """End the current order; False if `order_id` is not the current one (stale event).
+        One that failed, was rejected or interrupted, or that ended by a loss (`lost`: its
+        executor, or this supervisor, went while it ran; the executor then ends an order
+        that moved the robot as cancelled) cancels the rest of its utterance: later steps
+        assume earlier ones happened, and nobody saw how this one ended. One rule, the safe
+        one, whichever side was lost."""
         if status not in FINAL:
             raise ValueError(f"{status} is not a final status")
         if self.current is None or self.current.id != order_id:
@@ -211,7 +220,8 @@ class RobotQueue:
         self.current = None
         self.current_verified = True
         self._to_history(record, status, message)
-        if status in BREAKS_SEQUENCE and not self._continue_on_failure:
+        broken = status in BREAKS_SEQUENCE or (lost and status is not OrderStatus.SUCCEEDED)
+        if broken and not self._continue_on_failure:
             for sibling in [r for r in self.queue if r.request_id == record.request_id]:
                 self.queue.remove(sibling)
                 self._to_history(

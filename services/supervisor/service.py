@@ -519,7 +519,10 @@ class RobotSupervisor:
                 if self._queue.progress(order_id, progress):
                     self._publish_soon()
             case OrderFinished(order_id=order_id, status=status, message=message):
-                self._finish(order_id, status, message)  # a final status: the type says so
+                # A final status (the type says so). An order restored after a restart and
+                # not verified yet ran while this supervisor was away: it ended by a loss.
+                lost = not self._queue.current_verified
+                self._finish(order_id, status, message, lost)
 
     def on_executor(self, alive: bool) -> None:
         """The executor's token came or went."""
@@ -587,7 +590,7 @@ class RobotSupervisor:
         result = await self._send_control(GetResult(order_id=order_id))
         if isinstance(result, OrderFinished) and result.order_id == order_id:
             _LOGGER.info("%s: %s ended while %s restarted", self.robot, order_id, restarted)
-            self._finish(order_id, result.status, result.message)
+            self._finish(order_id, result.status, result.message, lost=True)
         else:
             self._finish(
                 order_id,
@@ -607,8 +610,10 @@ class RobotSupervisor:
 
     # --- bookkeeping -----------------------------------------------------------------------------
 
-    def _finish(self, order_id: str, status: OrderStatus, message: str) -> None:
-        if self._queue.finish(order_id, status, message):
+    def _finish(
+        self, order_id: str, status: OrderStatus, message: str, lost: bool = False
+    ) -> None:
+        if self._queue.finish(order_id, status, message, lost):
             _LOGGER.info("%s: %s %s %s", self.robot, order_id, status, message)
             self._changed()
 
