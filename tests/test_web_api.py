@@ -98,6 +98,25 @@ def test_the_page_and_health_need_no_token_and_hold_no_data(client: TestClient) 
     assert client.get("/api/health").json() == {"ok": True, "robot": "robot"}
 
 
+def test_no_other_site_may_frame_the_panel_or_run_scripts_in_it(client: TestClient) -> None:
+    """Issue 32: the panel sent no Content-Security-Policy or anti-framing header; a page
+    elsewhere could frame it and trick a click on Release."""
+    for response in (
+        client.get("/"),
+        client.get("/static/panel.js"),
+        client.get("/static/missing.js"),
+        client.get("/api/health"),
+        client.get("/api/state"),  # refused (no token): a 401 carries them too
+    ):
+        headers = response.headers
+        policy = headers["content-security-policy"]
+        assert "frame-ancestors 'none'" in policy
+        assert "script-src 'self';" in policy
+        assert "default-src 'self';" in policy
+        assert headers["x-frame-options"] == "DENY"
+        assert headers["x-content-type-options"] == "nosniff"
+
+
 @pytest.mark.parametrize("name", [".env", "x" * 256, "..%2fapp.py", "missing.js"])
 def test_static_paths_outside_the_panel_are_404(client: TestClient, name: str) -> None:
     assert client.get(f"/static/{name}").status_code == 404
