@@ -172,7 +172,7 @@ async def test_an_executor_back_after_a_loss_gets_an_order_only_once_it_stays(si
 
 
 async def test_burst_of_submits_killed_midway_keeps_every_acknowledged_order(site: Site) -> None:
-    site.start_supervisor()  # no executor: everything stays queued
+    site.start_supervisor("--max-queue", "10000")  # no executor: everything stays queued
 
     with site.joined() as bus:
         client = Client(bus, "r1")
@@ -203,7 +203,7 @@ async def test_burst_of_submits_killed_midway_keeps_every_acknowledged_order(sit
             stored = {row[0] for row in db.execute("SELECT id FROM orders")}
         assert set(acknowledged) <= stored
 
-        site.start_supervisor()
+        site.start_supervisor("--max-queue", "10000")
         await client_wait_ready(client, executor=False)
         assert (await client.state()).queue_length == len(stored)
         # Every stored request is known after the restart: retrying all 2000 queues only
@@ -215,7 +215,7 @@ async def test_burst_of_submits_killed_midway_keeps_every_acknowledged_order(sit
 
 
 async def test_ten_thousand_submits_are_all_accepted_and_kept(site: Site) -> None:
-    site.start_supervisor()
+    site.start_supervisor("--max-queue", "10000")
 
     with site.joined() as bus:
         client = Client(bus, "r1")
@@ -230,7 +230,7 @@ async def test_ten_thousand_submits_are_all_accepted_and_kept(site: Site) -> Non
         assert all(isinstance(r, Submitted) for r in replies)
         assert (await client.state()).queue_length == 10_000
         site.kill_supervisor()
-        site.start_supervisor()
+        site.start_supervisor("--max-queue", "10000")
         await client_wait_ready(client, executor=False)
         assert (await client.state()).queue_length == 10_000
 

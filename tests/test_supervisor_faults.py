@@ -358,3 +358,24 @@ async def test_an_unreadable_latch_file_holds_every_robot_stopped(site: Site) ->
         await client_wait_ready(client, executor=False)
         assert (await client.state()).stopped
         assert "the latch file cannot be read" in site.log()
+
+
+async def test_a_submit_past_the_queue_cap_is_refused_whole(site: Site) -> None:
+    """Issue 32, item 7: the queue had no cap (10,200 orders accepted). A submit that would
+    take it past --max-queue is refused in words, none of its orders queued; a retry of
+    one already taken is still answered."""
+    site.start_supervisor("--max-queue", "5")
+    with site.joined() as bus:
+        client = Client(bus, "r1")
+        await client_wait_ready(client, executor=False)
+        first = await client.submit(*(order("mul") for _ in range(4)), request_id="first")
+        refused = await client.ask_submit(order("mul"), order("mul"))
+        assert isinstance(refused, Failed)
+        assert refused.reason == (
+            "robot 'r1' has 4 orders queued and takes at most 5 (--max-queue): none of these "
+            "2 was queued; cancel some, or wait for them to run"
+        )
+        assert (await client.state()).queue_length == 4
+        assert await client.submit(*(order("mul") for _ in range(4)), request_id="first") == first
+        await client.submit(order("mul"))
+        assert (await client.state()).queue_length == 5

@@ -20,6 +20,7 @@ from shared.process import (
     serve,
 )
 
+from .queue import MAX_QUEUE
 from .service import MAX_ROBOTS, SupervisorService
 from .store import Durability, OrderStore
 
@@ -35,6 +36,14 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         type=robot_name,
         help="a robot to serve from the start and announce (repeatable); any other robot "
         "is served once its executor announces itself, up to --max-robots of them",
+    )
+    parser.add_argument(
+        "--max-queue",
+        type=positive_int,
+        default=MAX_QUEUE,
+        metavar="N",
+        help=f"most orders queued per robot (default: {MAX_QUEUE}); a submit past it is "
+        "refused whole",
     )
     parser.add_argument(
         "--max-robots",
@@ -84,6 +93,7 @@ async def main(args: argparse.Namespace) -> None:
             args.robot,
             continue_on_failure=args.continue_on_failure,
             max_robots=args.max_robots,
+            max_queue=args.max_queue,
         )
         await serve(service)
 

@@ -39,8 +39,17 @@ RECENT_REQUESTS = 10_000
 long-running supervisor does not grow with every submit it ever took."""
 
 
+MAX_QUEUE = 1000
+"""Orders queued at most per robot (`--max-queue`): a robot works through a few orders a
+minute, and every queued one costs memory and a row in each state snapshot's count."""
+
+
 class RequestConflict(VoicectlError):
     """A submit whose request id was already used for other orders."""
+
+
+class QueueFull(VoicectlError):
+    """A submit whose orders would take the queue past its cap: none of them is queued."""
 
 
 class RobotQueue:
@@ -58,8 +67,10 @@ class RobotQueue:
         clock: Callable[[], float] = time.time,
         history_limit: int = 50,
         continue_on_failure: bool = False,
+        max_queue: int = MAX_QUEUE,
     ) -> None:
         self.robot = robot
+        self._max_queue = max_queue
         self.executor_online = False
         self.current: OrderRecord | None = None
         self.current_verified = True
@@ -115,7 +126,8 @@ class RobotQueue:
 
     def submit(self, request_id: str, orders: list[Order], transcript: str) -> list[str]:
         """Queue `orders`; the same `request_id` again returns the first answer, queues
-        nothing. The same id with other orders is a RequestConflict: never dropped quietly."""
+        nothing. The same id with other orders is a RequestConflict: never dropped quietly.
+        Orders past the queue's cap are a QueueFull, and none of them is queued."""
         digest = hashlib.blake2b(msgspec.json.encode(orders), digest_size=16).digest()
         if request_id in self._requests:
             if self._digests.get(request_id, digest) != digest:
@@ -124,6 +136,12 @@ class RobotQueue:
                     "with a new request id"
                 )
             return self._requests[request_id]
+        if len(self.queue) + len(orders) > self._max_queue:
+            raise QueueFull(
+                f"robot '{self.robot}' has {len(self.queue)} orders queued and takes at most "
+                f"{self._max_queue} (--max-queue): none of these {len(orders)} was queued; "
+                "cancel some, or wait for them to run"
+            )
         self._digests[request_id] = digest
         now = self._clock()
         records = [

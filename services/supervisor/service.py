@@ -64,7 +64,7 @@ from shared.robot.stop import Cancelled, RobotStop, prepare
 from shared.ros2 import NAVIGATE_FEEDBACK
 from shared.throttle import Throttled
 
-from .queue import RequestConflict, RobotQueue
+from .queue import MAX_QUEUE, QueueFull, RequestConflict, RobotQueue
 from .store import Operation, OrderStore
 
 _LOGGER = logging.getLogger(__name__)
@@ -250,7 +250,7 @@ class RobotSupervisor:
         new = not self._queue.knows(submit.request_id)
         try:
             ids = self._queue.submit(submit.request_id, submit.orders, submit.transcript)
-        except RequestConflict as exc:
+        except (RequestConflict, QueueFull) as exc:
             return Failed(reason=str(exc))
         return ids, new
 
@@ -610,9 +610,7 @@ class RobotSupervisor:
 
     # --- bookkeeping -----------------------------------------------------------------------------
 
-    def _finish(
-        self, order_id: str, status: OrderStatus, message: str, lost: bool = False
-    ) -> None:
+    def _finish(self, order_id: str, status: OrderStatus, message: str, lost: bool = False) -> None:
         if self._queue.finish(order_id, status, message, lost):
             _LOGGER.info("%s: %s %s %s", self.robot, order_id, status, message)
             self._changed()
@@ -705,6 +703,7 @@ class SupervisorService(Service):
         continue_on_failure: bool = False,
         history_in_memory: int = 50,
         max_robots: int = MAX_ROBOTS,
+        max_queue: int = MAX_QUEUE,
     ) -> None:
         self._bus = bus
         self._announced = robots
@@ -712,6 +711,7 @@ class SupervisorService(Service):
         self._continue_on_failure = continue_on_failure
         self._history = history_in_memory
         self._max_robots = max_robots
+        self._max_queue = max_queue
         self._robots: dict[str, RobotSupervisor] = {}
         self._zid = str(bus.session.zid())
         """Who this supervisor is on the bus: the last chunk of its owner tokens."""
@@ -783,7 +783,10 @@ class SupervisorService(Service):
 
     def _new_queue(self, name: str) -> RobotQueue:
         return RobotQueue(
-            name, continue_on_failure=self._continue_on_failure, history_limit=self._history
+            name,
+            continue_on_failure=self._continue_on_failure,
+            history_limit=self._history,
+            max_queue=self._max_queue,
         )
 
     def _add(self, queue: RobotQueue, kept: bool) -> RobotSupervisor:
