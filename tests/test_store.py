@@ -6,6 +6,7 @@ import asyncio
 import queue
 import sqlite3
 import threading
+import time
 from pathlib import Path
 
 import msgspec
@@ -103,9 +104,11 @@ async def test_a_full_disk_is_said_in_plain_words_and_kept_writes_land_once_spac
         assert count_from_elsewhere(store.path) == 1
 
         small_disk.free()
+        freed = time.monotonic()
         await async_wait_until(
             lambda: store.trouble is None, 5 * RETRY_EVERY, "the kept write to land"
         )
+        print(f"disk full: kept write landed {time.monotonic() - freed:.2f} s after space returned")
         records, total = await store.call(history)
         assert (total, [r.id for r in records]) == (1, ["first"])
         assert count_from_elsewhere(store.path) == 1  # the refused ones never landed
