@@ -371,7 +371,7 @@ class RobotSupervisor:
             return None
         try:
             return await self._bus.request(
-                self._keys.executor_latch,
+                self._keys.executor_latch if on else self._keys.executor_release,
                 Latch(on=on),
                 self._reply_decode,
                 EXECUTOR_TIMEOUT,
