@@ -591,3 +591,24 @@ def test_audio_never_blocks_the_loop_the_stop_is_served_on() -> None:
     assert isinstance(stream.sent[0], AudioStart)
     assert isinstance(stream.sent[-1], AudioStop)  # the ends are never dropped
     assert len(stream.sent) <= QUEUED + 2  # new chunks were dropped, not queued for ever
+
+
+def test_made_up_robots_are_not_listed_and_the_panel_stays_quick(
+    client: TestClient, router: str, processes: Processes
+) -> None:
+    """Issue 32, item 2: 5,000 made-up executors' tokens made /api/robots list 5,001
+    robots (and every token cost the panel a sort of them all). Robots are listed when a
+    supervisor serves them; others are followed up to a bound, and ignored past it."""
+    flood = processes.start("harness.flood", "--connect", router, "--robots", "2000")
+    wait_until(lambda: "flooding: 2000" in processes.log(flood), 60.0, "the flood")
+    processes.start("services.supervisor", "--robot", "r2", "--connect", router)
+
+    def listed() -> list[str]:
+        robots: list[str] = client.get("/api/robots", headers=AUTH).json()["robots"]
+        return robots
+
+    wait_until(lambda: "r2" in listed(), 30.0, "r2, which a supervisor serves, to be listed")
+    assert listed() == ["r2", "robot"]
+    started = time.monotonic()
+    assert client.get("/api/health").status_code == 200
+    assert time.monotonic() - started < 0.5

@@ -716,6 +716,8 @@ class SupervisorService(Service):
         self._zid = str(bus.session.zid())
         """Who this supervisor is on the bus: the last chunk of its owner tokens."""
         self._claims: dict[str, Claim] = {}
+        self._serving = False
+        """Requests are served: a robot added now is announced at once."""
         self._room_maybe = True
         """A robot may have gone idle since `_make_room` last found none."""
         self._admitting: dict[str, bool] = {}
@@ -768,8 +770,10 @@ class SupervisorService(Service):
             overtakes=lambda request: isinstance(request, EmergencyStop),
         )
         self._bus.watch(RobotKeys.any_robot().alive("executor"), self._on_executor)
-        for name in robots:
-            self._bus.announce(RobotKeys(name).alive("supervisor"))
+        # Served from now on: said for each robot (panels list the robots served).
+        self._serving = True
+        for name, claim in self._claims.items():
+            claim.ends.append(self._bus.announce(RobotKeys(name).alive("supervisor")))
         _LOGGER.info("supervisor ready; history in %s", self._store.path)
 
     async def run(self) -> None:
@@ -806,6 +810,8 @@ class SupervisorService(Service):
                 keys.executor_info, self._decode_info, lambda _, i: robot.on_info(i), history=True
             ),
         ]
+        if self._serving:
+            ends.append(bus.announce(keys.alive("supervisor")))
         self._claims[queue.robot] = Claim(asyncio.get_running_loop().time(), ends, kept)
         return robot
 
