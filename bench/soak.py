@@ -32,6 +32,10 @@ from collections.abc import Iterator
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(REPO))
+
+from harness.processes import rss_mb  # noqa: E402  (fleet.py takes it from here too)
+
 SAYINGS = (
     "turn left",
     "wait one second",
@@ -68,17 +72,6 @@ def children(pid: int) -> dict[str, int]:
         if parent == pid and len(argv) > 2 and argv[1] == b"-m":
             found[argv[2].decode().rsplit(".", 1)[-1]] = int(entry.name)
     return found
-
-
-def rss_mb(pid: int, field: str = "VmRSS") -> float:
-    """A process's resident memory (VmHWM: its peak), in MB."""
-    try:
-        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-            if line.startswith(field):
-                return int(line.split()[1]) / 1024
-    except OSError:
-        pass
-    return float("nan")
 
 
 @contextlib.contextmanager

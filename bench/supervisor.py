@@ -323,8 +323,10 @@ def main() -> None:
                     f"{tmp}/bench.sqlite3",
                     "--durability",
                     args.durability,
-                    # Served from the start: "burst" never has an executor.
+                    # Served from the start: "burst" never has an executor, and keeps
+                    # the whole burst queued.
                     *("--robot", "bench", "--robot", "burst"),
+                    *("--max-queue", str(max(args.orders, 1000))),
                 ],
                 cwd=REPO,
                 stderr=subprocess.DEVNULL,

@@ -86,3 +86,14 @@ class Processes:
             f"----- {name} -----\n{log.read_text(errors='replace')[-4000:]}"
             for name, _, log in self.started
         )
+
+
+def rss_mb(pid: int, field: str = "VmRSS") -> float:
+    """A process's resident memory (VmHWM: its peak), in MB; NaN once it has gone."""
+    try:
+        for line in Path(f"/proc/{pid}/status").read_text().splitlines():
+            if line.startswith(field):
+                return int(line.split()[1]) / 1024
+    except OSError:
+        pass
+    return float("nan")

@@ -2,7 +2,8 @@
 
 Zenoh's Python API calls back on its own threads; a `Bus` turns those callbacks into calls
 on one event loop, decodes payloads once at the edge (a message that does not decode is
-logged in one line with its key and dropped), and closes every declaration with the
+dropped, and said in one line with its key at most every 10 s per subscription: anyone on
+the bus can send thousands), and closes every declaration with the
 session so that no callback thread keeps the process alive at exit.
 """
 
@@ -30,6 +31,7 @@ import zenoh.ext
 
 from .errors import BusError
 from .messages import Failed, Message
+from .throttle import Throttled
 
 _LOGGER = logging.getLogger(__name__)
 
@@ -164,6 +166,8 @@ class Bus:
         """The same, for `serve_in_turn`."""
         self._streams: set[Stream] = set()
         self._closers.callback(self._close_streams)
+        self._noise = Throttled(_LOGGER)
+        """Warnings of what does not decode, at most every 10 s per declaration."""
 
     @classmethod
     @contextlib.contextmanager
@@ -269,7 +273,7 @@ class Bus:
             try:
                 message = decode(sample.payload.to_bytes())
             except Exception as exc:  # any decoder's failure is the sender's fault: drop it
-                _LOGGER.warning("dropped undecodable message on %s: %s", sample_key, exc)
+                self._noise.warning(key, "dropped undecodable message on %s: %s", sample_key, exc)
                 return
             if on_loop:
                 self._call_soon(handler, sample_key, message)
@@ -415,7 +419,7 @@ class Bus:
             try:
                 request = decode(raw)
             except Exception as exc:
-                _LOGGER.warning("rejected undecodable request on %s: %s", query_key, exc)
+                self._noise.warning(key, "rejected undecodable request on %s: %s", query_key, exc)
                 answer: Message = Failed(reason=f"undecodable request: {exc}")
             else:
                 try:
@@ -507,7 +511,7 @@ class Bus:
             try:
                 request = decode(raw)
             except Exception as exc:
-                _LOGGER.warning("rejected undecodable request on %s: %s", query_key, exc)
+                self._noise.warning(key, "rejected undecodable request on %s: %s", query_key, exc)
                 refused: Pending[None] = Pending(query, query_key, None, self._encoder)
                 refused.answer(Failed(reason=f"undecodable request: {exc}"))
                 return
@@ -545,7 +549,7 @@ class Bus:
             try:
                 answer: Message = handler(decode(raw))
             except (msgspec.DecodeError, ValueError) as exc:
-                _LOGGER.warning("rejected undecodable request on %s: %s", key, exc)
+                self._noise.warning(key, "rejected undecodable request on %s: %s", key, exc)
                 answer = Failed(reason=f"undecodable request: {exc}")
             except Exception as exc:
                 _LOGGER.exception("handler for %s failed", key)
@@ -670,21 +674,28 @@ class Bus:
 
         return stop
 
-    def watch_served(self, key: str, handler: Callable[[bool], None]) -> None:
+    def watch_served(self, key: str, handler: Callable[[bool], None]) -> Callable[[], None]:
         """Call `handler(served)` on the loop as a service answering queries on `key`
-        becomes reachable through the router, and as it goes. A token says a process is
-        up; this says its queries would arrive: after a link comes back the two are
-        declared apart, and a query sent between them reaches nobody."""
+        becomes reachable through the router, and as it goes, until the bus closes or the
+        returned function ends the watch. A token says a process is up; this says its
+        queries would arrive: after a link comes back the two are declared apart, and a
+        query sent between them reaches nobody."""
         querier = self._session.declare_querier(key)
 
         def on_status(status: zenoh.MatchingStatus) -> None:
             self._call_soon(handler, status.matching)
 
+        stop_querying = self._undeclare_once(querier)
         listener = querier.declare_matching_listener(_direct(on_status))
-        self._closers.callback(querier.undeclare)
-        self._closers.callback(listener.undeclare)
+        stop_listening = self._undeclare_once(listener)  # closed first: it lives in the querier
         now: Any = querier.matching_status  # a MatchingStatus, whatever the stubs say
         self._call_soon(handler, now.matching)
+
+        def stop() -> None:
+            stop_listening()
+            stop_querying()
+
+        return stop
 
 
 class Pending(Generic[T]):

@@ -20,3 +20,8 @@ class OrderFailed(VoicectlError):
 class ServiceError(VoicectlError):
     """A service that cannot start, or must stop: its text is the process's last line
     (`run_service`), and the process exits with code 2."""
+
+
+class StoreError(VoicectlError):
+    """The supervisor's order store cannot do what was asked: its disk is full, its file
+    is damaged or was emptied, or another supervisor holds it."""

@@ -101,8 +101,8 @@ class RobotKeys:
         return f"{self.prefix}/supervisor/request"
 
     def supervisor_owner(self, tag: str) -> str:
-        """Liveliness token of the supervisor serving this robot (`tag`: when it started,
-        and its Zenoh id), so that a second one on the bus knows to stand down."""
+        """Liveliness token of the supervisor serving this robot (`tag`: its Zenoh id), so
+        that a second one on the bus knows to stand down."""
         return f"{self.prefix}/supervisor/owner/{tag}"
 
     @property
@@ -122,8 +122,15 @@ class RobotKeys:
 
     @property
     def executor_latch(self) -> str:
-        """The emergency stop's latch, answered off the executor's event loop."""
+        """The emergency stop's latch, answered off the executor's event loop: whoever
+        stops the robot may latch it."""
         return f"{self.prefix}/executor/latch"
+
+    @property
+    def executor_release(self) -> str:
+        """Where the latch is let go: a key of its own, so that a secured bus lets the
+        supervisor alone release it (a person releases through the supervisor)."""
+        return f"{self.prefix}/executor/release"
 
     @property
     def executor_info(self) -> str:

@@ -545,7 +545,8 @@ class Latch(Message):
     """The emergency stop, told to the executor on a key of its own: answered on the
     thread that receives it, never on the executor's event loop, so that an executor
     whose loop is blocked still stops commanding the robot. `on` refuses every command
-    and ends the running order at once; off (on release) lets orders command again."""
+    and ends the running order at once; off lets orders command again, and is taken only
+    on the executor's release key (the supervisor's)."""
 
     on: bool = True
 

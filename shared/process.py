@@ -42,6 +42,28 @@ def robot_name(text: str) -> str:
         raise argparse.ArgumentTypeError(str(exc)) from exc
 
 
+def positive_int(text: str) -> int:
+    """argparse type for a count of 1 or more."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = 0
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number of 1 or more")
+    return value
+
+
+def positive_float(text: str) -> float:
+    """argparse type for a number above 0 (a speed, a limit)."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = 0.0
+    if not 0.0 < value < float("inf"):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number above 0")
+    return value
+
+
 ZENOH_ENVIRONMENT = {
     "mode": "ZENOH_MODE",
     "connect": "ZENOH_CONNECT",

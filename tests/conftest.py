@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import errno
 import inspect
 import os
 import signal
@@ -16,6 +17,7 @@ import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import hypothesis
 import pytest
@@ -25,6 +27,9 @@ from harness.processes import Processes
 from harness.speech_set import Voice, real_recordings, speak
 from shared.bus import BusOptions
 from shared.robot import TransportKind
+
+if TYPE_CHECKING:
+    from .support import Site
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -93,6 +98,62 @@ def router() -> Iterator[str]:
         yield endpoint
     finally:
         session.close()
+
+
+class SmallDisk:
+    """A filesystem of its own, small enough to fill: a tmpfs mounted for one test."""
+
+    FILLER = "filler"
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+
+    def fill(self) -> int:
+        """Write until the disk refuses (ENOSPC); the bytes written."""
+        written = 0
+        fd = os.open(self.path / self.FILLER, os.O_WRONLY | os.O_CREAT | os.O_APPEND, 0o600)
+        try:
+            while True:
+                written += os.write(fd, bytes(65536))
+        except OSError as exc:
+            if exc.errno != errno.ENOSPC:
+                raise
+        finally:
+            os.close(fd)
+        return written
+
+    def free(self) -> None:
+        """Give the space back."""
+        (self.path / self.FILLER).unlink(missing_ok=True)
+
+
+@pytest.fixture
+def small_disk(tmp_path: Path) -> Iterator[SmallDisk]:
+    """A real 8 MB filesystem (tmpfs) at `tmp_path/disk`, unmounted after the test: what
+    a full disk does to SQLite, for real (ENOSPC from the kernel), not a pragma's stand-in.
+    Mounting needs root (CI runs as root); elsewhere the test is skipped, saying why."""
+    path = tmp_path / "disk"
+    path.mkdir()
+    mounted = subprocess.run(
+        ["mount", "-t", "tmpfs", "-o", "size=8m,mode=0700", "tmpfs", str(path)],
+        capture_output=True,
+        text=True,
+        check=False,
+    )
+    if mounted.returncode != 0:
+        pytest.skip(f"cannot mount a small tmpfs (needs root): {mounted.stderr.strip()}")
+    try:
+        yield SmallDisk(path)
+    finally:
+        subprocess.run(["umount", "--lazy", str(path)], check=False)
+
+
+@pytest.fixture
+def site(router: str, processes: Processes, tmp_path: Path) -> Site:
+    """A router, and a supervisor with its database in `tmp_path`, started when asked."""
+    from .support import Site  # support imports this module
+
+    return Site(router, processes, tmp_path / "supervisor.sqlite3")
 
 
 @pytest.fixture

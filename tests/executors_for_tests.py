@@ -144,3 +144,23 @@ class BlockedDriver(Executor):
                 refused += 1
             time.sleep(0.1)  # noqa: ASYNC251 (the fault under test)
         return f"drove; {refused} commands refused"
+
+
+class RawVelocity(Executor):
+    """Publishes its own Twist bytes on cmd_vel, as fast as `speed` asks (default 1000
+    m/s), once per odometry message for `seconds` (default 1), then a stop: a user
+    executor that bypasses `drive`."""
+
+    labels = ("rawvel",)
+
+    async def execute(self, order: Order, ctx: ExecutionContext) -> str | None:
+        robot = ctx.robot
+        twist = robot.codec.twist(float(order.params.get("speed", 1000.0)), 0.0)
+        end = time.monotonic() + float(order.params.get("seconds", 1.0))
+        try:
+            while time.monotonic() < end:
+                await robot.next_pose()
+                robot.publish(robot.names.cmd_vel, "geometry_msgs/msg/Twist", twist)
+        finally:
+            robot.drive(0.0, 0.0)
+        return "published"

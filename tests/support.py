@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import signal
+import subprocess
 import uuid
 from collections.abc import AsyncIterator, Callable, Coroutine
 from pathlib import Path
@@ -16,6 +18,7 @@ from shared.keys import RmwZenohKeys, RobotKeys, RobotNames
 from shared.messages import (
     Accepted,
     CancelOrder,
+    ControlRequest,
     Execute,
     ExecutorEvent,
     ExecutorReply,
@@ -27,6 +30,7 @@ from shared.messages import (
     Order,
     OrderFinished,
     OrderRecord,
+    Running,
     State,
     StateReply,
     Submit,
@@ -274,3 +278,70 @@ def start_robot(
         str(photos),
         *executor_args,
     )
+
+
+EXECUTORS = ["--executor", "tests.executors_for_tests:Slow=slow"]
+"""Executors the supervisor tests bind besides the built-in ones."""
+
+
+class Site:
+    """A router, a supervisor with a database that outlives it, executors per robot."""
+
+    def __init__(self, router: str, processes: Processes, db: Path) -> None:
+        self.router = router
+        self.processes = processes
+        self.db = db
+        self.supervisor: subprocess.Popen[bytes] | None = None
+        self.executors: dict[str, subprocess.Popen[bytes]] = {}
+
+    def start_supervisor(self, *extra: str) -> None:
+        """A supervisor serving r1 from the start (other robots once an executor comes)."""
+        self.supervisor = self.processes.start(
+            "services.supervisor",
+            *("--connect", self.router, "--db", str(self.db), "--robot", "r1", *extra),
+        )
+
+    def kill_supervisor(self) -> None:
+        assert self.supervisor is not None
+        self.supervisor.send_signal(signal.SIGKILL)
+        self.supervisor.wait()
+
+    def start_executor(self, robot: str = "r1") -> None:
+        self.executors[robot] = self.processes.start(
+            "services.executor", "--connect", self.router, "--robot", robot, *EXECUTORS
+        )
+
+    def kill_executor(self, robot: str = "r1") -> None:
+        self.executors[robot].send_signal(signal.SIGKILL)
+        self.executors[robot].wait()
+
+    def joined(self) -> Bus:
+        return joined(self.router)
+
+    def log(self) -> str:
+        """What the supervisor started last has written so far."""
+        assert self.supervisor is not None
+        return self.processes.log(self.supervisor)
+
+
+class StandIn:
+    """The executor's two services on a session of the test's own, a stand-in at the bus
+    seam: it accepts every order it is handed and keeps it in `taken`, with what
+    `witness(order)` saw at that moment (the store's row of the order, say)."""
+
+    def __init__(self, witness: Callable[[Execute], object] = lambda _execute: None) -> None:
+        self.taken: asyncio.Queue[Execute] = asyncio.Queue()
+        self.witnessed: dict[str, object] = {}
+        self._witness = witness
+
+    def serve(self, bus: Bus, keys: RobotKeys) -> None:
+        bus.serve(keys.executor_execute, json_decoder(Execute), self._execute)
+        bus.serve(keys.executor_control, json_decoder(ControlRequest), self._control)
+
+    async def _execute(self, request: Execute) -> Message:
+        self.witnessed[request.order_id] = self._witness(request)
+        await self.taken.put(request)
+        return Accepted(order_id=request.order_id)
+
+    async def _control(self, request: ControlRequest) -> Message:
+        return Running()

@@ -8,10 +8,12 @@ import math
 from pathlib import Path
 
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 from PIL import Image as PilImage
 
-from services.executor.robot import RobotLink
-from shared.bus import json_decoder
+from services.executor.robot import CONTROL_STEP, SAFE_LIMITS, RobotLink, limited
+from shared.bus import Bus, json_decoder
 from shared.keys import RobotNames
 from shared.messages import (
     CancelOrder,
@@ -233,3 +235,93 @@ async def test_an_order_cancelled_as_a_pose_arrives_is_cancelled(router: str) ->
         done, _ = await asyncio.wait({waiting}, timeout=10.0)
         assert done, "no pose came"
         assert waiting.cancelled(), f"the cancel was lost: {waiting.result()}"
+
+
+class CmdVel:
+    """What the robot hears on cmd_vel (the simulator's, through the bridge's keys):
+    (loop time, linear m/s, angular rad/s) of each velocity command."""
+
+    def __init__(self, bus: Bus) -> None:
+        loop = asyncio.get_running_loop()
+        self.heard: list[tuple[float, float, float]] = []
+        bus.subscribe(
+            RobotNames().cmd_vel,
+            Ros2Codec().read_twist,
+            lambda _key, velocity: self.heard.append((loop.time(), *velocity)),
+        )
+
+    def fastest(self) -> tuple[float, float]:
+        return max(abs(v[1]) for v in self.heard), max(abs(v[2]) for v in self.heard)
+
+    def steepest(self) -> tuple[float, float]:
+        """The largest rise in speed from one command to the next (linear, angular)."""
+        pairs = list(zip(self.heard, self.heard[1:], strict=False))
+        return (
+            max(abs(b[1]) - abs(a[1]) for a, b in pairs),
+            max(abs(b[2]) - abs(a[2]) for a, b in pairs),
+        )
+
+
+async def test_orders_asking_1000_m_s_are_held_to_the_speed_limits_on_cmd_vel(
+    robot: tuple[str, Path],
+) -> None:
+    """Issue 32, item 4: `drive` and `rotate` with speed 1000 put 50 m/s and 50 rad/s on
+    cmd_vel (only the simulator's own clamp kept the robot slow). Now every command holds
+    to the executor's limits (by default 0.5 m/s, 1.5 rad/s) and speeds up by at most
+    1 m/s² and 3 rad/s² (a rise of 0.1 m/s and 0.3 rad/s per command at most)."""
+    limits = SAFE_LIMITS
+    async with harness_on(robot[0]) as harness:
+        cmd_vel = CmdVel(harness.bus)
+        drive = await harness.execute(order("drive", distance=1.0, speed=1000.0))
+        assert (await harness.finished(drive)).status == OrderStatus.SUCCEEDED
+        turn = await harness.execute(order("rotate", angle=1.5, angular_speed=1000.0))
+        assert (await harness.finished(turn)).status == OrderStatus.SUCCEEDED
+        fastest_linear, fastest_angular = cmd_vel.fastest()
+        print(f"asked 1000: cmd_vel at most {fastest_linear:g} m/s, {fastest_angular:g} rad/s")
+        assert 0.4 < fastest_linear <= limits.linear
+        assert 1.0 < fastest_angular <= limits.angular
+        rise_linear, rise_angular = cmd_vel.steepest()
+        assert rise_linear <= limits.linear_accel * CONTROL_STEP + 1e-9
+        assert rise_angular <= limits.angular_accel * CONTROL_STEP + 1e-9
+
+
+async def test_speed_limits_are_the_robots_own_and_hold_for_raw_velocity_too(
+    router: str, processes: Processes, tmp_path: Path
+) -> None:
+    """Limits are per robot (the executor's flags), and a user executor that publishes
+    its own Twist bytes on cmd_vel is held to them as `drive` is."""
+    limits = ("--max-speed", "0.2", "--max-angular-speed", "0.4", "--max-accel", "0.5")
+    binding = ("--executor", "tests.executors_for_tests:RawVelocity")
+    start_robot(processes, router, tmp_path / "photos", executor_args=(*limits, *binding))
+    async with harness_on(router) as harness:
+        cmd_vel = CmdVel(harness.bus)
+        drive = await harness.execute(order("drive", distance=0.3, speed=1000.0))
+        assert (await harness.finished(drive)).status == OrderStatus.SUCCEEDED
+        assert cmd_vel.fastest()[0] == pytest.approx(0.2)
+        cmd_vel.heard.clear()
+        raw = await harness.execute(order("rawvel", speed=1000.0, seconds=1.0))
+        assert (await harness.finished(raw)).status == OrderStatus.SUCCEEDED
+        assert cmd_vel.fastest()[0] == pytest.approx(0.2)
+        assert cmd_vel.steepest()[0] <= 0.5 * CONTROL_STEP + 1e-9
+        assert cmd_vel.heard[-1][1:] == (0.0, 0.0)  # the stop is the last word, not overtaken
+
+
+@given(
+    wanted=st.floats(-2000.0, 2000.0),
+    last=st.floats(-0.5, 0.5),
+    dt=st.floats(0.0, CONTROL_STEP),
+)
+def test_a_held_velocity_never_passes_the_top_speed_nor_speeds_up_faster(
+    wanted: float, last: float, dt: float
+) -> None:
+    held = limited(wanted, last, top=0.5, accel=1.0, dt=dt)
+    assert abs(held) <= 0.5
+    asked = max(-0.5, min(0.5, wanted))
+    same_way = last != 0.0 and (asked > 0.0) == (last > 0.0)
+    if asked == 0.0 or (same_way and abs(asked) <= abs(last)):
+        assert held == asked  # slowing down, or stopping: at once
+    else:  # speeding up, from `last` or (reversing) from rest, towards what was asked
+        base = last if same_way else 0.0
+        assert abs(held) <= abs(base) + 1.0 * dt + 1e-12
+        assert abs(held) <= abs(asked)
+        assert held == 0.0 or (held > 0.0) == (asked > 0.0)

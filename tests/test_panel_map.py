@@ -7,15 +7,33 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import TYPE_CHECKING, Any
 
 import pytest
 
-from .conftest import REPO, Stack
+if TYPE_CHECKING:
+    from playwright.sync_api import Page
+
+from .conftest import REPO, Stack, wait_until
 from .test_panel_browser import ARTIFACTS, CHROMIUM, CHROMIUM_FLAGS, login, panel, pytestmark
 
 __all__ = ["pytestmark"]  # the browser's marks and skip, as in test_panel_browser
 
 MAP_JS = REPO / "services" / "web" / "static" / "map.js"
+
+
+def in_page(page: Page, expression: str, timeout: float = 30.0) -> Any:
+    """What `expression` gives in the page once it is truthy, asked from here until then.
+    Not Playwright's wait_for_function: it polls with eval inside the page, which the
+    panel's Content-Security-Policy forbids, as it should."""
+    found: list[Any] = []
+
+    def holds() -> bool:
+        found[:] = [page.evaluate(expression)]
+        return bool(found[0])
+
+    wait_until(holds, timeout, expression)
+    return found[0]
 
 
 def test_the_map_shows_places_robot_and_where_orders_go_before_and_after_send(
@@ -35,7 +53,7 @@ def test_the_map_shows_places_robot_and_where_orders_go_before_and_after_send(
         expect(grid).to_have_count(1, timeout=15_000)
         assert grid.get_attribute("href").startswith("data:image/png;base64,")
         # The view takes in the robot's map (walls from -10 to 10 m), not only the places.
-        page.wait_for_function("document.querySelector('#map').viewBox.baseVal.width >= 20")
+        in_page(page, "document.querySelector('#map').viewBox.baseVal.width >= 20")
         box = page.eval_on_selector(
             "#map", "m => { const b = m.viewBox.baseVal; return [b.x, b.y, b.width, b.height]; }"
         )
@@ -63,7 +81,8 @@ def test_the_map_shows_places_robot_and_where_orders_go_before_and_after_send(
         expect(staged.nth(0).locator("path.turn")).to_be_visible()
         # Both boxes in one look: the map is drawn again at every pose, and an element
         # measured between two drawings is gone.
-        arc, robot = page.wait_for_function(
+        arc, robot = in_page(
+            page,
             """() => {
                 const boxes = ["#map .step.staged path.turn", "#map .robot"].map((s) => {
                     const found = document.querySelector(s);
@@ -71,8 +90,8 @@ def test_the_map_shows_places_robot_and_where_orders_go_before_and_after_send(
                 });
                 return boxes.every((b) => b && b.width) &&
                     boxes.map((b) => ({x: b.x, y: b.y, width: b.width, height: b.height}));
-            }"""
-        ).json_value()
+            }""",
+        )
         outside = (
             arc["x"] + arc["width"] > robot["x"] + robot["width"] + 5 or arc["y"] < robot["y"] - 5
         )
@@ -109,9 +128,10 @@ def test_the_map_shows_places_robot_and_where_orders_go_before_and_after_send(
         trail = page.locator("#map .trail")
         expect(trail).to_have_count(1)
         before = len(trail.get_attribute("points").split())
-        page.wait_for_function(
+        in_page(
+            page,
             f"document.querySelector('#map .trail').getAttribute('points').split(' ').length"
-            f" > {before + 1}"  # poses come twice a second; the robot drives 10x life
+            f" > {before + 1}",  # poses come twice a second; the robot drives 10x life
         )
         expect(page.locator("#current .progress-text")).to_contain_text(" to ")
         page.screenshot(path=str(ARTIFACTS / "map-running.png"), full_page=True)

@@ -132,3 +132,54 @@ def test_a_submit_that_could_not_be_stored_is_withdrawn(queue: RobotQueue) -> No
     again = queue.submit("req-2", [order("b")], "")  # the retry is a new submit
     assert len(again) == 1
     assert [r.id for r in queue.queue] == [kept, *again]
+
+
+def test_an_order_whose_start_was_not_recorded_goes_back_to_the_head(queue: RobotQueue) -> None:
+    a, b = queue.submit("req-1", [order("a"), order("b")], "")
+    started = queue.start_next()
+    assert started is not None
+    assert started.id == a
+    assert not queue.unstart(b)  # not the current one: nothing changes
+    assert queue.unstart(a)
+    assert queue.current is None
+    assert [(r.id, r.status, r.started_at) for r in queue.queue] == [
+        (a, OrderStatus.QUEUED, None),
+        (b, OrderStatus.QUEUED, None),
+    ]
+    again = queue.start_next()
+    assert again is not None
+    assert again.id == a
+
+
+def test_withdrawing_a_submit_also_drops_its_order_whose_start_is_being_written(
+    queue: RobotQueue,
+) -> None:
+    (kept,) = queue.submit("req-0", [order("k")], "")
+    queue.start_next()
+    queue.finish(kept, OrderStatus.SUCCEEDED)
+    a, _ = queue.submit("req-1", [order("a"), order("b")], "")
+    started = queue.start_next()
+    assert started is not None
+    assert started.id == a
+    queue.withdraw("req-1")
+    assert queue.current is None
+    assert not queue.queue
+    assert not queue.unstart(a)
+
+
+def test_an_order_ended_by_a_loss_cancels_the_rest_of_its_utterance_whatever_its_status(
+    queue: RobotQueue,
+) -> None:
+    """After the supervisor's loss the executor ends an order that moved the robot as
+    cancelled; after the executor's loss the supervisor ends it as failed. Either way the
+    rest of the utterance is cancelled: one rule, the safe one."""
+    a, b = queue.submit("req-1", [order("a"), order("b")], "")
+    c, d = queue.submit("req-2", [order("c"), order("d")], "")
+    queue.start_next()
+    queue.finish(a, OrderStatus.CANCELLED, "supervisor lost", lost=True)
+    assert [r.id for r in queue.queue] == [c, d]
+    assert queue.history[0].id == b
+    assert queue.history[0].status == OrderStatus.CANCELLED
+    queue.start_next()
+    queue.finish(c, OrderStatus.SUCCEEDED, "done while away", lost=True)  # it did happen
+    assert [r.id for r in queue.queue] == [d]

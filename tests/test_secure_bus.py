@@ -18,7 +18,17 @@ import pytest
 from shared.bus import Bus, BusOptions, json_decoder
 from shared.errors import BusError
 from shared.keys import RobotKeys, RobotNames
-from shared.messages import Execute, ExecutorReply, GetRunning
+from shared.messages import (
+    Done,
+    EmergencyStop,
+    Execute,
+    ExecutorReply,
+    Failed,
+    GetRunning,
+    Latch,
+    Release,
+    Stopped,
+)
 from shared.ros2 import Odometry, Ros2Codec
 from voicectl.bus_secrets import ROUTER_TEMPLATE, USERS, SecretsExist, write_bus_secrets
 
@@ -143,6 +153,36 @@ async def test_the_panel_cannot_drive_the_robot_or_reach_the_executor(site: Secu
                 f"{key}: no service answered (none is up, or the router's access control "
                 "refuses this user)"
             )
+
+
+async def test_the_operator_releases_a_stop_only_through_the_supervisor(
+    site: SecureSite,
+) -> None:
+    """Issue 32: the operator's credentials could release the executor's latch directly
+    while the supervisor stayed stopped. A person may still latch the executor (STOP
+    without the supervisor), but its release has a key of its own that only the
+    supervisor may ask, and the latch key refuses a release."""
+    start_robot(site)
+    keys, decode = RobotKeys("r1"), json_decoder(Done | Failed)
+
+    with site.joined("operator") as bus:
+        client = Client(bus, "r1")
+        await client_wait_ready(client)
+        assert isinstance(await client.ask(EmergencyStop()), Stopped)
+        latched = await bus.request(keys.executor_latch, Latch(on=True), decode, timeout=5.0)
+        assert isinstance(latched, Done), latched  # latching is anyone's
+        refused = await bus.request(keys.executor_latch, Latch(on=False), decode, timeout=5.0)
+        assert isinstance(refused, Failed)
+        assert refused.reason.startswith("the latch is released through the supervisor")
+        with pytest.raises(BusError, match="access control refuses this user"):
+            await bus.request(keys.executor_release, Latch(on=False), decode, timeout=2.0)
+        refused_run = await client.ask_submit(order("mul", first=2, second=2))
+        assert isinstance(refused_run, Failed)  # still stopped: the supervisor's latch holds
+
+        released = await client.ask(Release())
+        assert released == Done(detail="emergency stop released")  # the executor's too
+        (product,) = await client.submit(order("mul", first=2, second=2))
+        assert (await client.finished(product)).message == "2 x 2 = 4"
 
 
 def without_credentials(config: Path, target: Path) -> Path:

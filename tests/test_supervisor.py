@@ -5,36 +5,26 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import signal
 import sqlite3
-import subprocess
 import time
 from collections.abc import Iterator
 from pathlib import Path
 
-import pytest
-
 from services.executor.runner import SUPERVISOR_LOST
 from services.supervisor.service import SETTLE
-from shared.bus import Bus, json_decoder
 from shared.errors import BusError
 from shared.keys import RobotKeys, RobotNames
 from shared.messages import (
-    Accepted,
     Cancel,
-    ControlRequest,
     Done,
     EmergencyStop,
-    Execute,
     Failed,
     GetHistory,
     GetState,
-    Message,
     Order,
     OrderStatus,
     Reorder,
     Resume,
-    Running,
     Stopped,
     Submit,
     Submitted,
@@ -42,53 +32,15 @@ from shared.messages import (
 )
 from shared.ros2 import Odometry, Ros2Codec, RosDistro
 
-from .conftest import Processes, async_wait_until
-from .support import Client, client_wait_ready, joined, order
-
-EXECUTORS = ["--executor", "tests.executors_for_tests:Slow=slow"]
-
-
-class Site:
-    """A router, a supervisor with a database that outlives it, executors per robot."""
-
-    def __init__(self, router: str, processes: Processes, db: Path) -> None:
-        self.router = router
-        self.processes = processes
-        self.db = db
-        self.supervisor: subprocess.Popen[bytes] | None = None
-        self.executors: dict[str, subprocess.Popen[bytes]] = {}
-
-    def start_supervisor(self, *extra: str) -> None:
-        """A supervisor serving r1 from the start (other robots once an executor comes)."""
-        self.supervisor = self.processes.start(
-            "services.supervisor",
-            *("--connect", self.router, "--db", str(self.db), "--robot", "r1", *extra),
-        )
-
-    def kill_supervisor(self) -> None:
-        assert self.supervisor is not None
-        self.supervisor.send_signal(signal.SIGKILL)
-        self.supervisor.wait()
-
-    def start_executor(self, robot: str = "r1") -> None:
-        self.executors[robot] = self.processes.start(
-            "services.executor", "--connect", self.router, "--robot", robot, *EXECUTORS
-        )
-
-    def kill_executor(self, robot: str = "r1") -> None:
-        self.executors[robot].send_signal(signal.SIGKILL)
-        self.executors[robot].wait()
-
-    def joined(self) -> Bus:
-        return joined(self.router)
-
-
-@pytest.fixture
-def site(router: str, processes: Processes, tmp_path: Path) -> Site:
-    return Site(router, processes, tmp_path / "supervisor.sqlite3")
+from .conftest import async_wait_until
+from .support import Client, Site, StandIn, client_wait_ready, order
 
 
 async def test_sigkill_with_orders_in_flight_loses_nothing_and_resumes(site: Site) -> None:
+    """Killed while a drive runs: the drive's end is fetched from the executor, the rest of
+    its utterance is cancelled (as after an executor's loss: nobody saw how the drive
+    ended, and the next steps assume it happened), and another utterance's orders wait,
+    paused, and run once resumed."""
     site.processes.start("services.sim", "--connect", site.router)
     site.start_supervisor()
     site.start_executor()
@@ -98,11 +50,11 @@ async def test_sigkill_with_orders_in_flight_loses_nothing_and_resumes(site: Sit
         await client_wait_ready(client)
         (done_before,) = await client.submit(order("mul", first=2, second=2))
         await client.finished(done_before)
-        running, queued_1, queued_2 = await client.submit(
-            order("drive", distance=5.0),
-            order("mul", first=3, second=3),
-            order("mul", first=4, second=4),
+        running, then = await client.submit(
+            order("drive", distance=5.0), order("mul", first=3, second=3)
         )
+        (queued_1,) = await client.submit(order("mul", first=4, second=4))
+        (queued_2,) = await client.submit(order("mul", first=5, second=5))
         await client.wait_state(
             lambda s: s.current is not None and s.current.progress is not None,
             "the drive to command the robot",
@@ -119,15 +71,20 @@ async def test_sigkill_with_orders_in_flight_loses_nothing_and_resumes(site: Sit
         assert f"{running} ended while the supervisor restarted" in site.processes.log(
             site.supervisor
         )
+        rest = await client.finished(then)
+        assert (rest.status, rest.message) == (
+            OrderStatus.CANCELLED,
+            f"an earlier order of the same command ended cancelled: {running}",
+        )
         state = await client.state()
         assert state.current is None
         assert [r.id for r in state.queue] == [queued_1, queued_2]
         assert state.paused  # nothing new starts after a restart unasked
 
         assert isinstance(await client.ask(Resume()), Done)
-        assert (await client.finished(queued_2)).message == "4 x 4 = 16"
+        assert (await client.finished(queued_2)).message == "5 x 5 = 25"
         page = await client.history()
-        assert [r.id for r in page.records] == [queued_2, queued_1, running, done_before]
+        assert [r.id for r in page.records] == [queued_2, queued_1, then, running, done_before]
 
 
 async def test_running_order_is_interrupted_when_no_executor_runs_it(site: Site) -> None:
@@ -153,25 +110,6 @@ async def test_running_order_is_interrupted_when_no_executor_runs_it(site: Site)
         site.start_executor()
         assert isinstance(await client.ask(Resume()), Done)
         assert (await client.finished(other)).message == "5 x 5 = 25"
-
-
-class StandIn:
-    """The executor's two services on a session of the test's own, a stand-in at the bus
-    seam: it accepts every order it is handed and keeps it in `taken`."""
-
-    def __init__(self) -> None:
-        self.taken: asyncio.Queue[Execute] = asyncio.Queue()
-
-    def serve(self, bus: Bus, keys: RobotKeys) -> None:
-        bus.serve(keys.executor_execute, json_decoder(Execute), self._execute)
-        bus.serve(keys.executor_control, json_decoder(ControlRequest), self._control)
-
-    async def _execute(self, request: Execute) -> Message:
-        await self.taken.put(request)
-        return Accepted(order_id=request.order_id)
-
-    async def _control(self, request: ControlRequest) -> Message:
-        return Running()
 
 
 async def test_an_order_waits_until_the_executor_can_be_reached_not_only_heard(site: Site) -> None:
@@ -234,7 +172,7 @@ async def test_an_executor_back_after_a_loss_gets_an_order_only_once_it_stays(si
 
 
 async def test_burst_of_submits_killed_midway_keeps_every_acknowledged_order(site: Site) -> None:
-    site.start_supervisor()  # no executor: everything stays queued
+    site.start_supervisor("--max-queue", "10000")  # no executor: everything stays queued
 
     with site.joined() as bus:
         client = Client(bus, "r1")
@@ -265,7 +203,7 @@ async def test_burst_of_submits_killed_midway_keeps_every_acknowledged_order(sit
             stored = {row[0] for row in db.execute("SELECT id FROM orders")}
         assert set(acknowledged) <= stored
 
-        site.start_supervisor()
+        site.start_supervisor("--max-queue", "10000")
         await client_wait_ready(client, executor=False)
         assert (await client.state()).queue_length == len(stored)
         # Every stored request is known after the restart: retrying all 2000 queues only
@@ -277,7 +215,7 @@ async def test_burst_of_submits_killed_midway_keeps_every_acknowledged_order(sit
 
 
 async def test_ten_thousand_submits_are_all_accepted_and_kept(site: Site) -> None:
-    site.start_supervisor()
+    site.start_supervisor("--max-queue", "10000")
 
     with site.joined() as bus:
         client = Client(bus, "r1")
@@ -292,7 +230,7 @@ async def test_ten_thousand_submits_are_all_accepted_and_kept(site: Site) -> Non
         assert all(isinstance(r, Submitted) for r in replies)
         assert (await client.state()).queue_length == 10_000
         site.kill_supervisor()
-        site.start_supervisor()
+        site.start_supervisor("--max-queue", "10000")
         await client_wait_ready(client, executor=False)
         assert (await client.state()).queue_length == 10_000
 

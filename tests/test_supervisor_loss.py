@@ -138,8 +138,15 @@ async def test_a_lost_supervisor_stops_the_moving_robot(robot: Robot, moving: Or
         await client_wait_ready(client)
         record = await client.finished(running)
         assert (record.status, record.message) == (OrderStatus.CANCELLED, SUPERVISOR_LOST)
+        # The rest of its utterance is cancelled, as after an executor's loss; another
+        # utterance's order is kept, waiting for resume.
+        rest = await client.finished(sibling)
+        assert (rest.status, rest.message) == (
+            OrderStatus.CANCELLED,
+            f"an earlier order of the same command ended cancelled: {running}",
+        )
         state = await client.state()
-        assert [r.id for r in state.queue] == [sibling, later]  # kept, waiting for resume
+        assert [r.id for r in state.queue] == [later]
         assert state.paused
         assert isinstance(await client.ask(Resume()), Done)
         assert (await client.finished(later)).message == "4 x 5 = 20"

@@ -3,6 +3,7 @@ a second stack does not touch the first one's data."""
 
 from __future__ import annotations
 
+import asyncio
 import json
 import os
 import signal
@@ -15,9 +16,12 @@ from pathlib import Path
 
 import pytest
 
+from shared.bus import Bus
+from shared.keys import RobotKeys
 from voicectl.stack import Child, port_in_use, wait_for_port
 
 from .conftest import REPO, Stack, free_port, free_ports, voicectl, wait_until
+from .support import on_bus
 
 pytestmark = pytest.mark.e2e
 
@@ -201,3 +205,31 @@ def test_children_start_without_code_between_fork_and_exec(
     env = seen["env"]
     assert isinstance(env, dict)
     assert env["VOICECTL_PARENT"] == str(os.getpid())
+
+
+def test_a_forged_owner_token_does_not_stop_the_stack(stack: Stack) -> None:
+    """Issue 32, item 3: an owner token held by no supervisor made the stack's supervisor
+    stand down at every restart, and after the sixth `voicectl up` stopped everything. Now
+    the supervisor serving keeps the robot, and one (re)started beside the token serves."""
+
+    async def forge(bus: Bus) -> None:
+        bus.announce(RobotKeys("robot").supervisor_owner("0-forged"))
+        (supervisor,) = pids(f"services.supervisor .*--connect {stack.router}")
+        os.kill(supervisor, signal.SIGKILL)
+        await asyncio.to_thread(
+            wait_until,
+            lambda: "voicectl up: supervisor exited with -9; restarting (1/5)" in stack.output,
+            20.0,
+            "the restart to be announced",
+        )
+        await asyncio.to_thread(
+            wait_until,
+            lambda: stack.voicectl("state", "--connect", stack.router).returncode == 0,
+            40.0,
+            "the restarted supervisor to serve beside the forged token",
+        )
+
+    on_bus(stack.router, forge)
+    assert stack.process.poll() is None
+    assert not any("stopping the stack" in line for line in stack.output)
+    assert any("Zenoh id 0-forged, which does not answer" in line for line in stack.output)

@@ -98,6 +98,25 @@ def test_the_page_and_health_need_no_token_and_hold_no_data(client: TestClient) 
     assert client.get("/api/health").json() == {"ok": True, "robot": "robot"}
 
 
+def test_no_other_site_may_frame_the_panel_or_run_scripts_in_it(client: TestClient) -> None:
+    """Issue 32: the panel sent no Content-Security-Policy or anti-framing header; a page
+    elsewhere could frame it and trick a click on Release."""
+    for response in (
+        client.get("/"),
+        client.get("/static/panel.js"),
+        client.get("/static/missing.js"),
+        client.get("/api/health"),
+        client.get("/api/state"),  # refused (no token): a 401 carries them too
+    ):
+        headers = response.headers
+        policy = headers["content-security-policy"]
+        assert "frame-ancestors 'none'" in policy
+        assert "script-src 'self';" in policy
+        assert "default-src 'self';" in policy
+        assert headers["x-frame-options"] == "DENY"
+        assert headers["x-content-type-options"] == "nosniff"
+
+
 @pytest.mark.parametrize("name", [".env", "x" * 256, "..%2fapp.py", "missing.js"])
 def test_static_paths_outside_the_panel_are_404(client: TestClient, name: str) -> None:
     assert client.get(f"/static/{name}").status_code == 404
@@ -572,3 +591,24 @@ def test_audio_never_blocks_the_loop_the_stop_is_served_on() -> None:
     assert isinstance(stream.sent[0], AudioStart)
     assert isinstance(stream.sent[-1], AudioStop)  # the ends are never dropped
     assert len(stream.sent) <= QUEUED + 2  # new chunks were dropped, not queued for ever
+
+
+def test_made_up_robots_are_not_listed_and_the_panel_stays_quick(
+    client: TestClient, router: str, processes: Processes
+) -> None:
+    """Issue 32, item 2: 5,000 made-up executors' tokens made /api/robots list 5,001
+    robots (and every token cost the panel a sort of them all). Robots are listed when a
+    supervisor serves them; others are followed up to a bound, and ignored past it."""
+    flood = processes.start("harness.flood", "--connect", router, "--robots", "2000")
+    wait_until(lambda: "flooding: 2000" in processes.log(flood), 60.0, "the flood")
+    processes.start("services.supervisor", "--robot", "r2", "--connect", router)
+
+    def listed() -> list[str]:
+        robots: list[str] = client.get("/api/robots", headers=AUTH).json()["robots"]
+        return robots
+
+    wait_until(lambda: "r2" in listed(), 30.0, "r2, which a supervisor serves, to be listed")
+    assert listed() == ["r2", "robot"]
+    started = time.monotonic()
+    assert client.get("/api/health").status_code == 200
+    assert time.monotonic() - started < 0.5

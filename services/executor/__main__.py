@@ -12,13 +12,20 @@ from shared.bus import Bus
 from shared.config import data_dir
 from shared.errors import ServiceError
 from shared.keys import RobotKeys
-from shared.process import add_bus_arguments, open_bus, robot_name, run_service, serve
+from shared.process import (
+    add_bus_arguments,
+    open_bus,
+    positive_float,
+    robot_name,
+    run_service,
+    serve,
+)
 from shared.robot import TransportKind, detect_transport, open_transport
 from shared.robot_options import add_robot_arguments, robot_options
 
 from .builtin import builtin_executors
 from .framework import BindingError, Bindings, load_binding, load_bindings_file
-from .robot import RESULT_GRACE, MapRelay, PoseRelay, RobotLink
+from .robot import RESULT_GRACE, SAFE_LIMITS, MapRelay, PoseRelay, RobotLink, SpeedLimits
 from .runner import STALL_LIMIT, ExecutorService
 
 _LOGGER = logging.getLogger(__name__)
@@ -79,9 +86,36 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         help="how long navigation's result may stay out of reach (a link down) before the "
         f"goal is cancelled and the order fails (default: {RESULT_GRACE:g})",
     )
+    limits = parser.add_argument_group(
+        "speed limits", "held to by every velocity the executor sends, whatever an order asks"
+    )
+    for flag, field, unit in (
+        ("--max-speed", "linear", "m/s"),
+        ("--max-angular-speed", "angular", "rad/s"),
+        ("--max-accel", "linear_accel", "m/s², speeding up"),
+        ("--max-angular-accel", "angular_accel", "rad/s², speeding up"),
+    ):
+        default = getattr(SAFE_LIMITS, field)
+        limits.add_argument(
+            flag,
+            dest=f"limit_{field}",
+            type=positive_float,
+            default=default,
+            metavar=unit.split(",")[0],
+            help=f"{unit} (default: {default:g})",
+        )
     add_bus_arguments(parser)
     add_robot_arguments(parser, detect=True)
     return parser.parse_args(argv)
+
+
+def speed_limits(args: argparse.Namespace) -> SpeedLimits:
+    return SpeedLimits(
+        linear=args.limit_linear,
+        angular=args.limit_angular,
+        linear_accel=args.limit_linear_accel,
+        angular_accel=args.limit_angular_accel,
+    )
 
 
 def load_bindings(args: argparse.Namespace) -> Bindings:
@@ -111,6 +145,7 @@ def executor_service(
         options,
         on_change=lambda: service.publish_info(),
         result_grace=args.result_grace,
+        limits=speed_limits(args),
     )
     PoseRelay(bus, RobotKeys(args.robot).pose, robot)
     MapRelay(bus, RobotKeys(args.robot).map, robot)

@@ -7,6 +7,11 @@ or rmw_zenoh alike (shared/robot/: Nav2 through the seam's action client, the st
 its stop). Each order gets an `OrderRobot`, a handle onto the link that is revoked when the
 order ends, so that an executor that outlives its order can never move the robot again.
 `PoseRelay` publishes the pose for voicectl's own panels.
+
+Every velocity the executor publishes goes through `RobotLink.drive`, which holds it to
+the robot's `SpeedLimits` (top speeds, and how fast it may speed up), whatever an order
+asks. Nav2's goals carry no speed: navigation drives at the speeds its own controller is
+configured with, on the robot.
 """
 
 from __future__ import annotations
@@ -16,9 +21,11 @@ import base64
 import contextlib
 import io
 import logging
+import math
 import time
 from collections.abc import Callable
 
+import msgspec
 import numpy as np
 from PIL import Image as PilImage
 
@@ -49,6 +56,7 @@ from shared.ros2 import (
     distro_of_result,
     new_goal_id,
 )
+from shared.throttle import Throttled
 
 _LOGGER = logging.getLogger(__name__)
 
@@ -67,6 +75,48 @@ PROBE_TIMEOUT = 3.0
 ROBOT_FRAME = "base_link"
 ODOM_FRAME = "odom"
 ODOMETRY = "nav_msgs/msg/Odometry"
+CONTROL_STEP = 0.1
+"""Seconds of speeding up one velocity command may use at most: the first after a pause
+starts from rest, however long the pause."""
+STALE_COMMAND = 0.5
+"""Seconds after which the last command no longer says how fast the robot goes (a base's
+cmd_vel watchdog has stopped it, or a stop from elsewhere has): it counts as at rest."""
+
+
+class SpeedLimits(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """How fast the executor lets any order move the robot, whatever the order asks: every
+    velocity command is held to these (`--max-speed` ...). Slowing down is never held back."""
+
+    linear: float = 0.5
+    """m/s, forwards or backwards."""
+    angular: float = 1.5
+    """rad/s, either way."""
+    linear_accel: float = 1.0
+    """m/s², speeding up."""
+    angular_accel: float = 3.0
+    """rad/s², speeding up."""
+
+    def __post_init__(self) -> None:
+        for name in self.__struct_fields__:
+            value = getattr(self, name)
+            if not 0.0 < value < math.inf:
+                raise ValueError(f"speed limit {name} must be a number above 0, not {value}")
+
+
+SAFE_LIMITS = SpeedLimits()
+"""The limits of a robot configured with none: a walking pace, a gentle start."""
+
+
+def limited(wanted: float, last: float, top: float, accel: float, dt: float) -> float:
+    """`wanted` held to `top`, and to speeding up by at most `accel * dt` from `last`;
+    slower than `last` (or zero) at once, and through zero at once when it reverses."""
+    wanted = max(-top, min(top, wanted))
+    same_way = last != 0.0 and (wanted > 0.0) == (last > 0.0)
+    if wanted == 0.0 or (same_way and abs(wanted) <= abs(last)):
+        return wanted
+    base = last if same_way else 0.0
+    step = accel * dt
+    return base + max(-step, min(step, wanted - base))
 
 
 class RobotRevoked(OrderFailed):
@@ -82,9 +132,14 @@ class RobotLink:
         options: RobotOptions,
         on_change: Callable[[], None] = lambda: None,
         result_grace: float = RESULT_GRACE,
+        limits: SpeedLimits = SAFE_LIMITS,
     ) -> None:
         self.transport = transport
         self._result_grace = result_grace
+        self.limits = limits
+        self._commanded = (0.0, 0.0, -math.inf)
+        """The last velocity sent (linear, angular) and when (monotonic seconds)."""
+        self._noise = Throttled(_LOGGER)
         self.options = options
         self.names = options.names
         self._on_change = on_change
@@ -307,8 +362,9 @@ class RobotLink:
             unsubscribe()
 
     def drive(self, linear_x: float, angular_z: float) -> None:
-        """Publish one velocity command on cmd_vel, in the type the robot takes. A zero
-        one is a stop: it waits for room rather than being dropped, and goes first."""
+        """Publish one velocity command on cmd_vel, in the type the robot takes, held to
+        the speed limits. Each waits for room rather than being dropped, and goes first."""
+        linear_x, angular_z = self._limit(linear_x, angular_z)
         kind = self.cmd_vel_type
         if kind is CmdVelType.TWIST and self.announced_cmd_vel is None and not self._warned_cmd_vel:
             self._warned_cmd_vel = self.options.cmd_vel_type is None
@@ -317,9 +373,34 @@ class RobotLink:
                     "the robot has not announced '%s'; sending Twist (see --cmd-vel-type)",
                     self.names.cmd_vel,
                 )
-        stop = linear_x == 0.0 and angular_z == 0.0
         payload = self.codec.velocity(kind, linear_x, angular_z, time.time())
-        self.transport.publish(self.names.cmd_vel, kind.ros_type, payload, urgent=stop)
+        # Every velocity at a stop's priority: Zenoh keeps order only within a priority,
+        # and a stop that overtook the command sent just before it left the robot moving
+        # (heard: 0.2 m/s after the zero that ended an order).
+        self.transport.publish(self.names.cmd_vel, kind.ros_type, payload, urgent=True)
+
+    def _limit(self, linear_x: float, angular_z: float) -> tuple[float, float]:
+        """The command held to `limits`, from the last one sent; remembered as sent."""
+        now = time.monotonic()
+        last_linear, last_angular, at = self._commanded
+        if now - at > STALE_COMMAND:
+            last_linear = last_angular = 0.0
+        dt = min(now - at, CONTROL_STEP)
+        top = self.limits
+        linear = limited(linear_x, last_linear, top.linear, top.linear_accel, dt)
+        angular = limited(angular_z, last_angular, top.angular, top.angular_accel, dt)
+        if abs(linear_x) > top.linear or abs(angular_z) > top.angular:
+            self._noise.warning(
+                "speed",
+                "an order asked %g m/s, %g rad/s: held to %g m/s, %g rad/s (--max-speed, "
+                "--max-angular-speed)",
+                linear_x,
+                angular_z,
+                top.linear,
+                top.angular,
+            )
+        self._commanded = (linear, angular, now)
+        return linear, angular
 
     @property
     def stopper(self) -> RobotStop:
@@ -328,6 +409,7 @@ class RobotLink:
 
     def stop_moving(self) -> str:
         """Zero velocity, at once; callable from any thread."""
+        self._commanded = (0.0, 0.0, time.monotonic())
         return self.stopper.zero_velocity()
 
     # --- stopping -------------------------------------------------------------------------
@@ -520,8 +602,23 @@ class OrderRobot:
 
     def publish(self, name: str, ros_type: str, payload: bytes) -> None:
         """Publish CDR bytes on any other topic of the robot (`names.topic("name")`, of
-        ROS type `ros_type`): any topic may move it."""
-        self._command().transport.publish(name, ros_type, payload)
+        ROS type `ros_type`): any topic may move it. A velocity on cmd_vel goes as `drive`
+        sends it, held to the speed limits (OrderFailed if it cannot be read)."""
+        link = self._command()
+        if name != link.names.cmd_vel:
+            link.transport.publish(name, ros_type, payload)
+            return
+        kind = CmdVelType.of(ros_type)
+        try:
+            if kind is None:
+                raise CdrError(f"{ros_type} is not a Twist or a TwistStamped")
+            linear_x, angular_z = link.codec.read_velocity(kind, payload)
+        except CdrError as exc:
+            raise OrderFailed(
+                f"a velocity on '{name}' must be one the executor can read, to hold it to "
+                f"the speed limits: {exc}"
+            ) from exc
+        link.drive(linear_x, angular_z)
 
     async def call(self, name: str, service_type: str, request: bytes, timeout: float) -> bytes:
         """Call any other service of the robot with CDR bytes; its reply's bytes."""

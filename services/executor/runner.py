@@ -118,7 +118,9 @@ class ExecutorService(Service):
         self._robot.start()
         self._bus.serve(self._keys.executor_execute, json_decoder(Execute), self.handle)
         self._bus.serve(self._keys.executor_control, json_decoder(ControlRequest), self.handle)
-        self._bus.serve_now(self._keys.executor_latch, json_decoder(Latch), self._on_latch)
+        latches = json_decoder(Latch)
+        self._bus.serve_now(self._keys.executor_latch, latches, self._on_latch)
+        self._bus.serve_now(self._keys.executor_release, latches, self._on_release)
         self._loop = loop = asyncio.get_running_loop()
         self._watchdog = LoopWatchdog(loop, self._stall_limit, self._on_stall, self._on_recover)
         self._watchdog.start()
@@ -226,14 +228,25 @@ class ExecutorService(Service):
 
     # --- the emergency stop and the stalled loop: on other threads than the loop --------------
 
+    def _on_release(self, latch: Latch) -> Message:
+        """On Zenoh's thread: the supervisor lets the latch go (or latches it, as anyone
+        may)."""
+        if latch.on:
+            return self._on_latch(latch)
+        self._robot.latched = False
+        _LOGGER.info("emergency stop released: orders may command the robot again")
+        return Done(detail="released")
+
     def _on_latch(self, latch: Latch) -> Message:
         """On Zenoh's thread, whatever the loop is doing: from now on the robot takes no
         command from any order, the running order's handle is revoked (no cancel deadline),
-        zero velocity goes out; the loop then ends the order and cancels the robot's goals."""
+        zero velocity goes out; the loop then ends the order and cancels the robot's goals.
+        Releasing is not done here but on its own key (`_on_release`)."""
         if not latch.on:
-            self._robot.latched = False
-            _LOGGER.info("emergency stop released: orders may command the robot again")
-            return Done(detail="released")
+            return Failed(
+                reason="the latch is released through the supervisor (voicectl release, or "
+                "Release in the panel), which lifts its own STOP too"
+            )
         self._robot.latched = True
         running = self._running
         if running is not None:

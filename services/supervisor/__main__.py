@@ -10,11 +10,19 @@ import sys
 from pathlib import Path
 
 from shared.config import data_dir
-from shared.errors import ServiceError
-from shared.process import add_bus_arguments, open_bus, robot_name, run_service, serve
+from shared.errors import ServiceError, StoreError
+from shared.process import (
+    add_bus_arguments,
+    open_bus,
+    positive_int,
+    robot_name,
+    run_service,
+    serve,
+)
 
-from .service import SupervisorService
-from .store import Durability, OrderStore, StoreInUse
+from .queue import MAX_QUEUE
+from .service import MAX_ROBOTS, SupervisorService
+from .store import Durability, OrderStore
 
 _LOGGER = logging.getLogger(__name__)
 
@@ -27,7 +35,24 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         default=[],
         type=robot_name,
         help="a robot to serve from the start and announce (repeatable); any other robot "
-        "is served as soon as a request, event or executor names it",
+        "is served once its executor announces itself, up to --max-robots of them",
+    )
+    parser.add_argument(
+        "--max-queue",
+        type=positive_int,
+        default=MAX_QUEUE,
+        metavar="N",
+        help=f"most orders queued per robot (default: {MAX_QUEUE}); a submit past it is "
+        "refused whole",
+    )
+    parser.add_argument(
+        "--max-robots",
+        type=positive_int,
+        default=MAX_ROBOTS,
+        metavar="N",
+        help="most robots served besides those named with --robot or found in the store "
+        f"(default: {MAX_ROBOTS}): names come from anyone on the bus; when full, a robot "
+        "whose executor has gone and that holds no order makes room",
     )
     parser.add_argument(
         "--db",
@@ -57,13 +82,20 @@ async def main(args: argparse.Namespace) -> None:
     with contextlib.ExitStack() as closing:
         try:
             store = closing.enter_context(OrderStore(db_path, args.durability))
-        except StoreInUse as exc:
+        except StoreError as exc:  # in use, damaged or emptied: said in one line
             raise ServiceError(str(exc)) from exc
         except (sqlite3.Error, OSError) as exc:
             raise ServiceError(f"cannot open {db_path}: {exc}") from exc
         bus = closing.enter_context(open_bus(args))
-        continues = args.continue_on_failure
-        await serve(SupervisorService(bus, store, args.robot, continue_on_failure=continues))
+        service = SupervisorService(
+            bus,
+            store,
+            args.robot,
+            continue_on_failure=args.continue_on_failure,
+            max_robots=args.max_robots,
+            max_queue=args.max_queue,
+        )
+        await serve(service)
 
 
 def run(argv: list[str] | None = None) -> int:

@@ -27,7 +27,9 @@ FINAL = frozenset(
     }
 )
 BREAKS_SEQUENCE = frozenset({OrderStatus.FAILED, OrderStatus.REJECTED, OrderStatus.INTERRUPTED})
-"""Results after which the rest of the same utterance is cancelled (unless configured not to)."""
+"""Results after which the rest of the same utterance is cancelled (unless configured not to).
+An order ended by a loss (of its executor, or of the supervisor while it ran) breaks it too,
+whatever its status says: see `finish`."""
 SNAPSHOT_QUEUE = 20
 SNAPSHOT_HISTORY = 20
 
@@ -37,8 +39,17 @@ RECENT_REQUESTS = 10_000
 long-running supervisor does not grow with every submit it ever took."""
 
 
+MAX_QUEUE = 1000
+"""Orders queued at most per robot (`--max-queue`): a robot works through a few orders a
+minute, and every queued one costs memory and a row in each state snapshot's count."""
+
+
 class RequestConflict(VoicectlError):
     """A submit whose request id was already used for other orders."""
+
+
+class QueueFull(VoicectlError):
+    """A submit whose orders would take the queue past its cap: none of them is queued."""
 
 
 class RobotQueue:
@@ -56,8 +67,10 @@ class RobotQueue:
         clock: Callable[[], float] = time.time,
         history_limit: int = 50,
         continue_on_failure: bool = False,
+        max_queue: int = MAX_QUEUE,
     ) -> None:
         self.robot = robot
+        self._max_queue = max_queue
         self.executor_online = False
         self.current: OrderRecord | None = None
         self.current_verified = True
@@ -113,7 +126,8 @@ class RobotQueue:
 
     def submit(self, request_id: str, orders: list[Order], transcript: str) -> list[str]:
         """Queue `orders`; the same `request_id` again returns the first answer, queues
-        nothing. The same id with other orders is a RequestConflict: never dropped quietly."""
+        nothing. The same id with other orders is a RequestConflict: never dropped quietly.
+        Orders past the queue's cap are a QueueFull, and none of them is queued."""
         digest = hashlib.blake2b(msgspec.json.encode(orders), digest_size=16).digest()
         if request_id in self._requests:
             if self._digests.get(request_id, digest) != digest:
@@ -122,6 +136,12 @@ class RobotQueue:
                     "with a new request id"
                 )
             return self._requests[request_id]
+        if len(self.queue) + len(orders) > self._max_queue:
+            raise QueueFull(
+                f"robot '{self.robot}' has {len(self.queue)} orders queued and takes at most "
+                f"{self._max_queue} (--max-queue): none of these {len(orders)} was queued; "
+                "cancel some, or wait for them to run"
+            )
         self._digests[request_id] = digest
         now = self._clock()
         records = [
@@ -154,12 +174,31 @@ class RobotQueue:
         return request_id in self._requests
 
     def withdraw(self, request_id: str) -> None:
-        """Undo a submit whose orders could not be stored: they were never accepted."""
+        """Undo a submit whose orders could not be stored: they were never accepted. One
+        of them may be current, its start being written: it was never sent, and is not
+        current any more."""
         self._digests.pop(request_id, None)
         ids = set(self._requests.pop(request_id, []))
         for record in [r for r in self.queue if r.id in ids]:
             self.queue.remove(record)
             self._positions.pop(record.id, None)
+        if self.current is not None and self.current.id in ids:
+            self._positions.pop(self.current.id, None)
+            self._changed.pop(self.current.id, None)
+            self.current = None
+
+    def unstart(self, order_id: str) -> bool:
+        """Put the current order `order_id` back at the head of the queue, as queued: its
+        start could not be recorded, so it was never sent. False if it is not current."""
+        if self.current is None or self.current.id != order_id:
+            return False
+        record = msgspec.structs.replace(
+            self.current, status=OrderStatus.QUEUED, started_at=None, progress=None
+        )
+        self.current = None
+        self._changed.pop(order_id, None)  # the store still has it queued
+        self.queue.appendleft(record)
+        return True
 
     def start_next(self) -> OrderRecord | None:
         """The next order to hand to the executor, now marked running; None if not now."""
@@ -182,8 +221,15 @@ class RobotQueue:
         self.current = msgspec.structs.replace(self.current, progress=progress)
         return True
 
-    def finish(self, order_id: str, status: OrderStatus, message: str = "") -> bool:
-        """End the current order; False if `order_id` is not the current one (stale event)."""
+    def finish(
+        self, order_id: str, status: OrderStatus, message: str = "", lost: bool = False
+    ) -> bool:
+        """End the current order; False if `order_id` is not the current one (stale event).
+        One that failed, was rejected or interrupted, or that ended by a loss (`lost`: its
+        executor, or this supervisor, went while it ran; the executor then ends an order
+        that moved the robot as cancelled) cancels the rest of its utterance: later steps
+        assume earlier ones happened, and nobody saw how this one ended. One rule, the safe
+        one, whichever side was lost."""
         if status not in FINAL:
             raise ValueError(f"{status} is not a final status")
         if self.current is None or self.current.id != order_id:
@@ -192,7 +238,8 @@ class RobotQueue:
         self.current = None
         self.current_verified = True
         self._to_history(record, status, message)
-        if status in BREAKS_SEQUENCE and not self._continue_on_failure:
+        broken = status in BREAKS_SEQUENCE or (lost and status is not OrderStatus.SUCCEEDED)
+        if broken and not self._continue_on_failure:
             for sibling in [r for r in self.queue if r.request_id == record.request_id]:
                 self.queue.remove(sibling)
                 self._to_history(

@@ -12,11 +12,16 @@ import asyncio
 import contextlib
 import functools
 import logging
-import time
+from collections.abc import Callable, Coroutine
+from dataclasses import dataclass
+from typing import Any
+
+import msgspec
+import zenoh
 
 from shared.bus import Bus, Pending, json_decoder
 from shared.errors import BusError, ServiceError
-from shared.keys import RobotKeys, last_chunk, robot_of
+from shared.keys import ANY, RobotKeys, last_chunk, robot_of
 from shared.messages import (
     Accepted,
     Cancel,
@@ -39,6 +44,7 @@ from shared.messages import (
     Message,
     OrderFinished,
     OrderProgress,
+    OrderRecord,
     OrderStatus,
     Rejected,
     Release,
@@ -50,13 +56,15 @@ from shared.messages import (
     Stopped,
     Submit,
     Submitted,
+    SupervisorReply,
     SupervisorRequest,
 )
 from shared.process import Service
 from shared.robot.stop import Cancelled, RobotStop, prepare
 from shared.ros2 import NAVIGATE_FEEDBACK
+from shared.throttle import Throttled
 
-from .queue import RequestConflict, RobotQueue
+from .queue import MAX_QUEUE, QueueFull, RequestConflict, RobotQueue
 from .store import Operation, OrderStore
 
 _LOGGER = logging.getLogger(__name__)
@@ -80,6 +88,17 @@ HOLD_EVERY = 0.1
 """While the stop is latched, zero velocity goes out this often."""
 STOP_NODE = "voicectl_supervisor"
 """The ROS node the supervisor appears as where nodes are seen (rmw_zenoh), for its stops."""
+MAX_ROBOTS = 256
+"""Robots served at most besides those configured or restored: every name costs memory
+and bus declarations, and anyone on the bus can make names up (`--max-robots`)."""
+CLAIM_WINDOW = 2.0
+"""Seconds after this supervisor claimed a robot during which another's claim counts as
+made at the same time, and is settled by Zenoh id; any later one is a newcomer's, which
+never displaces it."""
+OWNER_CHECK = 2.0
+"""Seconds to find who holds a robot's owner token, and whether it answers for it."""
+KNOWN_LISTED = 10
+"""Robots named in the refusal of a request for an unknown one."""
 
 
 class RobotSupervisor:
@@ -106,6 +125,10 @@ class RobotSupervisor:
         self._served: dict[str, bool] = {}
         """Which of its services (execute, control) are reachable: a request sent to one
         now would arrive."""
+        self._ends: list[Callable[[], None]] = []
+        """What `stop()` withdraws from the bus."""
+        self.heard_at = 0.0
+        """Loop time the executor's token last came or went."""
         self.executor_info: ExecutorInfo | None = None
         """How to reach the robot without its executor: the executor's last word on it;
         None while no executor was heard (`RobotStop.of` then looks for the robot)."""
@@ -123,7 +146,7 @@ class RobotSupervisor:
         loop = asyncio.get_running_loop()
         for key in (self._keys.executor_execute, self._keys.executor_control):
             self._served[key] = False
-            self._bus.watch_served(key, functools.partial(self.on_served, key))
+            self._ends.append(self._bus.watch_served(key, functools.partial(self.on_served, key)))
         self._tasks.append(loop.create_task(self._dispatch_loop()))
         if not self._queue.current_verified:
             self._tasks.append(loop.create_task(self._expire_unverified()))
@@ -132,12 +155,30 @@ class RobotSupervisor:
         self._changed()
 
     async def stop(self) -> None:
+        for end in self._ends:
+            end()
         tasks = [*self._tasks, *([self._holding] if self._holding is not None else [])]
         for task in tasks:
             task.cancel()
         await asyncio.gather(*tasks, return_exceptions=True)
         if self._publish_handle is not None:
             self._publish_handle.cancel()
+
+    @property
+    def stopped(self) -> bool:
+        """The emergency stop is latched."""
+        return self._queue.stopped
+
+    @property
+    def holds_orders(self) -> bool:
+        """Whether it has orders or a latched stop: what must not be dropped."""
+        queue = self._queue
+        return bool(queue.current or queue.queue or queue.stopped)
+
+    @property
+    def idle(self) -> bool:
+        """Nothing to keep it for: no executor, no order, no latched stop."""
+        return not (self._token or self.holds_orders)
 
     # --- requests ------------------------------------------------------------------------
 
@@ -169,7 +210,7 @@ class RobotSupervisor:
                 if not self._queue.stopped:
                     return Done(detail="the emergency stop was not on")
                 self._queue.release()
-                self._store.write([self._store.save_stopped(self.robot, False)])
+                self._store.set_stopped(self.robot, False)
                 self._changed()
                 match await self._latch_executor(False):
                     case Failed(reason=reason):
@@ -191,7 +232,7 @@ class RobotSupervisor:
                 return StateReply(state=self._queue.snapshot())
             case GetHistory(offset=offset, limit=limit):
                 records, total = await self._store.call(
-                    self._store.history_page(self.robot, offset, limit)
+                    self._store.history_page(self.robot, offset, limit), reads=True
                 )
                 return HistoryPage(records=records, total=total, offset=offset)
 
@@ -209,17 +250,18 @@ class RobotSupervisor:
         new = not self._queue.knows(submit.request_id)
         try:
             ids = self._queue.submit(submit.request_id, submit.orders, submit.transcript)
-        except RequestConflict as exc:
+        except (RequestConflict, QueueFull) as exc:
             return Failed(reason=str(exc))
         return ids, new
 
     def not_stored(self, submit: Submit, new: bool, error: BaseException) -> Failed:
-        """A submit whose orders could not be stored: they were never accepted (a retry's
-        failure leaves the first one's orders as they are)."""
+        """A submit whose orders could not be stored: they were never accepted, and none
+        of them ran, since an order starts only once it is stored (`_recorded`); a
+        retry's failure leaves the first one's orders as they are."""
         if new:
             self._queue.withdraw(submit.request_id)
             self._changed()
-        return Failed(reason=f"could not store the orders: {error}")
+        return Failed(reason=f"could not store the orders, so none was queued or run: {error}")
 
     async def _cancel(self, order_id: str, why: str) -> Message:
         if self._queue.remove_queued(order_id, why):
@@ -263,7 +305,7 @@ class RobotSupervisor:
         queue cleared, the robot held still; returns how many orders were cleared."""
         self._queue.stopped = True
         cleared = self._queue.clear_queue("emergency stop")
-        self._store.write([self._store.save_stopped(self.robot, True)])
+        self._store.set_stopped(self.robot, True)
         self._hold()
         return cleared
 
@@ -329,7 +371,7 @@ class RobotSupervisor:
             return None
         try:
             return await self._bus.request(
-                self._keys.executor_latch,
+                self._keys.executor_latch if on else self._keys.executor_release,
                 Latch(on=on),
                 self._reply_decode,
                 EXECUTOR_TIMEOUT,
@@ -393,11 +435,36 @@ class RobotSupervisor:
             self._wake.clear()
             if self._settling():
                 continue
+            pending = self._pending()  # goes first, kept, and not into the start's write
+            if pending:
+                self._store.keep(pending)
             record = self._queue.start_next()
             if record is None:
                 continue
-            self._changed()
-            await self._dispatch(record.id, Execute(order_id=record.id, order=record.order))
+            if await self._recorded(record):
+                await self._dispatch(record.id, Execute(order_id=record.id, order=record.order))
+
+    async def _recorded(self, record: OrderRecord) -> bool:
+        """Write that `record` starts, and say whether it may be sent to the executor now:
+        nothing runs that is not recorded. Its submit must have committed (it commits in
+        the same transaction, or earlier), and the start too; otherwise it goes back to
+        the head of the queue (or is gone, with its refused submit), and the queue pauses
+        saying why. Things that happened meanwhile (a STOP, a cancel) win."""
+        try:
+            await self._store.write([self._store.require_stored(record.id), *self.changes()])
+        except Exception as exc:
+            if self._queue.unstart(record.id):
+                self._queue.paused = f"order {record.id} could not start: {exc}; then resume"
+                _LOGGER.error("%s: %s", self.robot, self._queue.paused)
+                self._changed()
+            return False
+        current = self._queue.current
+        if current is None or current.id != record.id:
+            return False  # cancelled while its start was written
+        if self._queue.stopped:
+            self._finish(record.id, OrderStatus.CANCELLED, "emergency stop")
+            return False
+        return True
 
     def _settling(self) -> bool:
         """Whether an executor back after a loss is still within `SETTLE`; the dispatcher
@@ -452,11 +519,15 @@ class RobotSupervisor:
                 if self._queue.progress(order_id, progress):
                     self._publish_soon()
             case OrderFinished(order_id=order_id, status=status, message=message):
-                self._finish(order_id, status, message)  # a final status: the type says so
+                # A final status (the type says so). An order restored after a restart and
+                # not verified yet ran while this supervisor was away: it ended by a loss.
+                lost = not self._queue.current_verified
+                self._finish(order_id, status, message, lost)
 
     def on_executor(self, alive: bool) -> None:
         """The executor's token came or went."""
         self._token = alive
+        self.heard_at = asyncio.get_running_loop().time()
         self._online(self._token and all(self._served.values()))
 
     def on_served(self, key: str, served: bool) -> None:
@@ -519,7 +590,7 @@ class RobotSupervisor:
         result = await self._send_control(GetResult(order_id=order_id))
         if isinstance(result, OrderFinished) and result.order_id == order_id:
             _LOGGER.info("%s: %s ended while %s restarted", self.robot, order_id, restarted)
-            self._finish(order_id, result.status, result.message)
+            self._finish(order_id, result.status, result.message, lost=True)
         else:
             self._finish(
                 order_id,
@@ -539,8 +610,8 @@ class RobotSupervisor:
 
     # --- bookkeeping -----------------------------------------------------------------------------
 
-    def _finish(self, order_id: str, status: OrderStatus, message: str) -> None:
-        if self._queue.finish(order_id, status, message):
+    def _finish(self, order_id: str, status: OrderStatus, message: str, lost: bool = False) -> None:
+        if self._queue.finish(order_id, status, message, lost):
             _LOGGER.info("%s: %s %s %s", self.robot, order_id, status, message)
             self._changed()
 
@@ -548,17 +619,22 @@ class RobotSupervisor:
         """Store what changed (in order), publish soon, wake the dispatcher."""
         operations = self.changes()
         if operations:
-            self._store.write(operations)
+            self._store.keep(operations)
 
     def changes(self) -> list[Operation]:
         """What changed since the last call, as store operations to run in order; the
         state is published soon and the dispatcher woken."""
+        operations = self._pending()
+        self._publish_soon()
+        self._wake.set()
+        return operations
+
+    def _pending(self) -> list[Operation]:
+        """What changed since the last call, as store operations, and nothing else."""
         records, requests = self._queue.take_changes()
         operations = [self._store.save_orders(self.robot, records)] if records else []
         if requests:
             operations.append(self._store.save_requests(self.robot, requests))
-        self._publish_soon()
-        self._wake.set()
         return operations
 
     def _publish_soon(self) -> None:
@@ -582,12 +658,40 @@ Waiting = tuple[Pending[SupervisorRequest], RobotSupervisor, Submit, tuple[list[
 """A submit taken and queued, to be answered once its orders are committed."""
 
 
+@dataclass
+class Claim:
+    """This supervisor's claim on one robot: its owner token on the bus, and since when."""
+
+    at: float
+    """Loop time of the claim."""
+    ends: list[Callable[[], None]]
+    """What it declared on the bus for the robot, to withdraw when it lets go."""
+    kept: bool
+    """Named with --robot or restored from the store: never let go to make room, and a
+    rival that wins it means this process must stop. A robot taken on because its
+    executor announced itself is let go instead."""
+
+
 class SupervisorService(Service):
     """Every robot's supervisor in one process, sharing one bus and one store.
 
     A service (shared/process.py): `start()` restores the queues and serves them, `run()`
-    ends only when another supervisor already serves one of `robots` (ServiceError),
-    `stop()` stops each robot's dispatch.
+    ends only when another supervisor turns out to serve one of this one's robots
+    (ServiceError), `stop()` stops each robot's dispatch.
+
+    Robots come from the configuration (`robots`), from the store, and from executors
+    that announce themselves (their liveliness token), at most `max_robots` of the last:
+    past that, a robot whose executor has gone and that holds nothing (no order, no stop)
+    makes room, and otherwise the newcomer is not served. Only executor tokens are heard
+    for every robot name; events, announcements and owner tokens are subscribed to per
+    robot served, so that made-up names cost nothing past the cap, and requests naming
+    any other robot are refused.
+
+    A robot has one supervisor. Before claiming one (its owner token), a supervisor looks
+    for another's token, and counts it only if that supervisor answers for the robot
+    (anyone on the bus can hold a token). A claim made later never displaces the one
+    serving; two made at the same time (within `CLAIM_WINDOW`) are settled by Zenoh id,
+    the lower keeping the robot. No wall clock takes part.
     """
 
     def __init__(
@@ -598,33 +702,60 @@ class SupervisorService(Service):
         *,
         continue_on_failure: bool = False,
         history_in_memory: int = 50,
+        max_robots: int = MAX_ROBOTS,
+        max_queue: int = MAX_QUEUE,
     ) -> None:
         self._bus = bus
         self._announced = robots
         self._store = store
         self._continue_on_failure = continue_on_failure
         self._history = history_in_memory
+        self._max_robots = max_robots
+        self._max_queue = max_queue
         self._robots: dict[str, RobotSupervisor] = {}
-        self._tag = f"{time.time_ns()}-{bus.session.zid()}"
-        """Who this supervisor is on the bus: when it started, then its Zenoh id."""
-        self._owners: dict[str, set[str]] = {}
-        """Every supervisor's tag seen, by robot."""
+        self._zid = str(bus.session.zid())
+        """Who this supervisor is on the bus: the last chunk of its owner tokens."""
+        self._claims: dict[str, Claim] = {}
+        self._serving = False
+        """Requests are served: a robot added now is announced at once."""
+        self._room_maybe = True
+        """A robot may have gone idle since `_make_room` last found none."""
+        self._admitting: dict[str, bool] = {}
+        """Robots whose executor announced itself, being checked for another supervisor;
+        with whether its token is still up."""
+        self._decode_reply = json_decoder(SupervisorReply)
+        self._decode_event = json_decoder(ExecutorEvent)
+        self._decode_info = json_decoder(ExecutorInfo)
+        self._noise = Throttled(_LOGGER)
+        self._tasks: set[asyncio.Task[None]] = set()
         self.conflict: asyncio.Future[str] = asyncio.get_running_loop().create_future()
-        """Set, saying why, when a supervisor that started earlier serves one of this
-        one's robots: a robot has one supervisor, and this one must stop."""
+        """Set, saying why, when another supervisor serves one of this one's robots (one
+        it keeps) and wins it: a robot has one supervisor, and this one must stop."""
 
     async def start(self) -> None:
         robots = self._announced
         saved = await self._store.call(self._store.load(self._history))
+        kept = [*saved, *(name for name in robots if name not in saved)]
+        for name, rival in zip(kept, await asyncio.gather(*map(self._rival, kept)), strict=True):
+            if rival is not None:
+                raise ServiceError(_taken(name, rival))
+        # A latch file that cannot be read may have held any robot's STOP: all stopped.
+        unsure = bool(self._store.latched.unreadable)
         for name, robot in saved.items():
             queue = self._new_queue(name)
             queue.restore(robot.open_orders, robot.history, robot.requests)
-            queue.stopped = robot.stopped
-            self._add(queue)
+            queue.stopped = robot.stopped or unsure
+            self._add(queue, kept=True)
             if robot.open_orders:
                 _LOGGER.info("%s: restored %d open order(s)", name, len(robot.open_orders))
         for name in robots:
-            self.robot(name)
+            if name not in self._robots:
+                queue = self._new_queue(name)
+                queue.stopped = unsure
+                self._add(queue, kept=True)
+        for name, served in self._robots.items():
+            if served.stopped:  # said again: the latch file is written afresh
+                self._store.set_stopped(name, True)
         # A robot whose executor this supervisor never hears is stopped on the keys its
         # graph announces (RobotStop.of): follow it from now on, and have the stop's codec
         # built before any STOP can arrive.
@@ -638,73 +769,213 @@ class SupervisorService(Service):
             take=self._take_submits,
             overtakes=lambda request: isinstance(request, EmergencyStop),
         )
-        self._bus.watch(RobotKeys.any_robot().supervisor_owner("*"), self._on_owner)
-        self._bus.subscribe(
-            RobotKeys.any_robot().executor_events, json_decoder(ExecutorEvent), self._on_event
-        )
         self._bus.watch(RobotKeys.any_robot().alive("executor"), self._on_executor)
-        self._bus.subscribe(
-            RobotKeys.any_robot().executor_info,
-            json_decoder(ExecutorInfo),
-            self._on_info,
-            history=True,
-        )
-        for name in robots:
-            self._bus.announce(RobotKeys(name).alive("supervisor"))
+        # Served from now on: said for each robot (panels list the robots served).
+        self._serving = True
+        for name, claim in self._claims.items():
+            claim.ends.append(self._bus.announce(RobotKeys(name).alive("supervisor")))
         _LOGGER.info("supervisor ready; history in %s", self._store.path)
 
     async def run(self) -> None:
         raise ServiceError(await self.conflict)
 
     async def stop(self) -> None:
+        for task in self._tasks:
+            task.cancel()
+        await asyncio.gather(*self._tasks, return_exceptions=True)
         await asyncio.gather(*(r.stop() for r in self._robots.values()))
-
-    def robot(self, name: str) -> RobotSupervisor:
-        if name not in self._robots:
-            self._add(self._new_queue(name))
-        return self._robots[name]
 
     def _new_queue(self, name: str) -> RobotQueue:
         return RobotQueue(
-            name, continue_on_failure=self._continue_on_failure, history_limit=self._history
+            name,
+            continue_on_failure=self._continue_on_failure,
+            history_limit=self._history,
+            max_queue=self._max_queue,
         )
 
-    def _add(self, queue: RobotQueue) -> None:
-        supervisor = RobotSupervisor(self._bus, self._store, queue)
-        self._robots[queue.robot] = supervisor
-        supervisor.start()
-        self._bus.announce(RobotKeys(queue.robot).supervisor_owner(self._tag))
-        self._check_owners(queue.robot)
+    def _add(self, queue: RobotQueue, kept: bool) -> RobotSupervisor:
+        """Serve `queue`'s robot: claim it (the owner token), hear its executor's events
+        and announcement (the last one too, which the executor sends before its token),
+        and other supervisors' claims."""
+        robot = RobotSupervisor(self._bus, self._store, queue)
+        keys = RobotKeys(queue.robot)
+        self._robots[queue.robot] = robot
+        robot.start()
+        bus = self._bus
+        ends = [
+            bus.announce(keys.supervisor_owner(self._zid)),
+            bus.watch(keys.supervisor_owner(ANY), self._on_owner),
+            bus.subscribe(keys.executor_events, self._decode_event, lambda _, e: robot.on_event(e)),
+            bus.subscribe(
+                keys.executor_info, self._decode_info, lambda _, i: robot.on_info(i), history=True
+            ),
+        ]
+        if self._serving:
+            ends.append(bus.announce(keys.alive("supervisor")))
+        self._claims[queue.robot] = Claim(asyncio.get_running_loop().time(), ends, kept)
+        return robot
+
+    def _retire(self, name: str) -> None:
+        """Stop serving `name`: its owner token and subscriptions withdrawn, its dispatch
+        stopped."""
+        for end in self._claims.pop(name).ends:
+            end()
+        self._spawn(self._robots.pop(name).stop())
+
+    def _spawn(self, work: Coroutine[Any, Any, None]) -> None:
+        task = asyncio.get_running_loop().create_task(work)
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+
+    # --- which robots -------------------------------------------------------------------
+
+    def _on_executor(self, key: str, alive: bool) -> None:
+        name = robot_of(key)
+        robot = self._robots.get(name)
+        if robot is not None:
+            robot.on_executor(alive)
+            self._room_maybe |= not alive
+        elif name in self._admitting:
+            self._admitting[name] = alive
+        elif alive:
+            self._admit(name)
+
+    def _admit(self, name: str) -> None:
+        """Serve `name`, whose executor announced itself, if there is room (making some if
+        a robot gone idle can give it) and no other supervisor serves it."""
+        taken = sum(not claim.kept for claim in self._claims.values()) + len(self._admitting)
+        if taken >= self._max_robots and not self._make_room():
+            self._noise.warning(
+                "admit",
+                "robot '%s' is not served: %d robots besides those configured are served "
+                "already (--max-robots), none idle; start the supervisor with --robot %s",
+                name,
+                taken,
+                name,
+            )
+            return
+        self._admitting[name] = True
+        self._spawn(self._admit_unless_served(name))
+
+    async def _admit_unless_served(self, name: str) -> None:
+        try:
+            rival = await self._rival(name)
+        finally:
+            alive = self._admitting.pop(name)
+        if rival is not None:
+            _LOGGER.info("%s: served by another supervisor (Zenoh id %s)", name, rival)
+        elif name not in self._robots:
+            self._add(self._new_queue(name), kept=False).on_executor(alive)
+
+    def _make_room(self) -> bool:
+        """Let go of the robot idle the longest that was taken on for its executor (gone
+        since); False if there is none. Not looked for again until an executor goes: a
+        flood of names past the cap must not cost a look at every robot each."""
+        if not self._room_maybe:
+            return False
+        idle = [
+            name
+            for name, robot in self._robots.items()
+            if robot.idle and not self._claims[name].kept
+        ]
+        if not idle:
+            self._room_maybe = False
+            return False
+        oldest = min(idle, key=lambda name: self._robots[name].heard_at)
+        _LOGGER.info("%s: no longer served: its executor has gone, and room is needed", oldest)
+        self._retire(oldest)
+        return True
+
+    # --- who serves a robot ---------------------------------------------------------------
+
+    async def _rival(self, robot: str) -> str | None:
+        """The Zenoh id of another supervisor serving `robot`: one whose owner token is up
+        and that answers for the robot; None if there is none."""
+        for tag in await asyncio.to_thread(self._holders, robot):
+            if tag == self._zid:
+                continue
+            if await asyncio.to_thread(self._answers, robot, tag):
+                return tag
+            self._forged(robot, tag)
+        return None
+
+    def _holders(self, robot: str) -> list[str]:
+        """The tags of the owner tokens up for `robot` (on a thread: it waits)."""
+        replies = self._bus.session.liveliness().get(
+            RobotKeys(robot).supervisor_owner("*"), timeout=OWNER_CHECK
+        )
+        return [last_chunk(str(reply.ok.key_expr)) for reply in replies if reply.ok is not None]
+
+    def _answers(self, robot: str, zid: str) -> bool:
+        """Whether the process with Zenoh id `zid` answers as `robot`'s supervisor (on a
+        thread: it waits): a token alone proves nothing."""
+        replies = self._bus.session.get(
+            RobotKeys(robot).supervisor,
+            payload=self._bus.encode(GetState()),
+            target=zenoh.QueryTarget.ALL,
+            allowed_destination=zenoh.Locality.REMOTE,
+            timeout=OWNER_CHECK,
+        )
+        for reply in replies:
+            replier = reply.replier_id
+            if reply.ok is None or replier is None or str(replier.zid) != zid:
+                continue
+            with contextlib.suppress(msgspec.DecodeError, msgspec.ValidationError):
+                answer = self._decode_reply(reply.ok.payload.to_bytes())
+                if isinstance(answer, StateReply) and answer.state.robot == robot:
+                    return True
+        return False
+
+    def _forged(self, robot: str, tag: str) -> None:
+        self._noise.warning(
+            "owner",
+            "robot '%s': an owner token names Zenoh id %s, which does not answer as its "
+            "supervisor: ignored (anyone on the bus can hold a token)",
+            robot,
+            tag,
+        )
 
     def _on_owner(self, key: str, alive: bool) -> None:
         robot, tag = robot_of(key), last_chunk(key)
-        owners = self._owners.setdefault(robot, set())
-        if alive:
-            owners.add(tag)
-        else:
-            owners.discard(tag)
-        self._check_owners(robot)
-
-    def _check_owners(self, robot: str) -> None:
-        """Stand down if a supervisor that started earlier serves `robot` too: two
-        supervisors would both accept and dispatch every order."""
-        if robot not in self._robots or self.conflict.done():
+        claim = self._claims.get(robot)
+        if not alive or claim is None or tag == self._zid:
             return
-        earlier = sorted(t for t in self._owners.get(robot, ()) if _order(t) < _order(self._tag))
-        if earlier:
-            started, _, zid = earlier[0].partition("-")
-            since = time.strftime("%H:%M:%S", time.localtime(int(started) / 1e9))
-            self.conflict.set_result(
-                f"robot '{robot}' already has a supervisor (Zenoh id {zid}, up since "
-                f"{since}); a robot has one supervisor: stop the other one, or give this "
-                "one a router of its own"
+        if asyncio.get_running_loop().time() - claim.at > CLAIM_WINDOW:
+            # Whoever claims it now came later: it finds this one at its start, and stands
+            # down if it is a supervisor. This one keeps the robot either way.
+            self._noise.warning(
+                "claim",
+                "robot '%s': another claim to supervise it (Zenoh id %s), made while this "
+                "supervisor serves it: this one keeps it",
+                robot,
+                tag,
             )
+            return
+        self._spawn(self._settle(robot, tag, claim))
+
+    async def _settle(self, robot: str, tag: str, claim: Claim) -> None:
+        """Two claims at the same time: the lower Zenoh id keeps the robot, if the other
+        answers for it at all."""
+        if not await asyncio.to_thread(self._answers, robot, tag):
+            self._forged(robot, tag)
+            return
+        if not tag < self._zid or self._claims.get(robot) is not claim:
+            return  # it stands down, or this one has already let go
+        if claim.kept or self._robots[robot].holds_orders:
+            if not self.conflict.done():
+                self.conflict.set_result(_taken(robot, tag))
+            return
+        _LOGGER.info("%s: served by another supervisor (Zenoh id %s): let go", robot, tag)
+        self._retire(robot)
+
+    # --- requests and events ---------------------------------------------------------------
 
     async def _on_request(self, key: str, request: SupervisorRequest) -> Message:
         name = robot_of(key)
-        if name in self._robots:
-            return await self.robot(name).handle(request)
-        return self._unknown(name)
+        if name not in self._robots:
+            return self._unknown(name)
+        self._room_maybe |= isinstance(request, Release)  # a released robot may be idle
+        return await self._robots[name].handle(request)
 
     def _take_submits(self, batch: list[Pending[SupervisorRequest]]) -> None:
         """Submits in arrival order, each queued now; those accepted are answered together,
@@ -752,22 +1023,18 @@ class SupervisorService(Service):
         # one: with no executor ever heard of, there is no robot to know the keys of.
         # Asking its state is refused as well, naming the robots there are: a typo
         # answered with an empty state looks like an idle robot.
-        known = ", ".join(sorted(self._robots)) or "none"
+        names = sorted(self._robots)
+        known = ", ".join(names[:KNOWN_LISTED]) or "none"
+        if len(names) > KNOWN_LISTED:
+            known += f" and {len(names) - KNOWN_LISTED} more"
         return Failed(
             reason=f"no executor has served robot '{name}' (known robots: {known}); start "
             "its executor, or the supervisor with --robot"
         )
 
-    def _on_event(self, key: str, event: ExecutorEvent) -> None:
-        self.robot(robot_of(key)).on_event(event)
 
-    def _on_executor(self, key: str, alive: bool) -> None:
-        self.robot(robot_of(key)).on_executor(alive)
-
-    def _on_info(self, key: str, info: ExecutorInfo) -> None:
-        self.robot(robot_of(key)).on_info(info)
-
-
-def _order(tag: str) -> tuple[int, str]:
-    started, _, zid = tag.partition("-")
-    return (int(started) if started.isdigit() else 0, zid)
+def _taken(robot: str, zid: str) -> str:
+    return (
+        f"robot '{robot}' already has a supervisor (Zenoh id {zid}, which answers for it); "
+        "a robot has one supervisor: stop the other one, or give this one a router of its own"
+    )

@@ -22,9 +22,12 @@ from typing import Annotated, TypeVar
 
 import msgspec
 from starlette.applications import Starlette
+from starlette.middleware import Middleware
 from starlette.requests import ClientDisconnect, Request
 from starlette.responses import FileResponse, JSONResponse, Response, StreamingResponse
 from starlette.routing import Route, WebSocketRoute
+from starlette.types import ASGIApp, Receive, Scope, Send
+from starlette.types import Message as ASGIMessage
 from starlette.websockets import WebSocket
 
 from shared.bus import Bus, BusOptions
@@ -367,6 +370,42 @@ class Panel:
         return StreamingResponse(stream(), media_type="text/event-stream")
 
 
+SECURITY_HEADERS = [
+    (
+        b"content-security-policy",
+        b"default-src 'self'; script-src 'self'; style-src 'self'; img-src 'self' data:; "
+        b"connect-src 'self'; object-src 'none'; base-uri 'none'; form-action 'none'; "
+        b"frame-ancestors 'none'",
+    ),
+    (b"x-frame-options", b"DENY"),
+    (b"x-content-type-options", b"nosniff"),
+    (b"referrer-policy", b"no-referrer"),
+]
+"""On every HTTP response: the panel drives a robot, so no page of another site may frame
+it (clickjacking a STOP or a Release), and it runs only its own scripts and styles. Its map
+is a data: image; its audio worklet and requests come from its own origin."""
+
+
+class SecurityHeaders:
+    """ASGI middleware that adds `SECURITY_HEADERS` to every HTTP response, the event
+    stream's too (a plain ASGI wrapper: it never buffers a streaming body)."""
+
+    def __init__(self, app: ASGIApp) -> None:
+        self._app = app
+
+    async def __call__(self, scope: Scope, receive: Receive, send: Send) -> None:
+        if scope["type"] != "http":
+            await self._app(scope, receive, send)
+            return
+
+        async def with_headers(message: ASGIMessage) -> None:
+            if message["type"] == "http.response.start":
+                message = {**message, "headers": [*message.get("headers", []), *SECURITY_HEADERS]}
+            await send(message)
+
+        await self._app(scope, receive, with_headers)
+
+
 def create_app(options: BusOptions, panel: Panel, bus: Bus | None = None) -> Starlette:
     """`panel` as an ASGI app. Its lifespan runs the hub as a service (`running`,
     shared/process.py) on the loop that serves it, whichever server that is (uvicorn in
@@ -381,4 +420,6 @@ def create_app(options: BusOptions, panel: Panel, bus: Bus | None = None) -> Sta
             async with running(panel.attach(used)):
                 yield
 
-    return Starlette(routes=panel.routes(), lifespan=lifespan)
+    return Starlette(
+        routes=panel.routes(), lifespan=lifespan, middleware=[Middleware(SecurityHeaders)]
+    )

@@ -32,6 +32,7 @@ from shared.messages import (
     Transcript,
 )
 from shared.process import Service
+from shared.throttle import Throttled
 
 _LOGGER = logging.getLogger(__name__)
 
@@ -42,6 +43,12 @@ QUEUE_LIMIT = 200
 """Frames a stalled browser may fall behind before it loses the oldest."""
 END = b""
 """The last item of a listener's queue: the stream ends (the server is stopping)."""
+FOLLOWED = 1024
+"""Robots followed at most (their parts kept) that no supervisor serves: names come from
+anyone on the bus."""
+FOLLOWED_AT_ALL = 4096
+"""Robots followed at most, those a supervisor serves included (a forged supervisor
+token costs as much as a real one)."""
 
 
 class Parts(msgspec.Struct, tag="parts", tag_field="type"):
@@ -80,7 +87,10 @@ class Hub(Service):
         self._last: dict[str, dict[str, bytes]] = {}
         """Per robot, the last frame of each kind a new listener needs."""
         self._alive: dict[str, set[str]] = {}
-        """Per robot, the services whose token is up."""
+        """Per robot, the services whose token is up (robots with none are dropped)."""
+        self._listed: set[str] = set()
+        """Robots a supervisor's token says it serves."""
+        self._noise = Throttled(_LOGGER)
         self._converter = False
         self._posed: dict[str, float] = {}
         self._labels: dict[str, set[str]] = {}
@@ -141,7 +151,9 @@ class Hub(Service):
 
     @property
     def robots(self) -> list[str]:
-        return sorted({self._default, *self._alive})
+        """The default robot and every robot a supervisor serves (its token says so): a
+        robot only someone's token names is not listed, since anyone can make one up."""
+        return sorted({self._default, *self._listed})
 
     def parts(self, robot: str) -> Parts:
         alive = self._alive.get(robot, set())
@@ -237,18 +249,36 @@ class Hub(Service):
 
     def _on_alive(self, key: str, alive: bool) -> None:
         robot, service = robot_of(key), last_chunk(key)
-        new = robot not in self.robots
-        services = self._alive.setdefault(robot, set())
+        services = self._alive.get(robot)
+        if services is None:
+            if not alive or not self._may_follow(robot, service):
+                return
+            services = self._alive[robot] = set()
         if alive:
             services.add(service)
         else:
             services.discard(service)
+        if not services:
+            del self._alive[robot]
         self._send_parts(robot)
-        if new:  # every open panel learns of it
+        if ("supervisor" in services) != (robot in self._listed):
+            self._listed ^= {robot}
             robots = self._frame(Robots(robots=self.robots))
-            for listeners in self._listeners.values():
+            for listeners in self._listeners.values():  # every open panel learns of it
                 for queue in listeners:
                     queue.put_nowait(robots)
+
+    def _may_follow(self, robot: str, service: str) -> bool:
+        """Whether to follow one more robot: always the default one and those a supervisor
+        serves (up to `FOLLOWED_AT_ALL`), any other up to `FOLLOWED`."""
+        followed = len(self._alive)
+        served = robot == self._default or service == "supervisor"
+        if followed < (FOLLOWED_AT_ALL if served else FOLLOWED):
+            return True
+        self._noise.warning(
+            "follow", "robot '%s' not followed: %d robots are already", robot, followed
+        )
+        return False
 
     def _send_parts(self, robot: str) -> None:
         self._send(robot, self._frame(self.parts(robot)))
