@@ -74,6 +74,17 @@ class Transcript:
     """The encoder's view of the utterance, to weigh other words against (`likelihood`)."""
 
 
+def runtime() -> Any:
+    """onnxruntime, imported with its telemetry off. PyPI's build (1.32) carries Microsoft's
+    1DS telemetry, which on Linux writes a session file into the temporary directory and
+    would report to Microsoft's collector: a robot's recogniser reports to nobody."""
+    os.environ.setdefault("ORT_DISABLE_TELEMETRY", "1")
+    import onnxruntime
+
+    onnxruntime.disable_telemetry_events()
+    return onnxruntime
+
+
 class Cancelled(Exception):
     """A transcription stopped before its end because its result is no longer wanted."""
 
@@ -107,8 +118,7 @@ def prepare(source: Path, cache: Path) -> Path:
     Blocking, a few seconds the first time. Several processes may prepare at once: each
     writes a folder of its own and the first rename wins.
     """
-    import onnxruntime
-
+    onnxruntime = runtime()
     digest = hashlib.blake2b(digest_size=8)
     for name in FILES[:2]:
         digest.update((source / name).read_bytes())
@@ -142,8 +152,8 @@ def _convert(ort_file: Path, onnx_file: Path) -> None:
     """onnxruntime's own serialiser writes the ORT-format model as ONNX; its weight
     products are then rewritten (`quantized_products`)."""
     import onnx
-    import onnxruntime
 
+    onnxruntime = runtime()
     options = onnxruntime.SessionOptions()
     options.graph_optimization_level = onnxruntime.GraphOptimizationLevel.ORT_DISABLE_ALL
     options.optimized_model_filepath = str(onnx_file)
@@ -378,8 +388,7 @@ class Moonshine:
     def __init__(
         self, encoder: Path, decoder: Path, tokens: Path, threads: int = 1, arena: bool = True
     ) -> None:
-        import onnxruntime
-
+        onnxruntime = runtime()
         options = onnxruntime.SessionOptions()
         options.intra_op_num_threads = threads
         options.inter_op_num_threads = 1
