@@ -1,7 +1,8 @@
 """The secured bus, with real sessions: `voicectl bus-secrets` makes a CA, the router's
 certificate, passwords and client configurations; the shipped router configuration
 (TLS, user/password, access control) runs the stack end to end, and refuses whoever has
-no credentials, the wrong certificate, or a role that does not allow what they try."""
+no credentials, the wrong certificate, or a role that does not allow what they try, one
+robot's executor or robot side speaking for another robot among them."""
 
 from __future__ import annotations
 
@@ -30,7 +31,14 @@ from shared.messages import (
     Stopped,
 )
 from shared.ros2 import Odometry, Ros2Codec
-from voicectl.bus_secrets import ROUTER_TEMPLATE, USERS, SecretsExist, write_bus_secrets
+from voicectl.bus_secrets import (
+    ROUTER_TEMPLATE,
+    BusRobot,
+    SecretsExist,
+    router_configuration,
+    users,
+    write_bus_secrets,
+)
 
 from .conftest import REPO, Processes, async_wait_until, free_port, voicectl, wait_until
 from .support import Client, client_wait_ready, joined, order, until_heard
@@ -60,11 +68,21 @@ class SecureSite:
         return joined(self.options(self.config(user)))
 
 
+ROBOTS = [BusRobot("r1"), BusRobot("r2")]
+"""The robots of the secured site: r1 runs, r2 is the one an impostor would pose as."""
+NAMESPACED = [BusRobot("r1", "bot1"), BusRobot("r2", "bot2")]
+
+
 @pytest.fixture
-def site(processes: Processes, tmp_path: Path) -> SecureSite:
+def robots() -> list[BusRobot]:
+    return ROBOTS
+
+
+@pytest.fixture
+def site(processes: Processes, tmp_path: Path, robots: list[BusRobot]) -> SecureSite:
     port = free_port()
     secrets = tmp_path / "bus"
-    write_bus_secrets(secrets, ["127.0.0.1"], port)
+    write_bus_secrets(secrets, ["127.0.0.1"], port, robots)
     site = SecureSite(processes, secrets, port)
     processes.start(
         "services.router", "--config", str(secrets / "router.json5"), "--listen", site.endpoint
@@ -84,29 +102,82 @@ def listening(port: int) -> bool:
 
 def start_robot(site: SecureSite) -> None:
     site.start("services.supervisor", "supervisor", "--robot", "r1")
-    site.start("services.sim", "robot")
-    site.start("services.executor", "executor", "--robot", "r1")
+    site.start("services.sim", "robot-r1")
+    site.start("services.executor", "executor-r1", "--robot", "r1")
+
+
+def user_of(config: Path) -> str:
+    user: str = json.loads(config.read_text())["transport"]["auth"]["usrpwd"]["user"]
+    return user
 
 
 def test_bus_secrets_are_private_and_never_overwritten(tmp_path: Path) -> None:
     written = write_bus_secrets(tmp_path / "bus", ["robot.local", "192.168.1.20"])
     names = {path.name for path in written}
     assert names >= {"ca.pem", "router.pem", "router.key", "passwords", "router.json5"}
-    assert names >= {f"{user}.json5" for user in USERS}
+    assert names >= {f"{user}.json5" for user in users([BusRobot("robot")])}
     public = {"ca.pem", "router.pem", "router.json5"}
     for path in written:
         mode = stat.S_IMODE(path.stat().st_mode)
         assert mode == (0o644 if path.name in public else 0o600), path.name
     client = json.loads((tmp_path / "bus" / "panel.json5").read_text())
     assert client["connect"]["endpoints"] == ["tls/robot.local:7447"]
-    assert client["transport"]["auth"]["usrpwd"]["user"] == "panel"
-    # The router's configuration is the shipped one, paths aside.
+    assert user_of(tmp_path / "bus" / "panel.json5") == "panel"
+    # The router's configuration is the shipped one, paths aside, each robot's rules in.
     router = (tmp_path / "bus" / "router.json5").read_text()
-    assert router == ROUTER_TEMPLATE.read_text().replace(
-        "/etc/voicectl/bus", str((tmp_path / "bus").resolve())
-    )
+    assert router == router_configuration((tmp_path / "bus").resolve(), [BusRobot("robot")])
+    assert "/etc/voicectl/bus" not in router
     with pytest.raises(SecretsExist, match="already holds bus secrets"):
         write_bus_secrets(tmp_path / "bus", ["robot.local"])
+
+
+def test_bus_secrets_has_users_per_robot_and_plain_names_for_the_default_robot(
+    tmp_path: Path,
+) -> None:
+    """Issue 32: one executor user served every robot. Each robot now has its own
+    executor and robot side; the robot every --robot defaults to keeps the plain file
+    names, so that a deployment of one robot starts as it always did."""
+    write_bus_secrets(tmp_path / "one", ["router"])
+    assert user_of(tmp_path / "one" / "executor.json5") == "executor-robot"
+    assert user_of(tmp_path / "one" / "robot.json5") == "robot-robot"
+    assert user_of(tmp_path / "one" / "executor-robot.json5") == "executor-robot"
+
+    write_bus_secrets(tmp_path / "two", ["router"], robots=NAMESPACED)
+    made = {path.name for path in (tmp_path / "two").iterdir()}
+    assert {"executor-r1.json5", "robot-r1.json5", "executor-r2.json5", "robot-r2.json5"} <= made
+    assert not made & {"executor.json5", "robot.json5"}  # whose would they be?
+    passwords = (tmp_path / "two" / "passwords").read_text().splitlines()
+    assert [line.split(":")[0] for line in passwords] == users(NAMESPACED)
+    assert len(set(passwords)) == len(passwords)
+    # Every line of the template is in the router's configuration: only robots are added.
+    router = (tmp_path / "two" / "router.json5").read_text().splitlines()
+    template = ROUTER_TEMPLATE.read_text().replace("/etc/voicectl/bus", str(tmp_path / "two"))
+    added = [line for line in router if line not in template.splitlines()]
+    assert all(line.strip().startswith(("// robot 'r", '{"id": "')) for line in added)
+    assert sum("bot1/**/cmd_vel" in line for line in added) == 1
+    with pytest.raises(ValueError, match="robot name 'r 1' must be letters"):
+        BusRobot("r 1")
+    with pytest.raises(ValueError, match="robots must be named once each"):
+        write_bus_secrets(tmp_path / "three", ["router"], robots=[BusRobot("a"), BusRobot("a")])
+
+
+def test_the_bus_secrets_command_names_robots_and_their_namespaces(tmp_path: Path) -> None:
+    done = voicectl(
+        "bus-secrets", str(tmp_path / "bus"), "--robot", "r1", "--robot", "r2",
+        "--namespace", "r1=/bot1",
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.splitlines()[-2:] == [
+        "robot r1: its executor may say voice/r1/... and the ROS keys under bot1",
+        "robot r2: its executor may say voice/r2/... and any robot's ROS keys (no --namespace)",
+    ]
+    assert user_of(tmp_path / "bus" / "robot-r2.json5") == "robot-r2"
+    stray = voicectl("bus-secrets", str(tmp_path / "other"), "--namespace", "r3=bot3")
+    assert stray.returncode == 2
+    assert stray.stderr.strip() == (
+        "voicectl bus-secrets: --namespace names robot 'r3', which no --robot names (robots: robot)"
+    )
+    assert not (tmp_path / "other").exists()
 
 
 async def test_the_stack_runs_end_to_end_on_the_secured_bus(site: SecureSite) -> None:
