@@ -12,13 +12,15 @@ import shlex
 import socket
 import stat
 import sys
+from functools import partial
 from pathlib import Path
 
 import pytest
+import zenoh
 
 from shared.bus import Bus, BusOptions, json_decoder
 from shared.errors import BusError
-from shared.keys import RobotKeys, RobotNames
+from shared.keys import BRIDGE_TOKENS, BridgeKind, BridgeToken, RobotKeys, RobotNames
 from shared.messages import (
     Done,
     EmergencyStop,
@@ -26,6 +28,7 @@ from shared.messages import (
     ExecutorReply,
     Failed,
     GetRunning,
+    GetState,
     Latch,
     Release,
     Stopped,
@@ -254,6 +257,113 @@ async def test_the_operator_releases_a_stop_only_through_the_supervisor(
         assert released == Done(detail="emergency stop released")  # the executor's too
         (product,) = await client.submit(order("mul", first=2, second=2))
         assert (await client.finished(product)).message == "2 x 2 = 4"
+
+
+async def test_an_executor_cannot_speak_or_announce_for_another_robot(site: SecureSite) -> None:
+    """Issue 32: the executor's credentials could publish events and hold liveliness
+    tokens for any robot name, so that one robot's executor posed as another's (300 made
+    up robots appeared). r1's executor now speaks for r1 alone: what it says as r2 never
+    reaches the panel, and the supervisor never takes r2 on; as r1 it is heard and
+    served. What it forges is said first, on the same link: once the genuine reaches the
+    panel, the forged would have too."""
+    site.start("services.supervisor", "supervisor")  # serves whichever executor announces
+    r1, r2 = RobotKeys("r1"), RobotKeys("r2")
+    tokens: list[str] = []
+    events: list[str] = []
+
+    with site.joined("panel") as panel:
+        panel.watch(RobotKeys.any_robot().alive("*"), lambda key, up: up and tokens.append(key))
+        panel.subscribe(
+            RobotKeys.any_robot().executor_events, bytes, lambda key, _: events.append(key)
+        )
+        with site.joined("executor-r1") as impostor:
+            await until_heard(impostor, r1.executor_events)  # the panel's subscriptions are up
+            impostor.announce(r2.alive("executor"))
+            impostor.publish_bytes(r2.executor_events, b'{"type": "forged"}')
+            impostor.announce(r1.alive("executor"))
+            impostor.publish_bytes(r1.executor_events, b'{"type": "genuine"}')
+            await async_wait_until(
+                lambda: r1.executor_events in events and r1.alive("executor") in tokens,
+                10.0,
+                "r1's executor heard",
+            )
+            await async_wait_until(
+                lambda: r1.alive("supervisor") in tokens, 30.0, "the supervisor serving r1"
+            )
+            assert r2.executor_events not in events
+            assert [key for key in tokens if key.startswith(r2.prefix)] == []
+            unknown = await Client(panel, "r2").ask(GetState())
+            assert isinstance(unknown, Failed), unknown
+            assert unknown.reason.startswith("no executor has served robot 'r2' (known robots: r1)")
+
+
+def replies(bus: Bus, key: str, timeout: float = 5.0) -> list[str]:
+    """The keys that answered a query on `key` (on a thread: it waits)."""
+    return [str(r.ok.key_expr) for r in bus.session.get(key, timeout=timeout) if r.ok is not None]
+
+
+def answering(bus: Bus, key: str) -> None:
+    def answer(query: zenoh.Query) -> None:
+        query.reply(query.key_expr, b"goal accepted")
+
+    bus.session.declare_queryable(key, answer)
+
+
+@pytest.mark.parametrize("robots", [NAMESPACED], ids=["namespaced"])
+async def test_given_namespaces_only_its_own_executor_and_bridge_speak_for_a_robot(
+    site: SecureSite,
+) -> None:
+    """Issue 32, on the robots' own keys: with each robot's ROS namespace known
+    (bus-secrets --namespace r1=bot1), r1's executor publishes velocity and asks actions
+    only under bot1, and r1's robot side publishes and announces interfaces only under
+    bot1. Each forgery is said before its genuine twin, on the same link."""
+    bot1, bot2 = RobotNames("bot1"), RobotNames("bot2")
+    heard: list[str] = []
+    announced: list[str] = []
+
+    with (
+        site.joined("observer") as observer,
+        site.joined("executor-r1") as executor1,
+        site.joined("executor-r2") as executor2,
+        site.joined("robot-r1") as robot1,
+        site.joined("robot-r2") as robot2,
+    ):
+        for key in (bot2.cmd_vel, bot1.cmd_vel, bot2.odom, bot1.odom):
+            observer.subscribe(key, bytes, lambda key, _: heard.append(key))
+        observer.watch(BRIDGE_TOKENS, lambda key, up: up and announced.append(key))
+        for key in (bot1.cmd_vel, bot2.cmd_vel):
+            await until_heard(executor1, key)
+        executor1.publish_bytes(bot2.cmd_vel, CODEC.twist(1.0, 0.0))
+        executor1.publish_bytes(bot1.cmd_vel, CODEC.twist(1.0, 0.0))
+        await async_wait_until(lambda: bot1.cmd_vel in heard, 10.0, "bot1's velocity")
+        assert bot2.cmd_vel not in heard
+
+        zid = str(robot1.session.info.zid())
+        forged, genuine = (
+            BridgeToken(BridgeKind.PUBLISHER, names.odom, "nav_msgs/msg/Odometry").token_key(zid)
+            for names in (bot2, bot1)
+        )
+        robot1.announce(forged)
+        robot1.publish_bytes(bot2.odom, b"forged")
+        robot1.announce(genuine)
+        robot1.publish_bytes(bot1.odom, b"genuine")
+        await async_wait_until(
+            lambda: genuine in announced and bot1.odom in heard, 10.0, "bot1's robot side"
+        )
+        assert forged not in announced
+        assert bot2.odom not in heard
+
+        goal1, goal2 = bot1.navigate("send_goal"), bot2.navigate("send_goal")
+        answering(robot1, goal1)
+        answering(robot2, goal2)
+
+        async def answered(bus: Bus, key: str) -> bool:
+            return await asyncio.to_thread(replies, bus, key) == [key]
+
+        for bus, key in ((executor1, goal1), (executor2, goal2)):
+            await async_wait_until(partial(answered, bus, key), 10.0, f"{key} answered")
+        # Refused queries are dropped unanswered: they end at the timeout.
+        assert await asyncio.to_thread(replies, executor1, goal2, 2.0) == []
 
 
 def without_credentials(config: Path, target: Path) -> Path:
