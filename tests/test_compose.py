@@ -558,6 +558,8 @@ def test_the_secured_router_runs_the_shipped_secure_configuration() -> None:
     assert maker["build"] == SERVICES_COMPOSED["converter"]["build"]
     assert maker["command"][:2] == ["bus-secrets", CONTAINER_DIR]
     assert flag(maker["command"], "--host") == "router"
+    # The robot every service of the stack names, with users of its own.
+    assert flag(maker["command"], "--robot") == DEFAULT_ROBOT
     assert f"bus-secrets:{CONTAINER_DIR}" in maker["volumes"]
     assert f"mkdir -p /data {CONTAINER_DIR}" in DOCKERFILE
 
