@@ -71,7 +71,8 @@ ROBOT_MARKERS = {
     "subjects": "// --- each robot's subjects",
     "policies": "// --- each robot's policies",
 }
-"""The template's lines after whose comment each robot's part of its list is written."""
+"""The template's lines after whose comment each robot's part of a list is written, just
+before the `],` that closes the list."""
 LOCAL_NAMES = ("localhost", "127.0.0.1")
 VALID_DAYS = 3650
 PORT = 7447
