@@ -49,7 +49,7 @@ sys.path.insert(0, str(REPO))
 
 import pocketsphinx  # noqa: E402
 
-from harness.speech_set import Utterance, generate  # noqa: E402
+from harness.speech_set import LEAD_SILENCE, Utterance, generate  # noqa: E402
 from services.converter.decide import (  # noqa: E402
     SHIPPED,
     Decision,
@@ -105,6 +105,10 @@ class Outcome:
     to_proposal: float | None = None
     doubts: list[Doubt] = field(default_factory=list)
     heard: str = ""
+
+
+LENGTHS = [("up to 3 s", 0.0, 3.0), ("3 to 6 s", 3.0, 6.0), ("over 6 s", 6.0, math.inf)]
+"""Commands by how long their speech lasts: the latency targets are per length."""
 
 
 def percentile(values: list[float], q: float) -> float:
@@ -575,6 +579,20 @@ async def through_service(
         if heard:
             print(
                 f"{'':<46}   {condition:<8} end of speech -> final p50 "
+                f"{1e3 * percentile(heard, 0.5):4.0f} ms   p95 {1e3 * percentile(heard, 0.95):4.0f}"
+                f" ms   (n={len(heard)})"
+            )
+    for label, shortest, longest in LENGTHS:
+        heard = [
+            o.to_final
+            for o in outcomes
+            if o.to_final is not None
+            and o.utterance.command
+            and shortest < o.utterance.speech_end - LEAD_SILENCE <= longest
+        ]
+        if heard:
+            print(
+                f"{'':<46}   commands {label:<9} end of speech -> final p50 "
                 f"{1e3 * percentile(heard, 0.5):4.0f} ms   p95 {1e3 * percentile(heard, 0.95):4.0f}"
                 f" ms   (n={len(heard)})"
             )
