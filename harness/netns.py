@@ -52,7 +52,7 @@ LEASE = ("--cfg", f"transport/link/tx/lease:{LEASE_MS}")
 Side = Literal["host", "robot"]
 SIDES: tuple[Side, ...] = ("host", "robot")
 _PREFIX = "vcx"
-_NAME = re.compile(rf"^{_PREFIX}(\d+)n\d+[hr]$")
+_NAME = re.compile(rf"^{_PREFIX}(\d+)n\d+[hrl]$")
 _COUNTER = itertools.count()
 
 
@@ -240,6 +240,82 @@ class TwoHosts:
         return unclean
 
     def __enter__(self) -> TwoHosts:
+        return self
+
+    def __exit__(self, *_: object) -> None:
+        self.close()
+
+
+class LoopbackOnly:
+    """One network namespace with nothing but loopback up, for processes that must reach
+    one another and nothing else: DDS participants (real ROS 2), which discover by
+    multicast. No route leaves it, so no packet of theirs can leave the machine. A
+    process outside joins a Zenoh router in it, or it one outside, through a Unix socket
+    (`socket`). Everything started here is stopped, and the namespace deleted, by
+    `close()`, whatever happened before; `clean_stale` removes those of killed runs."""
+
+    def __init__(self, logs: Path) -> None:
+        logs.mkdir(parents=True, exist_ok=True)
+        tag = f"{_PREFIX}{os.getpid()}n{next(_COUNTER)}"
+        self.name = f"{tag}l"
+        self._sockets = Path(tempfile.mkdtemp(prefix=f"{tag}-"))
+        self.processes = Processes(logs)
+        self._pdeathsig = ["setpriv", "--pdeathsig", "KILL"] if shutil.which("setpriv") else []
+        clean_stale()
+        try:
+            _run("ip", "netns", "add", self.name)
+            _run("ip", "-n", self.name, "link", "set", "lo", "up")
+        except BaseException:
+            self.close()
+            raise
+
+    def socket(self, name: str = "router") -> str:
+        """A Zenoh endpoint on a Unix socket that both sides of the namespace reach."""
+        return f"unixsock-stream/{self._sockets / name}.sock"
+
+    @property
+    def prefix(self) -> list[str]:
+        """What runs a command inside (it execs the next program)."""
+        return ["ip", "netns", "exec", self.name, *self._pdeathsig]
+
+    def start(
+        self,
+        module: str,
+        *args: str,
+        name: str,
+        python: str | Path | None = None,
+        env: dict[str, str] | None = None,
+    ) -> subprocess.Popen[bytes]:
+        """`python -m module args` inside; its output goes to a log."""
+        return self.processes.start(
+            module, *args, name=name, prefix=self.prefix, python=python, env=env
+        )
+
+    def run(self, *command: str, env: dict[str, str] | None = None) -> str:
+        """Run a command inside to its end; its output (RuntimeError if it fails)."""
+        done = subprocess.run(
+            [*self.prefix, *command], capture_output=True, text=True, timeout=60, env=env
+        )
+        if done.returncode != 0:
+            raise RuntimeError(f"{' '.join(command)}: {done.stderr.strip() or done.returncode}")
+        return done.stdout
+
+    def log(self, name: str) -> str:
+        return self.processes.log(name)
+
+    def dump(self) -> str:
+        return self.processes.dump()
+
+    def close(self) -> list[str]:
+        """Stop everything started here and delete the namespace; what did not stop cleanly."""
+        try:
+            unclean = self.processes.stop_all()
+        finally:
+            subprocess.run(["ip", "netns", "del", self.name], capture_output=True, timeout=30)
+            shutil.rmtree(self._sockets, ignore_errors=True)
+        return unclean
+
+    def __enter__(self) -> LoopbackOnly:
         return self
 
     def __exit__(self, *_: object) -> None:

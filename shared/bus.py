@@ -182,6 +182,11 @@ class Bus:
             bus._closers.close()
             session.close()
 
+    def at_close(self, func: Callable[[], object]) -> None:
+        """Call `func()` when the bus closes, before its session does (what was opened on
+        top of it: a robot transport's own node)."""
+        self._closers.callback(func)
+
     def _close_streams(self) -> None:
         for stream in list(self._streams):
             stream.close()
@@ -193,7 +198,8 @@ class Bus:
     def encode(self, message: Message) -> bytes:
         return self._encoder.encode(message)
 
-    def _call_soon(self, func: Callable[..., object], *args: Any) -> None:
+    def call_soon(self, func: Callable[..., object], *args: Any) -> None:
+        """Run `func(*args)` on the bus's loop, from any thread; nothing once it closes."""
         with contextlib.suppress(RuntimeError):  # the loop is closing; nothing to deliver to
             self._loop.call_soon_threadsafe(func, *args)
 
@@ -276,7 +282,7 @@ class Bus:
                 self._noise.warning(key, "dropped undecodable message on %s: %s", sample_key, exc)
                 return
             if on_loop:
-                self._call_soon(handler, sample_key, message)
+                self.call_soon(handler, sample_key, message)
             else:
                 handler(sample_key, message)
 
@@ -335,14 +341,14 @@ class Bus:
                 return
             answered = True
             if reply.ok is not None:
-                self._call_soon(settle, reply.ok.payload.to_bytes())
+                self.call_soon(settle, reply.ok.payload.to_bytes())
             elif reply.err is not None:
                 text = reply.err.payload.to_string()
-                self._call_soon(settle, BusError(f"{key}: {text}"))
+                self.call_soon(settle, BusError(f"{key}: {text}"))
 
         def on_done() -> None:
             if not answered:  # one loop wake-up per request, not two
-                self._call_soon(settle, BusError(f"{key}: {self._unanswered}"))
+                self.call_soon(settle, BusError(f"{key}: {self._unanswered}"))
 
         qos: dict[str, Any] = {}
         if urgent:
@@ -646,7 +652,7 @@ class Bus:
 
         def on_sample(sample: zenoh.Sample) -> None:
             alive = sample.kind == zenoh.SampleKind.PUT
-            self._call_soon(handler, str(sample.key_expr), alive)
+            self.call_soon(handler, str(sample.key_expr), alive)
 
         subscriber = self._session.liveliness().declare_subscriber(
             key, _direct(on_sample), history=True
@@ -660,13 +666,13 @@ class Bus:
         publisher = self._session.declare_publisher(key)
 
         def on_status(status: zenoh.MatchingStatus) -> None:
-            self._call_soon(handler, status.matching)
+            self.call_soon(handler, status.matching)
 
         stop_publishing = self._undeclare_once(publisher)
         listener = publisher.declare_matching_listener(_direct(on_status))
         stop_listening = self._undeclare_once(listener)  # closed first: it lives in the publisher
         now: Any = publisher.matching_status
-        self._call_soon(handler, now.matching)
+        self.call_soon(handler, now.matching)
 
         def stop() -> None:
             stop_listening()
@@ -683,13 +689,13 @@ class Bus:
         querier = self._session.declare_querier(key)
 
         def on_status(status: zenoh.MatchingStatus) -> None:
-            self._call_soon(handler, status.matching)
+            self.call_soon(handler, status.matching)
 
         stop_querying = self._undeclare_once(querier)
         listener = querier.declare_matching_listener(_direct(on_status))
         stop_listening = self._undeclare_once(listener)  # closed first: it lives in the querier
         now: Any = querier.matching_status  # a MatchingStatus, whatever the stubs say
-        self._call_soon(handler, now.matching)
+        self.call_soon(handler, now.matching)
 
         def stop() -> None:
             stop_listening()

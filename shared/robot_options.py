@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from typing import TypeVar
 
 from .keys import RmwZenohKeys, RobotNames, check_ros_name
-from .robot.kinds import CameraType, CmdVelType, RosDistro, TransportKind
+from .robot.kinds import ON_ZENOH, CameraType, CmdVelType, RosDistro, TransportKind
 
 AUTO = "auto"
 _Kind = TypeVar("_Kind", RosDistro, CmdVelType, CameraType, TransportKind)
@@ -54,10 +54,12 @@ def add_robot_arguments(parser: argparse.ArgumentParser, detect: bool) -> None:
     group = parser.add_argument_group("the robot: its ROS 2 graph over Zenoh")
     group.add_argument(
         "--transport",
-        choices=[AUTO, *TransportKind] if detect else list(TransportKind),
+        choices=[AUTO, *TransportKind] if detect else list(ON_ZENOH),
         default=AUTO if detect else TransportKind.BRIDGE.value,
-        help="how the robot's ROS 2 graph is reached: zenoh-bridge-ros2dds ('bridge') or "
-        f"ROS 2 nodes on rmw_zenoh (default: {AUTO if detect else 'bridge'})",
+        help="how the robot's ROS 2 graph is reached: zenoh-bridge-ros2dds ('bridge'), "
+        "ROS 2 nodes on rmw_zenoh ('rmw-zenoh')"
+        + (", or as a plain ROS 2 node on DDS with rclpy ('ros2')" if detect else "")
+        + f" (default: {AUTO if detect else 'bridge'})",
     )
     group.add_argument(
         "--domain-id",

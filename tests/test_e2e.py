@@ -19,6 +19,7 @@ from shared.bus import BusOptions
 from shared.keys import RobotKeys, RobotNames
 from shared.messages import OrderStatus, State, StateUpdate
 from shared.robot import TransportKind
+from shared.robot.kinds import ON_ZENOH
 from shared.ros2 import Pose2D, Ros2Codec, RosDistro
 
 from .conftest import Stack, wait_until
@@ -56,7 +57,7 @@ class RobotWatch:
         self.session.close()
 
 
-@pytest.mark.parametrize("stack", list(TransportKind), indirect=True, ids=str)
+@pytest.mark.parametrize("stack", list(ON_ZENOH), indirect=True, ids=str)
 def test_spoken_sequence_moves_the_simulated_robot(stack: Stack) -> None:
     """The demo, on a robot behind zenoh-bridge-ros2dds and on one whose nodes speak
     rmw_zenoh (`voicectl up --transport rmw-zenoh`): the same orders, the same motion."""

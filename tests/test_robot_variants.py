@@ -34,6 +34,7 @@ from shared.messages import (
     TargetPose,
 )
 from shared.robot import TransportKind, open_transport
+from shared.robot.kinds import ON_ZENOH
 from shared.ros2 import Ros2Codec
 
 from .conftest import Processes, async_wait_until, voicectl
@@ -73,7 +74,7 @@ REMAPPED = RobotNames(
 )
 
 
-@pytest.fixture(params=list(TransportKind))
+@pytest.fixture(params=list(ON_ZENOH))
 def transport(request: pytest.FixtureRequest) -> TransportKind:
     """How the simulated robot shows its graph; the executor finds out by itself."""
     kind: TransportKind = request.param

@@ -1,0 +1,279 @@
+"""`voicectl executor --transport ros2` against a robot of real ROS 2 (harness/ros2_robot.py,
+rclpy on Fast DDS), on Jazzy and on Kilted: driven by voice, its progress in the
+supervisor's state, and STOP halting it and cancelling its goal through the STOP relay
+(`voicectl relay`), also with the executor's loop blocked or the executor dead.
+
+Every DDS participant (the robot, the executor, the relay) runs in one network namespace
+with only loopback up (harness/netns.py), with ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST.
+The router is this test's own: it listens on loopback TCP for the supervisor, the
+converter and the test, outside the namespace, and on a Unix socket for the processes
+inside it."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import math
+import os
+import subprocess
+import time
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import pytest
+import zenoh
+
+from harness import netns
+from harness.netns import LoopbackOnly
+from harness.ros2_env import Ros2Env
+from shared.bus import BusOptions, json_decoder
+from shared.client import VoicectlClient
+from shared.keys import RobotKeys
+from shared.messages import (
+    ExecutorEvent,
+    Order,
+    OrderProgress,
+    OrderStatus,
+    Release,
+    RobotPose,
+    StateUpdate,
+    TargetPose,
+)
+from shared.ros2 import Ros2Codec
+
+from .conftest import REPO, Processes, async_wait_until, free_port, voicectl
+from .ros2_support import DISTROS, env_of
+from .stop_rig import order
+from .support import Client, client_wait_ready, joined, until_heard
+
+pytestmark = pytest.mark.ros2
+
+ROBOT = "r1"
+STOP_BOUND = 0.05
+"""Seconds from STOP to zero velocity and to the goal's cancel, at the robot: the issue's
+bound (its p99 is measured in docs/benchmarks.md)."""
+WAIT = 60.0
+EXECUTORS = ("--executor", "tests.executors_for_tests:BlockingNavigator", "--stall-limit", "30")
+"""A navigator that blocks its loop; the watchdog held off, so that STOP is timed alone."""
+
+
+@dataclass
+class DdsRobot:
+    """A robot of real ROS 2 in a namespace of its own, its executor and STOP relay beside
+    it, and a router, a supervisor and a converter outside."""
+
+    env: Ros2Env
+    space: LoopbackOnly
+    router: str
+    """Where processes outside the namespace reach the router."""
+    inside: str
+    """Where processes inside reach it."""
+    processes: Processes
+    executor: subprocess.Popen[bytes] | None = None
+    seen: int = field(default=0)
+
+    def start_inside(self, module: str, *args: str, name: str) -> subprocess.Popen[bytes]:
+        return self.space.start(
+            module, *args, name=name, python=self.env.python, env=self.env.environ()
+        )
+
+    def start_executor(self) -> None:
+        self.executor = self.start_inside(
+            "services.executor",
+            *("--transport", "ros2", "--robot", ROBOT, "--connect", self.inside, *EXECUTORS),
+            name="executor",
+        )
+
+    def events(self, what: str, since: float = 0.0) -> list[float]:
+        """When the robot said `what` ('zero', 'cancel', 'canceled'...), since `since`."""
+        found = []
+        for line in self.space.log("robot").splitlines():
+            if line.startswith("{"):
+                event: dict[str, Any] = json.loads(line)
+                if event["event"] == what and event["at"] >= since:
+                    found.append(event["at"])
+        return found
+
+    def dump(self) -> str:
+        return f"{self.space.dump()}\n{self.processes.dump()}"
+
+
+@pytest.fixture(params=DISTROS)
+def dds(request: pytest.FixtureRequest, processes: Processes, tmp_path: Path) -> Iterator[DdsRobot]:
+    env = env_of(request.param)
+    missing = netns.unavailable()
+    if missing is not None:
+        if os.environ.get("VOICECTL_ROS2") == "required":
+            pytest.fail(missing)
+        pytest.skip(missing)
+    space = LoopbackOnly(tmp_path / "robot")
+    router = f"tcp/127.0.0.1:{free_port()}"
+    inside = space.socket()
+    options = BusOptions(mode="router", connect=[], listen=[router, inside])
+    session = zenoh.open(options.zenoh_config())
+    robot = DdsRobot(env, space, router, inside, processes)
+    try:
+        robot.start_inside("harness.ros2_robot", name="robot")
+        robot.start_inside("services.relay", "--connect", inside, "--debug", name="relay")
+        robot.start_executor()
+        processes.start("services.supervisor", "--connect", router, "--robot", ROBOT)
+        processes.start("services.converter", "--connect", router, "--orders", str(REPO / "orders"))
+        yield robot
+    except BaseException:
+        print(robot.dump())
+        raise
+    finally:
+        unclean = space.close()
+        session.close()
+        assert not unclean, f"{unclean}\n{robot.dump()}"
+
+
+async def ready(robot: DdsRobot, client: Client) -> None:
+    await async_wait_until(lambda: robot.events("ready"), WAIT, "the ROS 2 robot")
+    await async_wait_until(
+        lambda: "STOP relay ready" in robot.space.log("relay"), WAIT, "the STOP relay"
+    )
+    await client_wait_ready(client)
+
+
+def test_every_dds_participant_is_in_a_namespace_no_packet_leaves(tmp_path: Path) -> None:
+    """The namespace the ROS 2 tests run in has loopback alone: no other link, no route
+    but loopback's, and a datagram to DDS's discovery multicast group cannot be sent."""
+    env_of(DISTROS[0])
+    missing = netns.unavailable()
+    if missing is not None:
+        pytest.skip(missing)
+    with LoopbackOnly(tmp_path) as space:
+        links = [line.split(":")[1].strip() for line in space.run("ip", "-o", "link").splitlines()]
+        assert links == ["lo"]
+        routes = space.run("ip", "-4", "route", "show", "table", "all").splitlines()
+        routes += space.run("ip", "-6", "route", "show", "table", "all").splitlines()
+        assert routes, "loopback has routes of its own"
+        assert all(" dev lo " in f"{route} " for route in routes), routes
+        send = (
+            "import errno, socket\n"
+            "s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)\n"
+            "try:\n"
+            "    s.sendto(b'RTPS', ('239.255.0.1', 7400))\n"
+            "except OSError as exc:\n"
+            "    print(errno.errorcode[exc.errno])\n"
+            "else:\n"
+            "    print('sent')\n"
+        )
+        assert space.run("python3", "-c", send).strip() == "ENETUNREACH"
+    assert env_of(DISTROS[0]).environ()["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
+
+
+async def test_a_real_ros2_robot_is_driven_by_voice_and_its_progress_reaches_the_panel(
+    dds: DdsRobot,
+) -> None:
+    keys = RobotKeys(ROBOT)
+    with joined(dds.router) as bus:
+        client = Client(bus, ROBOT)
+        await ready(dds, client)
+        progress: list[OrderProgress] = []
+        states: list[StateUpdate] = []
+        poses: list[RobotPose] = []
+        bus.subscribe(
+            keys.executor_events,
+            json_decoder(ExecutorEvent),
+            lambda _k, e: progress.append(e) if isinstance(e, OrderProgress) else None,
+        )
+        bus.subscribe(keys.state, json_decoder(StateUpdate), lambda _k, s: states.append(s))
+        bus.subscribe(keys.pose, json_decoder(RobotPose), lambda _k, p: poses.append(p))
+        said = await asyncio.to_thread(
+            voicectl,
+            *("say", "--robot", ROBOT, "--connect", dds.router),
+            "turn left then reach the kitchen",
+            timeout=60.0,
+        )
+        assert said.returncode == 0, said.stderr
+        turn, kitchen = json.loads(said.stdout)["order_ids"]
+        for order_id in (turn, kitchen):
+            record = await client.finished(order_id, timeout=WAIT)
+            assert record.status is OrderStatus.SUCCEEDED, record
+        # Nav2's feedback became the order's progress, in the supervisor's state too.
+        ahead = [p.progress.distance_linear for p in progress if p.order_id == kitchen]
+        assert any(d is not None and d > 1.0 for d in ahead), progress
+        assert any(
+            s.state.current is not None
+            and s.state.current.id == kitchen
+            and s.state.current.progress is not None
+            for s in states
+        )
+        # The kitchen of orders/demo.yaml is at (3, 5).
+        await async_wait_until(lambda: poses, 5.0, "the robot's pose")
+        assert math.dist((poses[-1].x, poses[-1].y), (3.0, 5.0)) < 0.1, poses[-1]
+
+
+@pytest.mark.parametrize("case", ["navigating", "blocked-loop", "executor-killed"])
+async def test_stop_halts_a_real_ros2_robot_and_cancels_its_goal(dds: DdsRobot, case: str) -> None:
+    """Zero velocity and the goal's cancel reach the robot within the bound, from the
+    executor (on Zenoh's thread, whatever its loop does) and from the supervisor through
+    the STOP relay (whatever the executor does), and the robot then stands."""
+    keys = RobotKeys(ROBOT)
+    with joined(dds.router) as bus:
+        client = Client(bus, ROBOT)
+        await ready(dds, client)
+        poses: list[tuple[float, RobotPose]] = []
+        bus.subscribe(
+            keys.pose, json_decoder(RobotPose), lambda _k, p: poses.append((time.monotonic(), p))
+        )
+        far = TargetPose(frame="map", x=8.0)
+        if case == "blocked-loop":
+            await client.submit(order("blocknav", seconds=4, x=8.0))
+        else:
+            await client.submit(
+                Order(order="goal", label="mbgoal", description="reach x 8", target_pose=far)
+            )
+        await async_wait_until(lambda: dds.events("goal"), WAIT, "the goal at the robot")
+        await async_wait_until(lambda: poses and poses[-1][1].x > 0.3, WAIT, "the robot under way")
+        if case == "executor-killed":
+            assert dds.executor is not None
+            dds.executor.kill()
+            dds.executor.wait()
+        if case == "blocked-loop":
+            await asyncio.sleep(0.5)  # the executor's loop is blocked by now (for 4 s)
+        asked = time.monotonic()
+        stopped = await VoicectlClient(bus).stop(ROBOT)
+        await async_wait_until(
+            lambda: dds.events("zero", asked) and dds.events("canceled", asked),
+            5.0,
+            "zero velocity and the cancel at the robot",
+        )
+        zero = dds.events("zero", asked)[0] - asked
+        cancel = dds.events("cancel", asked)[0] - asked
+        print(case, f"zero {zero * 1000:.1f} ms, cancel {cancel * 1000:.1f} ms", stopped)
+        assert zero < STOP_BOUND, (zero, stopped)
+        assert cancel < STOP_BOUND, (cancel, stopped)
+        assert "navigation cancelled" in stopped.detail, stopped
+        if case != "executor-killed":
+            assert stopped.confirmed, stopped
+        # Standing: no pose relayed from a second after the STOP moves.
+        if case != "executor-killed":
+            settle = asked + 0.5
+            await async_wait_until(
+                lambda: [p for at, p in poses if at > settle + 1.0], 5.0, "poses after STOP"
+            )
+            after = [p for at, p in poses if at > settle]
+            assert math.dist((after[0].x, after[0].y), (after[-1].x, after[-1].y)) < 0.01
+        released = await client.ask(Release())
+        assert released is not None
+
+
+async def test_the_stop_relay_forwards_stops_and_nothing_else(dds: DdsRobot) -> None:
+    """On the bridge's keys, a velocity that is not zero goes nowhere; a zero one reaches
+    the robot, in the type its cmd_vel takes."""
+    with joined(dds.router) as bus:
+        client = Client(bus, ROBOT)
+        await ready(dds, client)
+        await until_heard(bus, "cmd_vel")
+        asked = time.monotonic()
+        codec = Ros2Codec()
+        bus.publish_bytes("cmd_vel", codec.twist(0.3, 0.0))
+        bus.publish_bytes("cmd_vel", codec.twist_stamped(0.0, 0.0, 1.0))
+        await async_wait_until(lambda: dds.events("zero", asked), 5.0, "the relayed stop")
+        assert dds.events("moving", asked) == []
+        assert "dropped a velocity that is not a stop" in dds.space.log("relay")
