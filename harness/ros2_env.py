@@ -76,6 +76,13 @@ float32 distance_remaining
 """
 # Nav2 1.3 (Jazzy) and 1.4 (Kilted) define the same fields; Kilted adds result constants.
 NAVIGATE_TO_POSE = f"{_GOAL}---\n{_RESULT}---\n{_FEEDBACK}"
+ROLLING_NAVIGATE_TO_POSE = (
+    f"{_GOAL}---\n{_RESULT}---\n{_FEEDBACK}"
+    "float32 position_tracking_error\nfloat32 heading_tracking_error\n"
+)
+"""Nav2's main branch (Rolling): two more feedback fields. No wheels carry Rolling: only
+the type hashes rosidl computes for it are made (into `ROLLING`, beside Kilted's venv)."""
+ROLLING = "rolling"
 
 DISTROS = {
     "jazzy": Distro(
@@ -135,6 +142,9 @@ class Interfaces:
     files: tuple[tuple[str, str], ...]
     """(path in the package, text)."""
     dependencies: tuple[str, ...]
+    described_only: str = ""
+    """Not built into the venv: only its type descriptions (with their hashes), copied
+    into the folder of that name beside it."""
 
     def package_xml(self) -> str:
         depends = "".join(f"  <depend>{name}</depend>\n" for name in self.dependencies)
@@ -177,6 +187,18 @@ def built(distro: Distro) -> tuple[Interfaces, ...]:
             "tf2_msgs",
             (("msg/TFMessage.msg", "geometry_msgs/TransformStamped[] transforms\n"),),
             ("geometry_msgs",),
+        ),
+        *(
+            [
+                Interfaces(
+                    "nav2_msgs",
+                    (("action/NavigateToPose.action", ROLLING_NAVIGATE_TO_POSE),),
+                    ("builtin_interfaces", "geometry_msgs", "action_msgs"),
+                    described_only=ROLLING,
+                )
+            ]
+            if distro.name == "kilted"
+            else []
         ),
     )
 
@@ -233,6 +255,11 @@ class Ros2Env:
     def share(self) -> Path:
         """ROS packages' `share/<pkg>` folders: interfaces and their type descriptions."""
         return self.prefix / "share"
+
+    def described(self, distro: str) -> Path:
+        """The `share` folder of type descriptions made for `distro` beside this venv
+        (Rolling's, beside Kilted's)."""
+        return self.root / distro / "share"
 
     @property
     def ready(self) -> bool:
@@ -330,15 +357,16 @@ def _build(distro: Distro, env: Ros2Env, log: Path) -> None:
         environ = env.environ()
         environ["PATH"] = f"{env.prefix / 'bin'}{os.pathsep}{environ.get('PATH', '')}"
         for interfaces in built(distro):
-            source = env.root / "src" / interfaces.name
+            tag = f"{interfaces.name}-{interfaces.described_only or distro.name}"
+            source = env.root / "src" / tag
             for path, text in interfaces.files:
                 (source / path).parent.mkdir(parents=True, exist_ok=True)
                 (source / path).write_text(text)
             (source / "package.xml").write_text(interfaces.package_xml())
             (source / "CMakeLists.txt").write_text(interfaces.cmake_lists())
-            build = env.root / "build" / interfaces.name
+            build = env.root / "build" / tag
             run(
-                f"{interfaces.name} (cmake)",
+                f"{tag} (cmake)",
                 [
                     *("cmake", "-G", "Ninja", "-S", source, "-B", build),
                     f"-DCMAKE_INSTALL_PREFIX={env.prefix}",
@@ -348,7 +376,14 @@ def _build(distro: Distro, env: Ros2Env, log: Path) -> None:
                 ],
                 environ,
             )
-            run(f"{interfaces.name} (ninja)", ["ninja", "-C", build, "install"], environ)
+            if not interfaces.described_only:
+                run(f"{tag} (ninja)", ["ninja", "-C", build, "install"], environ)
+                continue
+            target = f"{interfaces.name}__rosidl_generator_type_description"
+            run(f"{tag} (ninja)", ["ninja", "-C", build, target], environ)
+            described = build / "rosidl_generator_type_description" / interfaces.name
+            into = env.root / interfaces.described_only / "share" / interfaces.name
+            shutil.copytree(described, into)
         shutil.rmtree(env.root / "build", ignore_errors=True)
         check = "import rclpy, nav2_msgs.action, tf2_msgs.msg, nav_msgs.msg, sensor_msgs.msg"
         run("import check", [env.python, "-c", check], env.environ())

@@ -319,10 +319,12 @@ class Bus:
         timeout: float,
         urgent: bool = False,
         attachment: bytes | None = None,
+        complete: bool = False,
     ) -> bytes:
         """Send one query (with an `attachment` if given) and return the first good reply's
         payload. An `urgent` one (a stop, a cancel) waits for room instead of being
-        dropped, and goes first."""
+        dropped, and goes first. A `complete` one is asked only of queryables declared
+        complete, one reply per key (rmw_zenoh's clients ask so)."""
         future: asyncio.Future[bytes] = self._loop.create_future()
 
         def settle(result: bytes | BaseException) -> None:
@@ -357,6 +359,8 @@ class Bus:
                 "priority": zenoh.Priority.REAL_TIME,
                 "express": True,
             }
+        if complete:
+            qos.update(_COMPLETE)
         self._session.get(
             key,
             zenoh.handlers.Callback(on_reply, on_done, indirect=False),
@@ -368,7 +372,12 @@ class Bus:
         return await future
 
     def query_and_forget(
-        self, key: str, payload: bytes, timeout: float, attachment: bytes | None = None
+        self,
+        key: str,
+        payload: bytes,
+        timeout: float,
+        attachment: bytes | None = None,
+        complete: bool = False,
     ) -> None:
         """Send an urgent query whose answer nobody waits for, from any thread: a cancel
         sent by a thread whose event loop cannot wait for it (the executor's watchdog)."""
@@ -381,7 +390,16 @@ class Bus:
             congestion_control=zenoh.CongestionControl.BLOCK,
             priority=zenoh.Priority.REAL_TIME,
             express=True,
+            **(_COMPLETE if complete else {}),
         )
+
+    def keeping(self, key: str, depth: int = 1) -> Kept:
+        """A publisher of raw bytes (CDR) on `key` that keeps its last `depth` samples for
+        subscribers that come later, and asks them (ROS's transient local, as rmw_zenoh
+        publishes it: an action's status)."""
+        kept = Kept(self, key, depth)
+        self._closers.callback(kept.close)
+        return kept
 
     async def request(
         self,
@@ -772,6 +790,31 @@ class Stream:
             self._bus._streams.discard(self)
 
 
+class Kept:
+    """Raw bytes published on one key, the last `depth` kept by Zenoh's advanced publisher
+    for subscribers that come later (`Bus.keeping`)."""
+
+    def __init__(self, bus: Bus, key: str, depth: int) -> None:
+        self._publisher = zenoh.ext.declare_advanced_publisher(
+            bus.session,
+            key,
+            encoding=CDR,
+            congestion_control=zenoh.CongestionControl.BLOCK,
+            cache=zenoh.ext.CacheConfig(max_samples=depth),
+            publisher_detection=True,
+        )
+        self._closed = False
+
+    def put(self, payload: bytes, attachment: bytes | None = None) -> None:
+        if not self._closed:
+            self._publisher.put(payload, attachment=attachment)
+
+    def close(self) -> None:
+        if not self._closed:
+            self._closed = True
+            self._publisher.undeclare()
+
+
 class Latest:
     """Publishes on one key and keeps the last message for subscribers that come later.
 
@@ -861,6 +904,13 @@ def _open_session(options: BusOptions) -> zenoh.Session:
             why += "?"
         raise BusError(f"cannot reach the router at {options.where} ({why})") from failed[0]
     return opened[0]
+
+
+_COMPLETE: dict[str, Any] = {
+    "target": zenoh.QueryTarget.ALL_COMPLETE,
+    "consolidation": zenoh.ConsolidationMode.LATEST,
+}
+"""How rmw_zenoh's clients ask: only complete queryables, one reply per key."""
 
 
 def _direct(callback: Callable[[T], None]) -> zenoh.handlers.Callback[T]:

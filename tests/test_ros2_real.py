@@ -424,3 +424,18 @@ def test_type_hashes_are_found_where_rosidl_writes_them() -> None:
     share = env_of("kilted").share
     assert len(type_hashes(share, "geometry_msgs/msg/Twist")) == 1
     assert type_hashes(share, "geometry_msgs/msg/NoSuchType") == set()
+
+
+ROLLING_HASHED = [NAVIGATE_FEEDBACK, NAVIGATE_SEND_GOAL, NAVIGATE_GET_RESULT]
+"""Rolling's NavigateToPose: its feedback has two more fields (and so another hash); its
+services do not carry the feedback (the same hashes as Jazzy's)."""
+
+
+@pytest.mark.parametrize("ros_type", ROLLING_HASHED)
+def test_rolling_s_navigate_to_pose_hashes_are_rosidls(ros_type: str) -> None:
+    """No wheels carry Rolling: harness/ros2_env.py has rosidl (Kilted's) describe Nav2's
+    main-branch NavigateToPose, and voicectl's Rolling hashes must be those."""
+    described = env_of("kilted").described("rolling")
+    assert type_hashes(described, ros_type) == {type_hash(RosDistro.ROLLING, ros_type)}
+    if ros_type == NAVIGATE_FEEDBACK:
+        assert type_hash(RosDistro.ROLLING, ros_type) != type_hash(RosDistro.JAZZY, ros_type)

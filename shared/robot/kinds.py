@@ -31,6 +31,9 @@ class RosDistro(StrEnum):
 
     HUMBLE = "humble"
     JAZZY = "jazzy"
+    ROLLING = "rolling"
+    """Nav2's NavigateToPose feedback has two more fields than Jazzy's (its result is
+    Jazzy's): told apart by its type hash, on rmw_zenoh."""
 
 
 class _TopicType(StrEnum):

@@ -170,6 +170,12 @@ class RobotTransport(abc.ABC):
         announcement, which wins once seen. Nothing to do where a key does not depend on
         what the robot announces (the bridge)."""
 
+    def announced_distro(self) -> RosDistro | None:
+        """The robot's distribution as its announcements tell it (rmw_zenoh's type hashes:
+        Nav2's feedback tells Rolling from Jazzy, where a get_result reply cannot), whatever
+        was configured; None where they tell nothing (the bridge, DDS)."""
+        return None
+
     @abc.abstractmethod
     def subscriber_types(self, name: str) -> list[str]:
         """The ROS types the robot's subscribers of topic `name` have announced, as far as
