@@ -72,6 +72,8 @@ class StandIn:
         self.command = (0.0, 0.0)
         self.commanded_at = -math.inf
         self.navigating = False
+        self.active: Any = None
+        """The goal being driven to; an older one still running sees it is preempted."""
         node = self.node
         kind = TwistStamped if stamped else Twist
         node.create_subscription(kind, f"{prefix}/cmd_vel", self.on_cmd_vel, 10)
@@ -155,10 +157,12 @@ class StandIn:
             return x, y, wrap(self.yaw + yaw)
 
     def execute(self, handle: Any) -> Any:
+        """Drive to the goal, as Nav2 does: one goal at a time, a newer one preempts it."""
         tx, ty, tyaw = self.target(handle.request)
         started = time.monotonic()
         result = NavigateToPose.Result()
         with self.lock:
+            self.active = handle
             self.navigating = True
         try:
             while True:
@@ -166,10 +170,14 @@ class StandIn:
                     handle.canceled()
                     say("canceled")
                     return result
-                if not handle.is_active:  # preempted
-                    return result
                 with self.lock:
+                    preempted = self.active is not handle
                     x, y, yaw = self.x, self.y, self.yaw
+                if preempted:
+                    result.error_msg = "preempted by a newer goal"
+                    handle.abort()
+                    say("aborted")
+                    return result
                 distance = math.hypot(tx - x, ty - y)
                 if max(abs(tx), abs(ty)) > BOUND and time.monotonic() - started > 0.5:
                     result.error_code = ABORT_CODE
@@ -187,22 +195,28 @@ class StandIn:
                 linear = min(MAX_LINEAR, distance) if distance > 0.05 and abs(turn) < 0.3 else 0.0
                 with self.lock:
                     self.command = (linear, angular)
-                feedback = NavigateToPose.Feedback()
-                feedback.current_pose.header.frame_id = "map"
-                feedback.current_pose.pose.position.x = x
-                feedback.current_pose.pose.position.y = y
-                feedback.current_pose.pose.orientation.z = math.sin(yaw / 2)
-                feedback.current_pose.pose.orientation.w = math.cos(yaw / 2)
-                feedback.distance_remaining = distance
-                elapsed = time.monotonic() - started
-                feedback.navigation_time.sec = int(elapsed)
-                feedback.navigation_time.nanosec = int((elapsed % 1) * 1e9)
-                handle.publish_feedback(feedback)
+                handle.publish_feedback(self.feedback(x, y, yaw, distance, started))
                 time.sleep(2 * TICK)  # the controller's period, not a wait for anyone
         finally:
             with self.lock:
-                self.navigating = False
-                self.command = (0.0, 0.0)
+                if self.active is handle:
+                    self.active = None
+                    self.navigating = False
+                    self.command = (0.0, 0.0)
+
+    @staticmethod
+    def feedback(x: float, y: float, yaw: float, distance: float, started: float) -> Any:
+        feedback = NavigateToPose.Feedback()
+        feedback.current_pose.header.frame_id = "map"
+        feedback.current_pose.pose.position.x = x
+        feedback.current_pose.pose.position.y = y
+        feedback.current_pose.pose.orientation.z = math.sin(yaw / 2)
+        feedback.current_pose.pose.orientation.w = math.cos(yaw / 2)
+        feedback.distance_remaining = distance
+        elapsed = time.monotonic() - started
+        feedback.navigation_time.sec = int(elapsed)
+        feedback.navigation_time.nanosec = int((elapsed % 1) * 1e9)
+        return feedback
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -49,9 +49,18 @@ def _ros_name(what: str, allow_empty: bool = False) -> Callable[[str], str]:
     return parse
 
 
-def add_robot_arguments(parser: argparse.ArgumentParser, detect: bool) -> None:
-    """The robot's flags; with `detect`, the transport and types default to 'auto'."""
+def add_robot_arguments(
+    parser: argparse.ArgumentParser, detect: bool, transport: bool = True
+) -> None:
+    """The robot's flags; with `detect`, the transport and types default to 'auto';
+    without `transport`, no --transport (the STOP relay has one way to the robot)."""
     group = parser.add_argument_group("the robot: its ROS 2 graph over Zenoh")
+    if transport:
+        _add_transport(group, detect)
+    _add_rest(group, detect)
+
+
+def _add_transport(group: argparse._ArgumentGroup, detect: bool) -> None:
     group.add_argument(
         "--transport",
         choices=[AUTO, *TransportKind] if detect else list(ON_ZENOH),
@@ -61,6 +70,9 @@ def add_robot_arguments(parser: argparse.ArgumentParser, detect: bool) -> None:
         + (", or as a plain ROS 2 node on DDS with rclpy ('ros2')" if detect else "")
         + f" (default: {AUTO if detect else 'bridge'})",
     )
+
+
+def _add_rest(group: argparse._ArgumentGroup, detect: bool) -> None:
     group.add_argument(
         "--domain-id",
         type=_domain_id,
@@ -116,7 +128,7 @@ def robot_options(args: argparse.Namespace) -> RobotOptions:
             navigate_name=args.navigate,
             map_name=args.map,
         ),
-        transport=chosen(TransportKind, args.transport),
+        transport=chosen(TransportKind, getattr(args, "transport", TransportKind.ROS2)),
         domain_id=args.domain_id,
         distro=chosen(RosDistro, args.distro),
         cmd_vel_type=chosen(CmdVelType, args.cmd_vel_type),

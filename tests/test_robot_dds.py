@@ -15,7 +15,7 @@ from shared.robot import TransportKind, detect_transport, transports
 from shared.robot.stop import RobotStop
 from shared.ros2 import CmdVelType, Ros2Codec
 
-from .conftest import async_wait_until, voicectl
+from .conftest import REPO, async_wait_until, voicectl
 from .support import joined, until_heard
 
 NO_RCLPY = pytest.mark.skipif(
@@ -63,3 +63,22 @@ async def test_a_process_with_zenoh_alone_stops_a_dds_robot_on_the_relays_keys(
         stop.zero_velocity()
         await async_wait_until(lambda: heard, 5.0, "zero velocity on the relay's key")
         assert heard[0] == (0.0, 0.0)
+
+
+def test_the_deploy_doc_s_ros2_commands_parse_as_written() -> None:
+    """docs/deploy.md's commands for a robot on DDS, with HOST filled in: their flags are
+    the ones the executor and the relay take."""
+    from services.executor.__main__ import parse_args as executor_args
+    from services.relay.__main__ import parse_args as relay_args
+
+    doc = (REPO / "docs" / "deploy.md").read_text()
+    section = doc[doc.index("## A robot on DDS") : doc.index("## Containers")]
+    commands = [
+        line.removeprefix(".venv/bin/voicectl ").replace("HOST", "127.0.0.1").split()
+        for line in section.splitlines()
+        if line.startswith(".venv/bin/voicectl ")
+    ]
+    assert {command[0] for command in commands} == {"executor", "relay"}
+    for command in commands:
+        parse = executor_args if command[0] == "executor" else relay_args
+        parse(command[1:])

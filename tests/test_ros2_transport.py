@@ -15,24 +15,20 @@ import asyncio
 import json
 import math
 import os
-import subprocess
 import time
 from collections.abc import Iterator
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import pytest
-import zenoh
 
 from harness import netns
 from harness.netns import LoopbackOnly
-from harness.ros2_env import Ros2Env
-from shared.bus import BusOptions, json_decoder
+from shared.bus import json_decoder
 from shared.client import VoicectlClient
 from shared.keys import RobotKeys
 from shared.messages import (
     ExecutorEvent,
+    ExecutorInfo,
     Order,
     OrderProgress,
     OrderStatus,
@@ -43,61 +39,19 @@ from shared.messages import (
 )
 from shared.ros2 import Ros2Codec
 
-from .conftest import REPO, Processes, async_wait_until, free_port, voicectl
+from .conftest import Processes, async_wait_until, voicectl
+from .ros2_rig import ROBOT, WAIT, DdsRobot, dds_robot
 from .ros2_support import DISTROS, env_of
 from .stop_rig import order
-from .support import Client, client_wait_ready, joined, until_heard
+from .support import Client, joined, until_heard
 
 pytestmark = pytest.mark.ros2
 
-ROBOT = "r1"
 STOP_BOUND = 0.05
 """Seconds from STOP to zero velocity and to the goal's cancel, at the robot: the issue's
 bound (its p99 is measured in docs/benchmarks.md)."""
-WAIT = 60.0
 EXECUTORS = ("--executor", "tests.executors_for_tests:BlockingNavigator", "--stall-limit", "30")
 """A navigator that blocks its loop; the watchdog held off, so that STOP is timed alone."""
-
-
-@dataclass
-class DdsRobot:
-    """A robot of real ROS 2 in a namespace of its own, its executor and STOP relay beside
-    it, and a router, a supervisor and a converter outside."""
-
-    env: Ros2Env
-    space: LoopbackOnly
-    router: str
-    """Where processes outside the namespace reach the router."""
-    inside: str
-    """Where processes inside reach it."""
-    processes: Processes
-    executor: subprocess.Popen[bytes] | None = None
-    seen: int = field(default=0)
-
-    def start_inside(self, module: str, *args: str, name: str) -> subprocess.Popen[bytes]:
-        return self.space.start(
-            module, *args, name=name, python=self.env.python, env=self.env.environ()
-        )
-
-    def start_executor(self) -> None:
-        self.executor = self.start_inside(
-            "services.executor",
-            *("--transport", "ros2", "--robot", ROBOT, "--connect", self.inside, *EXECUTORS),
-            name="executor",
-        )
-
-    def events(self, what: str, since: float = 0.0) -> list[float]:
-        """When the robot said `what` ('zero', 'cancel', 'canceled'...), since `since`."""
-        found = []
-        for line in self.space.log("robot").splitlines():
-            if line.startswith("{"):
-                event: dict[str, Any] = json.loads(line)
-                if event["event"] == what and event["at"] >= since:
-                    found.append(event["at"])
-        return found
-
-    def dump(self) -> str:
-        return f"{self.space.dump()}\n{self.processes.dump()}"
 
 
 @pytest.fixture(params=DISTROS)
@@ -108,34 +62,8 @@ def dds(request: pytest.FixtureRequest, processes: Processes, tmp_path: Path) ->
         if os.environ.get("VOICECTL_ROS2") == "required":
             pytest.fail(missing)
         pytest.skip(missing)
-    space = LoopbackOnly(tmp_path / "robot")
-    router = f"tcp/127.0.0.1:{free_port()}"
-    inside = space.socket()
-    options = BusOptions(mode="router", connect=[], listen=[router, inside])
-    session = zenoh.open(options.zenoh_config())
-    robot = DdsRobot(env, space, router, inside, processes)
-    try:
-        robot.start_inside("harness.ros2_robot", name="robot")
-        robot.start_inside("services.relay", "--connect", inside, "--debug", name="relay")
-        robot.start_executor()
-        processes.start("services.supervisor", "--connect", router, "--robot", ROBOT)
-        processes.start("services.converter", "--connect", router, "--orders", str(REPO / "orders"))
+    with dds_robot(env, processes, tmp_path, EXECUTORS) as robot:
         yield robot
-    except BaseException:
-        print(robot.dump())
-        raise
-    finally:
-        unclean = space.close()
-        session.close()
-        assert not unclean, f"{unclean}\n{robot.dump()}"
-
-
-async def ready(robot: DdsRobot, client: Client) -> None:
-    await async_wait_until(lambda: robot.events("ready"), WAIT, "the ROS 2 robot")
-    await async_wait_until(
-        lambda: "STOP relay ready" in robot.space.log("relay"), WAIT, "the STOP relay"
-    )
-    await client_wait_ready(client)
 
 
 def test_every_dds_participant_is_in_a_namespace_no_packet_leaves(tmp_path: Path) -> None:
@@ -172,7 +100,7 @@ async def test_a_real_ros2_robot_is_driven_by_voice_and_its_progress_reaches_the
     keys = RobotKeys(ROBOT)
     with joined(dds.router) as bus:
         client = Client(bus, ROBOT)
-        await ready(dds, client)
+        await dds.ready(client)
         progress: list[OrderProgress] = []
         states: list[StateUpdate] = []
         poses: list[RobotPose] = []
@@ -216,7 +144,9 @@ async def test_stop_halts_a_real_ros2_robot_and_cancels_its_goal(dds: DdsRobot, 
     keys = RobotKeys(ROBOT)
     with joined(dds.router) as bus:
         client = Client(bus, ROBOT)
-        await ready(dds, client)
+        # The panel's client, warm: it has heard the executor announce how to stop it.
+        stopper = VoicectlClient(bus)
+        await dds.ready(client)
         poses: list[tuple[float, RobotPose]] = []
         bus.subscribe(
             keys.pose, json_decoder(RobotPose), lambda _k, p: poses.append((time.monotonic(), p))
@@ -237,7 +167,7 @@ async def test_stop_halts_a_real_ros2_robot_and_cancels_its_goal(dds: DdsRobot, 
         if case == "blocked-loop":
             await asyncio.sleep(0.5)  # the executor's loop is blocked by now (for 4 s)
         asked = time.monotonic()
-        stopped = await VoicectlClient(bus).stop(ROBOT)
+        stopped = await stopper.stop(ROBOT)
         await async_wait_until(
             lambda: dds.events("zero", asked) and dds.events("canceled", asked),
             5.0,
@@ -268,7 +198,7 @@ async def test_the_stop_relay_forwards_stops_and_nothing_else(dds: DdsRobot) -> 
     the robot, in the type its cmd_vel takes."""
     with joined(dds.router) as bus:
         client = Client(bus, ROBOT)
-        await ready(dds, client)
+        await dds.ready(client)
         await until_heard(bus, "cmd_vel")
         asked = time.monotonic()
         codec = Ros2Codec()
@@ -277,3 +207,35 @@ async def test_the_stop_relay_forwards_stops_and_nothing_else(dds: DdsRobot) -> 
         await async_wait_until(lambda: dds.events("zero", asked), 5.0, "the relayed stop")
         assert dds.events("moving", asked) == []
         assert "dropped a velocity that is not a stop" in dds.space.log("relay")
+
+
+async def test_auto_picks_ros2_where_no_robot_announces_itself_on_zenoh(dds: DdsRobot) -> None:
+    """An executor left to find its transport, in a ROS 2 environment, with no bridge or
+    rmw_zenoh robot on the bus: a plain ROS 2 node, which then finds the robot on DDS."""
+    infos: list[ExecutorInfo] = []
+    with joined(dds.router) as bus:
+        bus.subscribe(
+            RobotKeys("r2").executor_info,
+            json_decoder(ExecutorInfo),
+            lambda _k, info: infos.append(info),
+            history=True,
+        )
+        dds.start_inside(
+            "services.executor",
+            *("--robot", "r2", "--transport", "auto", "--connect", dds.inside),
+            name="auto-executor",
+        )
+        await async_wait_until(
+            lambda: infos and infos[-1].cmd_vel_hash == "" and infos[-1].transport == "ros2",
+            WAIT,
+            "the executor's announcement",
+        )
+        assert "the robot's graph speaks ros2" in dds.space.log("auto-executor")
+        await async_wait_until(
+            lambda: (
+                "takes geometry_msgs/msg/Twist (announced by the robot)"
+                in dds.space.log("auto-executor")
+            ),
+            WAIT,
+            "the robot's cmd_vel found on DDS",
+        )

@@ -16,6 +16,7 @@ import argparse
 import asyncio
 import logging
 import sys
+import time
 
 from shared.bus import Bus
 from shared.errors import BusError, ServiceError
@@ -41,7 +42,7 @@ _TWIST_SIZE = 52
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser = argparse.ArgumentParser(prog="voicectl relay", description=__doc__)
     add_bus_arguments(parser)
-    add_robot_arguments(parser, detect=False)
+    add_robot_arguments(parser, detect=False, transport=False)
     return parser.parse_args(argv)
 
 
@@ -128,11 +129,13 @@ class StopRelay(Service):
         for wanted in [t for t in taken if t is not None] or [kind]:
             payload = self._codec.velocity(wanted, 0.0, 0.0)
             dds.publish(self._names.cmd_vel, wanted.ros_type, payload, urgent=True)
+        _LOGGER.debug("zero velocity relayed at %.6f (monotonic)", time.monotonic())
 
     async def _on_cancel(self, raw: bytes) -> bytes | None:
         dds = self._dds
         assert dds is not None
         name = self._names.navigate("cancel_goal")
+        _LOGGER.debug("cancel relayed at %.6f (monotonic)", time.monotonic())
         try:
             return await dds.call(name, CANCEL_GOAL, raw, CANCEL_TIMEOUT, urgent=True)
         except BusError as exc:
