@@ -80,9 +80,12 @@ ROLLING_NAVIGATE_TO_POSE = (
     f"{_GOAL}---\n{_RESULT}---\n{_FEEDBACK}"
     "float32 position_tracking_error\nfloat32 heading_tracking_error\n"
 )
-"""Nav2's main branch (Rolling): two more feedback fields. No wheels carry Rolling: only
-the type hashes rosidl computes for it are made (into `ROLLING`, beside Kilted's venv)."""
+"""Nav2's main branch (Rolling): two more feedback fields. No wheels carry Rolling: the
+type hashes rosidl computes for it are made (into `ROLLING`, beside Kilted's venv), and its
+Python types under another package name (`ROLLING_NAV2_MSGS`)."""
 ROLLING = "rolling"
+ROLLING_NAV2_MSGS = "rolling_nav2_msgs"
+"""Rolling's NavigateToPose built into Kilted's venv under this package name."""
 
 DISTROS = {
     "jazzy": Distro(
@@ -195,7 +198,16 @@ def built(distro: Distro) -> tuple[Interfaces, ...]:
                     (("action/NavigateToPose.action", ROLLING_NAVIGATE_TO_POSE),),
                     ("builtin_interfaces", "geometry_msgs", "action_msgs"),
                     described_only=ROLLING,
-                )
+                ),
+                # The same definition under a package name of its own, built into the
+                # venv beside Jazzy's nav2_msgs, so that real rclpy writes and reads
+                # Rolling's layout (a package's name is not on the wire; the hashes are
+                # the described ones above).
+                Interfaces(
+                    ROLLING_NAV2_MSGS,
+                    (("action/NavigateToPose.action", ROLLING_NAVIGATE_TO_POSE),),
+                    ("builtin_interfaces", "geometry_msgs", "action_msgs"),
+                ),
             ]
             if distro.name == "kilted"
             else []

@@ -17,6 +17,7 @@ from typing import Any
 
 import pytest
 
+from harness.ros2_env import ROLLING_NAV2_MSGS
 from shared.ros2 import (
     CANCEL_ALL,
     CANCEL_GOAL,
@@ -25,6 +26,7 @@ from shared.ros2 import (
     NAVIGATE_SEND_GOAL,
     SERVICES,
     CancelCode,
+    CdrError,
     GoalStatus,
     OccupancyGrid,
     Pose2D,
@@ -439,3 +441,50 @@ def test_rolling_s_navigate_to_pose_hashes_are_rosidls(ros_type: str) -> None:
     assert type_hashes(described, ros_type) == {type_hash(RosDistro.ROLLING, ros_type)}
     if ros_type == NAVIGATE_FEEDBACK:
         assert type_hash(RosDistro.ROLLING, ros_type) != type_hash(RosDistro.JAZZY, ros_type)
+
+
+@pytest.fixture(scope="module")
+def kilted() -> Iterator[Oracle]:
+    yield from oracle_of("kilted")
+
+
+def test_rolling_s_feedback_is_read_and_written_as_real_ros_does(kilted: Oracle) -> None:
+    """No wheels carry Rolling: its NavigateToPose is built into Kilted's venv under a
+    package name of its own (harness/ros2_env.py), the same fields in the same order,
+    which is all CDR carries. Real ROS's bytes, with tracking errors that are not zero,
+    read in Rolling's layout; Jazzy's layout refuses them; voicectl's Rolling bytes read
+    in real ROS as meant."""
+    ros_type = f"{ROLLING_NAV2_MSGS}/action/NavigateToPose_FeedbackMessage"
+    rolling = Ros2Codec(RosDistro.ROLLING)
+    values = {
+        "goal_id": uuid(GOAL_ID),
+        "feedback": {
+            "current_pose": {"header": header(STAMP, FRAME), "pose": pose(POSE)},
+            "navigation_time": time_of(3.25),
+            "estimated_time_remaining": time_of(7.5),
+            "number_of_recoveries": 3,
+            "distance_remaining": 1.5,
+            "position_tracking_error": 0.125,
+            "heading_tracking_error": -0.5,
+        },
+    }
+    theirs = kilted.encode(ros_type, values)
+    read = rolling.read_feedback(theirs)
+    assert (read.goal_id, read.distance_remaining) == (GOAL_ID, 1.5)
+    assert (read.pose.x, read.pose.y, read.pose.yaw) == pytest.approx((POSE.x, POSE.y, POSE.yaw))
+    with pytest.raises(CdrError):
+        CODEC.read_feedback(theirs)
+
+    ours = rolling.feedback(GOAL_ID, POSE, 1.5, 3.25, FRAME, STAMP)
+    decoded, _ = kilted.decode(ros_type, ours)
+    feedback = values["feedback"]
+    assert decoded == {
+        **values,
+        "feedback": {
+            **feedback,
+            "estimated_time_remaining": time_of(0.0),
+            "number_of_recoveries": 0,
+            "position_tracking_error": 0.0,
+            "heading_tracking_error": 0.0,
+        },
+    }
