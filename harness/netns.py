@@ -16,6 +16,7 @@ it with the loss probability: netem's `delay D loss L` on both ends of the link.
 
     python -m harness.netns shape --queue N --delay-ms 100 --loss 5   (inside a namespace)
     python -m harness.netns clean      (remove what runs of killed tests left behind)
+    python -m harness.netns rtps --seconds 10 --enough 3   (DDS's datagrams seen here)
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ import struct
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -322,6 +324,75 @@ class LoopbackOnly:
         self.close()
 
 
+# --- DDS's packets, counted: that they stay in the namespace -----------------------------
+
+_ETH_P_ALL = 0x0003
+_UDP = 17
+
+
+def is_rtps(frame: bytes) -> bool:
+    """Whether a link-layer frame (AF_PACKET, Ethernet framing, as loopback has too) is a
+    UDP datagram of RTPS, DDS's wire protocol: its payload starts with b'RTPS'."""
+    if len(frame) < 14:
+        return False
+    ethertype = int.from_bytes(frame[12:14], "big")
+    if ethertype == 0x0800 and len(frame) >= 34 and frame[23] == _UDP:
+        udp = 14 + (frame[14] & 0x0F) * 4
+    elif ethertype == 0x86DD and len(frame) >= 54 and frame[20] == _UDP:
+        udp = 14 + 40
+    else:
+        return False
+    return frame[udp + 8 : udp + 12] == b"RTPS"
+
+
+class RtpsCounter:
+    """Counts, on a thread of its own, the RTPS datagrams that cross any link of the
+    network namespace it was made in (sent or received), until closed; `reached` is set
+    once `enough` are seen. Needs root."""
+
+    def __init__(self, enough: int = 1) -> None:
+        self.count = 0
+        self.reached = threading.Event()
+        self._enough = enough
+        self._sniffer = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, socket.htons(_ETH_P_ALL))
+        self._sniffer.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 << 20)
+        self._sniffer.settimeout(0.1)
+        self._stopping = threading.Event()
+        self._thread = threading.Thread(target=self._count, name="rtps-counter", daemon=True)
+        self._thread.start()
+
+    def _count(self) -> None:
+        while not self._stopping.is_set():
+            try:
+                frame = self._sniffer.recv(65535)
+            except TimeoutError:
+                continue
+            if is_rtps(frame):
+                self.count += 1
+                if self.count >= self._enough:
+                    self.reached.set()
+
+    def close(self) -> int:
+        """Stop counting; the count."""
+        self._stopping.set()
+        self._thread.join()
+        self._sniffer.close()
+        return self.count
+
+    def __enter__(self) -> RtpsCounter:
+        return self
+
+    def __exit__(self, *_: object) -> None:
+        self.close()
+
+
+def count_rtps(seconds: float, enough: int) -> int:
+    """RTPS datagrams seen in this namespace within `seconds`, stopping early at `enough`."""
+    with RtpsCounter(enough) as counter:
+        counter.reached.wait(seconds)
+        return counter.count
+
+
 # --- the shaper: netem's delay and loss in user space, through NFQUEUE ---------------------
 
 _NETLINK_NETFILTER = 12
@@ -429,9 +500,14 @@ def main(argv: list[str] | None = None) -> int:
     shaper.add_argument("--delay-ms", type=float, default=100.0)
     shaper.add_argument("--loss", type=float, default=5.0, metavar="PERCENT")
     commands.add_parser("clean", help="delete namespaces left by killed runs")
+    rtps = commands.add_parser("rtps", help="count DDS's datagrams on this namespace's links")
+    rtps.add_argument("--seconds", type=float, default=10.0, help="count for this long")
+    rtps.add_argument("--enough", type=int, default=1, help="stop once this many are seen")
     args = parser.parse_args(argv)
     if args.command == "shape":
         shape(args.queue, args.delay_ms / 1000, args.loss / 100)
+    elif args.command == "rtps":
+        print(count_rtps(args.seconds, args.enough))
     else:
         print("\n".join(clean_stale()) or "nothing to clean")
     return 0

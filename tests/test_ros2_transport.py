@@ -15,6 +15,7 @@ import asyncio
 import json
 import math
 import os
+import sys
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -39,7 +40,7 @@ from shared.messages import (
 )
 from shared.ros2 import Ros2Codec
 
-from .conftest import Processes, async_wait_until, voicectl
+from .conftest import REPO, Processes, async_wait_until, voicectl
 from .ros2_rig import ROBOT, WAIT, DdsRobot, dds_robot
 from .ros2_support import DISTROS, env_of
 from .stop_rig import order
@@ -47,9 +48,11 @@ from .support import Client, joined, until_heard
 
 pytestmark = pytest.mark.ros2
 
-STOP_BOUND = 0.05
-"""Seconds from STOP to zero velocity and to the goal's cancel, at the robot: the issue's
-bound (its p99 is measured in docs/benchmarks.md)."""
+STOP_BOUND = 0.25
+"""Seconds from STOP to zero velocity and to the goal's cancel at the robot, one STOP on a
+loaded two-core machine, as tests/test_stop.py bounds the other transports: well short of
+any retry or timeout on the way. The issue's 50 ms is a p99, measured by
+bench/stop_transports.py beside the other transports (docs/benchmarks.md)."""
 EXECUTORS = ("--executor", "tests.executors_for_tests:BlockingNavigator", "--stall-limit", "30")
 """A navigator that blocks its loop; the watchdog held off, so that STOP is timed alone."""
 
@@ -92,6 +95,24 @@ def test_every_dds_participant_is_in_a_namespace_no_packet_leaves(tmp_path: Path
         )
         assert space.run("python3", "-c", send).strip() == "ENETUNREACH"
     assert env_of(DISTROS[0]).environ()["ROS_AUTOMATIC_DISCOVERY_RANGE"] == "LOCALHOST"
+
+
+@pytest.mark.parametrize("dds", ["kilted"], indirect=True)
+async def test_dds_talks_in_the_namespace_and_not_one_datagram_of_it_reaches_the_machine(
+    dds: DdsRobot,
+) -> None:
+    """While the robot, its executor and the relay talk DDS in their namespace, a sniffer
+    there sees RTPS datagrams, and one on every link of the machine outside sees none."""
+    await async_wait_until(
+        lambda: "STOP relay ready" in dds.space.log("relay"), WAIT, "the relay matched on DDS"
+    )
+    count = ("-m", "harness.netns", "rtps", "--seconds", "30", "--enough", "5")
+    with netns.RtpsCounter() as outside:
+        inside = await asyncio.to_thread(
+            dds.space.run, sys.executable, *count, env={**os.environ, "PYTHONPATH": str(REPO)}
+        )
+    assert int(inside) >= 5, "no DDS traffic seen in the namespace: the sniffer is blind"
+    assert outside.count == 0
 
 
 async def test_a_real_ros2_robot_is_driven_by_voice_and_its_progress_reaches_the_panel(
@@ -211,13 +232,21 @@ async def test_the_stop_relay_forwards_stops_and_nothing_else(dds: DdsRobot) -> 
 
 async def test_auto_picks_ros2_where_no_robot_announces_itself_on_zenoh(dds: DdsRobot) -> None:
     """An executor left to find its transport, in a ROS 2 environment, with no bridge or
-    rmw_zenoh robot on the bus: a plain ROS 2 node, which then finds the robot on DDS."""
+    rmw_zenoh robot on the bus: a plain ROS 2 node, which then finds the robot on DDS.
+    Where a robot does announce itself on Zenoh, there, rclpy or not."""
     infos: list[ExecutorInfo] = []
+    on_zenoh: list[ExecutorInfo] = []
     with joined(dds.router) as bus:
         bus.subscribe(
             RobotKeys("r2").executor_info,
             json_decoder(ExecutorInfo),
             lambda _k, info: infos.append(info),
+            history=True,
+        )
+        bus.subscribe(
+            RobotKeys("r3").executor_info,
+            json_decoder(ExecutorInfo),
+            lambda _k, info: on_zenoh.append(info),
             history=True,
         )
         dds.start_inside(
@@ -239,3 +268,15 @@ async def test_auto_picks_ros2_where_no_robot_announces_itself_on_zenoh(dds: Dds
             WAIT,
             "the robot's cmd_vel found on DDS",
         )
+        # A simulated robot on rmw_zenoh, under a namespace of its own, beside the DDS one.
+        names = ("--namespace", "bot3")
+        sim = ("--transport", "rmw-zenoh", "--connect", dds.inside, *names)
+        dds.start_inside("services.sim", *sim, name="zenoh-robot")
+        dds.start_inside(
+            "services.executor",
+            *("--robot", "r3", "--transport", "auto", "--connect", dds.inside, *names),
+            name="zenoh-executor",
+        )
+        await async_wait_until(lambda: on_zenoh, WAIT, "the second executor's announcement")
+        assert on_zenoh[-1].transport == "rmw-zenoh"
+        assert "the robot's graph speaks rmw-zenoh" in dds.space.log("zenoh-executor")
