@@ -57,7 +57,8 @@ def model(kind: str, threads: int, arena: bool) -> Moonshine:
     else:
         folder = prepare(source, cache_dir())
         encoder, decoder = folder / "encoder.onnx", folder / "decoder.onnx"
-    return Moonshine(encoder, decoder, source / "tokenizer.bin", threads, arena)
+    prepared = kind == "prepared"
+    return Moonshine(encoder, decoder, source / "tokenizer.bin", threads, arena, prepared)
 
 
 def rss_mb() -> float:

@@ -62,6 +62,7 @@ from services.converter.decide import (  # noqa: E402
 from services.converter.grammar import build_grammar  # noqa: E402
 from services.converter.orders import OrderSet  # noqa: E402
 from services.converter.parser import Parser  # noqa: E402
+from services.stt import sphinx  # noqa: E402
 from services.stt.__main__ import add_engine_arguments, engine_options  # noqa: E402
 from services.stt.audio import NoiseFloor, Suppressor, frames, read_wav  # noqa: E402
 from services.stt.engine import Engine, EngineOptions, Final, finals, load_engine  # noqa: E402
@@ -207,10 +208,14 @@ def offline(
         grammar_only(options, orders, utterances, directory)
         return
     if args.replay:
-        records = msgspec.json.decode(args.replay.read_bytes(), type=list[Record])
-        known = {u.file: u for u in utterances}
-        pairs = [(known[r.file], r) for r in records if r.file in known]
-        print(f"replayed {len(pairs)} decodes from {args.replay}")
+        records = {
+            r.file: r
+            for path in args.replay
+            for r in msgspec.json.decode(path.read_bytes(), type=list[Record])
+        }  # a later file's decode of a file replaces an earlier one's
+        pairs = [(u, records[u.file]) for u in utterances if u.file in records]
+        missing = len(utterances) - len(pairs)
+        print(f"replayed {len(pairs)} decodes ({missing} utterances had none)")
     else:
         started = time.perf_counter()
         engine = load_engine(options)
@@ -653,8 +658,17 @@ def main() -> None:
     )
     parser.add_argument("--threads", action="store_true", help="CPU of each service thread")
     parser.add_argument("--record", type=Path, help="offline: keep every decode in this file")
-    parser.add_argument("--replay", type=Path, help="offline: judge the decodes of --record again")
+    parser.add_argument(
+        "--replay", type=Path, nargs="+", help="offline: judge the decodes of --record again"
+    )
     parser.add_argument("--sweep", action="store_true", help="offline: the decision's rules, swept")
+    parser.add_argument("--conditions", help="only these conditions (clean,pink5,...)")
+    parser.add_argument("--sources", help="only these sources (real,kokoro,...)")
+    parser.add_argument(
+        "--room",
+        type=float,
+        help="offline: dB a frame must stand above the room to be speech (sphinx.ROOM_MARGIN)",
+    )
     parser.add_argument("--every", type=int, default=1, help="only every Nth utterance")
     parser.add_argument("--quick", action="store_true", help="every 20th utterance")
     parser.add_argument(
@@ -673,6 +687,12 @@ def main() -> None:
     if args.quick:
         args.every = 20
     utterances = [u for u in generate(args.set) if u.split == args.split][:: args.every]
+    if args.conditions:
+        utterances = [u for u in utterances if u.condition in args.conditions.split(",")]
+    if args.sources:
+        utterances = [u for u in utterances if u.source in args.sources.split(",")]
+    if args.room is not None:
+        sphinx.ROOM_MARGIN = args.room
     orders = OrderSet.load(args.orders)
     machine = platform.processor() or platform.machine()
     print(

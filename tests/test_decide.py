@@ -130,6 +130,21 @@ def test_a_phrase_repeated_by_the_model_counts_once() -> None:
     assert (orders, rejected) == (["turn right"], False)
 
 
+def test_a_teen_or_ty_only_moonshine_heard_is_asked_with_its_twin() -> None:
+    """Kokoro's af_bella said "turn left fifteen degrees" in babble (test split); Moonshine
+    wrote 50 and the grammar heard nothing."""
+    said = "Turn left 50 degrees. Turn left 50 degrees. Turn left"
+    decision = decide(*readings(heard("", said, rejected="no command heard"), PARSER))
+    assert [o.description for o in decision.orders] == ["turn left 50 degrees"]
+    [doubt] = decision.doubts
+    assert (doubt.words, doubt.alternatives) == ("50", ["15"])
+    assert decision.text.split()[doubt.position] == "50"
+    both = decide(*readings(heard("turn left fifty degrees", "Turn left 50 degrees."), PARSER))
+    assert both.doubts == []
+    plain = decide(*readings(heard("", "Turn left 45 degrees.", rejected="no"), PARSER))
+    assert plain.doubts == []
+
+
 def test_a_list_number_the_model_writes_is_no_number_said() -> None:
     transcript = heard("rotate left ninety degrees", "1. Rotate left 90 degrees.")
     assert decided(transcript)[:2] == (["turn left 90 degrees"], False)

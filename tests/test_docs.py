@@ -168,24 +168,37 @@ def test_executors_doc_executors_file_binds_and_its_typo_fails_as_shown(tmp_path
     assert done.stderr.strip().splitlines()[-1] == shown
 
 
-def test_deploy_doc_secured_bus_commands_run_as_written(tmp_path: Path) -> None:
+@pytest.mark.parametrize(
+    ("make_after", "lines_after", "directory", "fleet"),
+    [
+        ("in a directory of your choice", "every process starts with its own file", "bus", False),
+        ("Several robots on one router", "start with their robot's files", "fleet", True),
+    ],
+    ids=["one-robot", "fleet"],
+)
+def test_deploy_doc_secured_bus_commands_run_as_written(
+    tmp_path: Path, make_after: str, lines_after: str, directory: str, fleet: bool
+) -> None:
     """`voicectl bus-secrets` as documented (HOME moved to a temporary directory), and
-    every documented service line parses with the files it made."""
+    every documented service line parses with the files it made; in a fleet, each
+    robot's executor and robot side start with that robot's own files."""
     doc = DOCS / "deploy.md"
-    make = block_after(doc, "in a directory of your choice", "sh").strip()
+    make = block_after(doc, make_after, "sh").strip()
     env = {"HOME": str(tmp_path), "PATH": "/usr/bin:/bin", "PYTHONPATH": str(REPO)}
     command = make.replace(".venv/bin/voicectl", f"{sys.executable} -m voicectl")
     done = subprocess.run(
         ["bash", "-c", command], capture_output=True, text=True, env=env, cwd=REPO, check=False
     )
     assert done.returncode == 0, done.stderr
-    secrets = tmp_path / ".local/share/voicectl/bus"
+    secrets = tmp_path / ".local/share/voicectl" / directory
     client = json.loads((secrets / "panel.json5").read_text())
     assert client["connect"]["endpoints"] == ["tls/robot-host.local:7447"]
-    lines = block_after(doc, "every process starts with its own file", "sh").strip().splitlines()
-    assert lines[0] == "B=~/.local/share/voicectl/bus"
+    namespaces = re.findall(r"--namespace (\S+)", make)
+    lines = block_after(doc, lines_after, "sh").strip().splitlines()
+    variable, _, path = lines[0].partition("=")
+    assert path == f"~/.local/share/voicectl/{directory}"
     for line in lines[1:]:
-        words = line.replace("$B", str(secrets)).split()
+        words = line.replace(f"${variable}", str(secrets)).split()
         assert words[0] == ".venv/bin/voicectl"
         name, argv = words[1], words[2:]
         if name == "say":
@@ -195,6 +208,16 @@ def test_deploy_doc_secured_bus_commands_run_as_written(tmp_path: Path) -> None:
         options = bus_options(args, router=name == "router", environ={})
         assert options.config_file is not None
         assert options.config_file.is_file()
+        if name in ("executor", "sim") and fleet:
+            # The robot's own credentials, and the namespace its rules were made with.
+            user = json.loads(options.config_file.read_text())["transport"]["auth"]["usrpwd"]
+            robot = user["user"].partition("-")[2]
+            assert f"{robot}=/{args.namespace}" in namespaces
+            if name == "executor":
+                assert user["user"] == f"executor-{args.robot}"
+    router = (secrets / "router.json5").read_text()
+    for robot in re.findall(r"--robot (\w+)", make):
+        assert f"voice/{robot}/alive/executor" in router
 
 
 def documented_keys() -> list[tuple[str, str]]:

@@ -15,15 +15,27 @@ import msgspec
 import pytest
 import zenoh
 
-from shared.bus import BusOptions
+from harness.speech_set import in_pink_noise
+from services.stt.audio import frames, read_wav
+from shared.bus import Bus, BusOptions, json_decoder
+from shared.client import VoicectlClient
 from shared.keys import RobotKeys, RobotNames
-from shared.messages import OrderStatus, State, StateUpdate
+from shared.messages import (
+    AudioChunk,
+    AudioStart,
+    AudioStop,
+    OrderStatus,
+    Proposal,
+    State,
+    StateUpdate,
+    SttStatus,
+)
 from shared.robot import TransportKind
 from shared.robot.kinds import ON_ZENOH
 from shared.ros2 import Pose2D, Ros2Codec, RosDistro
 
-from .conftest import Stack, wait_until
-from .support import robot_key
+from .conftest import Stack, async_wait_until, wait_until
+from .support import on_bus, robot_key
 
 pytestmark = pytest.mark.e2e
 
@@ -94,6 +106,58 @@ def test_spoken_sequence_moves_the_simulated_robot(stack: Stack) -> None:
     unknown = stack.voicectl("state", "--connect", stack.router, "--robot", "nobody")
     assert unknown.returncode == 1, unknown
     assert "no executor has served robot 'nobody' (known robots: robot)" in unknown.stderr
+
+
+@pytest.mark.parametrize("snr", [None, 5.0], ids=["clean", "pink-noise-5dB"])
+def test_a_person_saying_go_forward_ten_meters_moves_the_robot_ten_meters(
+    stack: Stack, people: dict[str, Path], snr: float | None
+) -> None:
+    """pocketsphinx's recording of a man, streamed to the stack's recogniser as the panel
+    streams a microphone (in pink noise 5 dB below him, a loud room), becomes the order
+    to drive 10 m, which the simulated robot drives."""
+    pcm = read_wav(people["real-goforward"])
+    if snr is not None:
+        pcm = in_pink_noise(pcm, snr, tail=1.0)
+    watch = RobotWatch(stack.router)
+    try:
+        wait_until(lambda: watch.pose is not None, 30.0, "odometry from the sim")
+
+        async def speak(bus: Bus) -> list[str]:
+            keys = RobotKeys("robot")
+            heard: list[Proposal] = []
+            bus.subscribe(keys.proposal, json_decoder(Proposal), lambda _k, p: heard.append(p))
+            ready: list[SttStatus] = []
+            bus.subscribe(
+                keys.stt_status,
+                json_decoder(SttStatus),
+                lambda _k, s: ready.append(s),
+                history=True,
+            )
+            await async_wait_until(lambda: any(s.ready for s in ready), 60.0, "a grammar in use")
+            sender = bus.stream(keys.stt_audio("person"))
+            assert await sender.matched(60.0), "the recogniser does not listen"
+            sender.send(AudioStart())
+            pieces = frames(pcm)
+            for seq, first in enumerate(range(0, len(pieces), 5)):  # 100 ms a message
+                sender.send(AudioChunk(seq=seq, pcm=b"".join(pieces[first : first + 5])))
+            sender.send(AudioStop())
+            await async_wait_until(
+                lambda: any(p.session == "person" for p in heard), 60.0, "the proposal"
+            )
+            [proposal] = [p for p in heard if p.session == "person"]
+            assert not proposal.rejected, proposal
+            assert [o.description for o in proposal.orders] == ["move forward 10 m"], proposal
+            assert [h.ear for h in proposal.hearings] == ["grammar", "moonshine"]
+            client = VoicectlClient(bus)
+            return await client.submit("robot", proposal.orders, proposal.transcript)
+
+        [order_id] = on_bus(stack.router, speak)
+        wait_until(lambda: order_id in watch.pose_at_finish, 60.0, "the drive to finish")
+        arrived = watch.pose_at_finish[order_id]
+        assert abs(arrived.x - 10.0) < 0.2, arrived
+        assert abs(arrived.y) < 0.2, arrived
+    finally:
+        watch.close()
 
 
 def test_panel_api_needs_the_token_and_drives_the_robot(stack: Stack) -> None:

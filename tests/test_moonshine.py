@@ -123,3 +123,15 @@ def test_a_cache_that_cannot_be_written_is_one_line_saying_what_to_set(tmp_path:
     blocked.write_text("not a folder")
     with pytest.raises(EngineError, match="set VOICECTL_CACHE to a folder this user may write"):
         prepare(weights_dir(), blocked)
+
+
+def test_onnxruntime_reports_to_nobody_and_leaves_nothing_behind(tmp_path: Path) -> None:
+    """PyPI's onnxruntime carries Microsoft's telemetry, which writes a session file into
+    the temporary directory (and would report to Microsoft): voicectl turns it off."""
+    scratch = tmp_path / "tmp"
+    scratch.mkdir()
+    environment = {**os.environ, "TMPDIR": str(scratch)}
+    environment.pop("ORT_DISABLE_TELEMETRY", None)
+    done = voicectl("transcribe", str(REPO / "README.md"), env=environment)
+    assert done.returncode == 1, done.stderr  # README.md is no audio: one unreadable file
+    assert list(scratch.iterdir()) == []

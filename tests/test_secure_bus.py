@@ -1,7 +1,8 @@
 """The secured bus, with real sessions: `voicectl bus-secrets` makes a CA, the router's
 certificate, passwords and client configurations; the shipped router configuration
 (TLS, user/password, access control) runs the stack end to end, and refuses whoever has
-no credentials, the wrong certificate, or a role that does not allow what they try."""
+no credentials, the wrong certificate, or a role that does not allow what they try, one
+robot's executor or robot side speaking for another robot among them."""
 
 from __future__ import annotations
 
@@ -11,13 +12,15 @@ import shlex
 import socket
 import stat
 import sys
+from functools import partial
 from pathlib import Path
 
 import pytest
+import zenoh
 
 from shared.bus import Bus, BusOptions, json_decoder
 from shared.errors import BusError
-from shared.keys import RobotKeys, RobotNames
+from shared.keys import BRIDGE_TOKENS, BridgeKind, BridgeToken, RobotKeys, RobotNames
 from shared.messages import (
     Done,
     EmergencyStop,
@@ -25,12 +28,20 @@ from shared.messages import (
     ExecutorReply,
     Failed,
     GetRunning,
+    GetState,
     Latch,
     Release,
     Stopped,
 )
 from shared.ros2 import Odometry, Ros2Codec
-from voicectl.bus_secrets import ROUTER_TEMPLATE, USERS, SecretsExist, write_bus_secrets
+from voicectl.bus_secrets import (
+    ROUTER_TEMPLATE,
+    BusRobot,
+    SecretsExist,
+    router_configuration,
+    users,
+    write_bus_secrets,
+)
 
 from .conftest import REPO, Processes, async_wait_until, free_port, voicectl, wait_until
 from .support import Client, client_wait_ready, joined, order, until_heard
@@ -60,11 +71,21 @@ class SecureSite:
         return joined(self.options(self.config(user)))
 
 
+ROBOTS = [BusRobot("r1"), BusRobot("r2")]
+"""The robots of the secured site: r1 runs, r2 is the one an impostor would pose as."""
+NAMESPACED = [BusRobot("r1", "bot1"), BusRobot("r2", "bot2")]
+
+
 @pytest.fixture
-def site(processes: Processes, tmp_path: Path) -> SecureSite:
+def robots() -> list[BusRobot]:
+    return ROBOTS
+
+
+@pytest.fixture
+def site(processes: Processes, tmp_path: Path, robots: list[BusRobot]) -> SecureSite:
     port = free_port()
     secrets = tmp_path / "bus"
-    write_bus_secrets(secrets, ["127.0.0.1"], port)
+    write_bus_secrets(secrets, ["127.0.0.1"], port, robots)
     site = SecureSite(processes, secrets, port)
     processes.start(
         "services.router", "--config", str(secrets / "router.json5"), "--listen", site.endpoint
@@ -84,29 +105,82 @@ def listening(port: int) -> bool:
 
 def start_robot(site: SecureSite) -> None:
     site.start("services.supervisor", "supervisor", "--robot", "r1")
-    site.start("services.sim", "robot")
-    site.start("services.executor", "executor", "--robot", "r1")
+    site.start("services.sim", "robot-r1")
+    site.start("services.executor", "executor-r1", "--robot", "r1")
+
+
+def user_of(config: Path) -> str:
+    user: str = json.loads(config.read_text())["transport"]["auth"]["usrpwd"]["user"]
+    return user
 
 
 def test_bus_secrets_are_private_and_never_overwritten(tmp_path: Path) -> None:
     written = write_bus_secrets(tmp_path / "bus", ["robot.local", "192.168.1.20"])
     names = {path.name for path in written}
     assert names >= {"ca.pem", "router.pem", "router.key", "passwords", "router.json5"}
-    assert names >= {f"{user}.json5" for user in USERS}
+    assert names >= {f"{user}.json5" for user in users([BusRobot("robot")])}
     public = {"ca.pem", "router.pem", "router.json5"}
     for path in written:
         mode = stat.S_IMODE(path.stat().st_mode)
         assert mode == (0o644 if path.name in public else 0o600), path.name
     client = json.loads((tmp_path / "bus" / "panel.json5").read_text())
     assert client["connect"]["endpoints"] == ["tls/robot.local:7447"]
-    assert client["transport"]["auth"]["usrpwd"]["user"] == "panel"
-    # The router's configuration is the shipped one, paths aside.
+    assert user_of(tmp_path / "bus" / "panel.json5") == "panel"
+    # The router's configuration is the shipped one, paths aside, each robot's rules in.
     router = (tmp_path / "bus" / "router.json5").read_text()
-    assert router == ROUTER_TEMPLATE.read_text().replace(
-        "/etc/voicectl/bus", str((tmp_path / "bus").resolve())
-    )
+    assert router == router_configuration((tmp_path / "bus").resolve(), [BusRobot("robot")])
+    assert "/etc/voicectl/bus" not in router
     with pytest.raises(SecretsExist, match="already holds bus secrets"):
         write_bus_secrets(tmp_path / "bus", ["robot.local"])
+
+
+def test_bus_secrets_has_users_per_robot_and_plain_names_for_the_default_robot(
+    tmp_path: Path,
+) -> None:
+    """Issue 32: one executor user served every robot. Each robot now has its own
+    executor and robot side; the robot every --robot defaults to keeps the plain file
+    names, so that a deployment of one robot starts as it always did."""
+    write_bus_secrets(tmp_path / "one", ["router"])
+    assert user_of(tmp_path / "one" / "executor.json5") == "executor-robot"
+    assert user_of(tmp_path / "one" / "robot.json5") == "robot-robot"
+    assert user_of(tmp_path / "one" / "executor-robot.json5") == "executor-robot"
+
+    write_bus_secrets(tmp_path / "two", ["router"], robots=NAMESPACED)
+    made = {path.name for path in (tmp_path / "two").iterdir()}
+    assert {"executor-r1.json5", "robot-r1.json5", "executor-r2.json5", "robot-r2.json5"} <= made
+    assert not made & {"executor.json5", "robot.json5"}  # whose would they be?
+    passwords = (tmp_path / "two" / "passwords").read_text().splitlines()
+    assert [line.split(":")[0] for line in passwords] == users(NAMESPACED)
+    assert len(set(passwords)) == len(passwords)
+    # Every line of the template is in the router's configuration: only robots are added.
+    router = (tmp_path / "two" / "router.json5").read_text().splitlines()
+    template = ROUTER_TEMPLATE.read_text().replace("/etc/voicectl/bus", str(tmp_path / "two"))
+    added = [line for line in router if line not in template.splitlines()]
+    assert all(line.strip().startswith(("// robot 'r", '{"id": "')) for line in added)
+    assert sum("bot1/**/cmd_vel" in line for line in added) == 1
+    with pytest.raises(ValueError, match="robot name 'r 1' must be letters"):
+        BusRobot("r 1")
+    with pytest.raises(ValueError, match="robots must be named once each"):
+        write_bus_secrets(tmp_path / "three", ["router"], robots=[BusRobot("a"), BusRobot("a")])
+
+
+def test_the_bus_secrets_command_names_robots_and_their_namespaces(tmp_path: Path) -> None:
+    done = voicectl(
+        "bus-secrets", str(tmp_path / "bus"), "--robot", "r1", "--robot", "r2",
+        "--namespace", "r1=/bot1",
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.splitlines()[-2:] == [
+        "robot r1: its executor may say voice/r1/... and the ROS keys under bot1",
+        "robot r2: its executor may say voice/r2/... and any robot's ROS keys (no --namespace)",
+    ]
+    assert user_of(tmp_path / "bus" / "robot-r2.json5") == "robot-r2"
+    stray = voicectl("bus-secrets", str(tmp_path / "other"), "--namespace", "r3=bot3")
+    assert stray.returncode == 2
+    assert stray.stderr.strip() == (
+        "voicectl bus-secrets: --namespace names robot 'r3', which no --robot names (robots: robot)"
+    )
+    assert not (tmp_path / "other").exists()
 
 
 async def test_the_stack_runs_end_to_end_on_the_secured_bus(site: SecureSite) -> None:
@@ -183,6 +257,113 @@ async def test_the_operator_releases_a_stop_only_through_the_supervisor(
         assert released == Done(detail="emergency stop released")  # the executor's too
         (product,) = await client.submit(order("mul", first=2, second=2))
         assert (await client.finished(product)).message == "2 x 2 = 4"
+
+
+async def test_an_executor_cannot_speak_or_announce_for_another_robot(site: SecureSite) -> None:
+    """Issue 32: the executor's credentials could publish events and hold liveliness
+    tokens for any robot name, so that one robot's executor posed as another's (300 made
+    up robots appeared). r1's executor now speaks for r1 alone: what it says as r2 never
+    reaches the panel, and the supervisor never takes r2 on; as r1 it is heard and
+    served. What it forges is said first, on the same link: once the genuine reaches the
+    panel, the forged would have too."""
+    site.start("services.supervisor", "supervisor")  # serves whichever executor announces
+    r1, r2 = RobotKeys("r1"), RobotKeys("r2")
+    tokens: list[str] = []
+    events: list[str] = []
+
+    with site.joined("panel") as panel:
+        panel.watch(RobotKeys.any_robot().alive("*"), lambda key, up: up and tokens.append(key))
+        panel.subscribe(
+            RobotKeys.any_robot().executor_events, bytes, lambda key, _: events.append(key)
+        )
+        with site.joined("executor-r1") as impostor:
+            await until_heard(impostor, r1.executor_events)  # the panel's subscriptions are up
+            impostor.announce(r2.alive("executor"))
+            impostor.publish_bytes(r2.executor_events, b'{"type": "forged"}')
+            impostor.announce(r1.alive("executor"))
+            impostor.publish_bytes(r1.executor_events, b'{"type": "genuine"}')
+            await async_wait_until(
+                lambda: r1.executor_events in events and r1.alive("executor") in tokens,
+                10.0,
+                "r1's executor heard",
+            )
+            await async_wait_until(
+                lambda: r1.alive("supervisor") in tokens, 30.0, "the supervisor serving r1"
+            )
+            assert r2.executor_events not in events
+            assert [key for key in tokens if key.startswith(r2.prefix)] == []
+            unknown = await Client(panel, "r2").ask(GetState())
+            assert isinstance(unknown, Failed), unknown
+            assert unknown.reason.startswith("no executor has served robot 'r2' (known robots: r1)")
+
+
+def replies(bus: Bus, key: str, timeout: float = 5.0) -> list[str]:
+    """The keys that answered a query on `key` (on a thread: it waits)."""
+    return [str(r.ok.key_expr) for r in bus.session.get(key, timeout=timeout) if r.ok is not None]
+
+
+def answering(bus: Bus, key: str) -> None:
+    def answer(query: zenoh.Query) -> None:
+        query.reply(query.key_expr, b"goal accepted")
+
+    bus.session.declare_queryable(key, answer)
+
+
+@pytest.mark.parametrize("robots", [NAMESPACED], ids=["namespaced"])
+async def test_given_namespaces_only_its_own_executor_and_bridge_speak_for_a_robot(
+    site: SecureSite,
+) -> None:
+    """Issue 32, on the robots' own keys: with each robot's ROS namespace known
+    (bus-secrets --namespace r1=bot1), r1's executor publishes velocity and asks actions
+    only under bot1, and r1's robot side publishes and announces interfaces only under
+    bot1. Each forgery is said before its genuine twin, on the same link."""
+    bot1, bot2 = RobotNames("bot1"), RobotNames("bot2")
+    heard: list[str] = []
+    announced: list[str] = []
+
+    with (
+        site.joined("observer") as observer,
+        site.joined("executor-r1") as executor1,
+        site.joined("executor-r2") as executor2,
+        site.joined("robot-r1") as robot1,
+        site.joined("robot-r2") as robot2,
+    ):
+        for key in (bot2.cmd_vel, bot1.cmd_vel, bot2.odom, bot1.odom):
+            observer.subscribe(key, bytes, lambda key, _: heard.append(key))
+        observer.watch(BRIDGE_TOKENS, lambda key, up: up and announced.append(key))
+        for key in (bot1.cmd_vel, bot2.cmd_vel):
+            await until_heard(executor1, key)
+        executor1.publish_bytes(bot2.cmd_vel, CODEC.twist(1.0, 0.0))
+        executor1.publish_bytes(bot1.cmd_vel, CODEC.twist(1.0, 0.0))
+        await async_wait_until(lambda: bot1.cmd_vel in heard, 10.0, "bot1's velocity")
+        assert bot2.cmd_vel not in heard
+
+        zid = str(robot1.session.info.zid())
+        forged, genuine = (
+            BridgeToken(BridgeKind.PUBLISHER, names.odom, "nav_msgs/msg/Odometry").token_key(zid)
+            for names in (bot2, bot1)
+        )
+        robot1.announce(forged)
+        robot1.publish_bytes(bot2.odom, b"forged")
+        robot1.announce(genuine)
+        robot1.publish_bytes(bot1.odom, b"genuine")
+        await async_wait_until(
+            lambda: genuine in announced and bot1.odom in heard, 10.0, "bot1's robot side"
+        )
+        assert forged not in announced
+        assert bot2.odom not in heard
+
+        goal1, goal2 = bot1.navigate("send_goal"), bot2.navigate("send_goal")
+        answering(robot1, goal1)
+        answering(robot2, goal2)
+
+        async def answered(bus: Bus, key: str) -> bool:
+            return await asyncio.to_thread(replies, bus, key) == [key]
+
+        for bus, key in ((executor1, goal1), (executor2, goal2)):
+            await async_wait_until(partial(answered, bus, key), 10.0, f"{key} answered")
+        # Refused queries are dropped unanswered: they end at the timeout.
+        assert await asyncio.to_thread(replies, executor1, goal2, 2.0) == []
 
 
 def without_credentials(config: Path, target: Path) -> Path:

@@ -298,8 +298,9 @@ async def test_bad_input_is_logged_and_dropped_and_sessions_go_on(
         assert not final.rejected
         assert listener.statuses[-1].ready
     log = processes.log(next(p for name, p, _ in processes.started if name == "stt"))
-    assert "dropped undecodable message on voice/robot/stt/audio/junk" in log
-    assert "pcm must be whole 640-byte frames" in log
+    # One line for the junk (the frames that are not whole are the next warning of the same
+    # subscription within shared/throttle.py's interval: held back, not logged).
+    assert log.count("dropped undecodable message on voice/robot/stt/audio/junk") == 1
     assert log.count("audio for session nostart, not started: dropped") == 1  # once
     assert "stop for session nostart, which was not started: ignored" in log
     assert "grammar empty not used: grammar empty: JSGF grammar has no public rule" in log

@@ -18,7 +18,7 @@ from shared.bus import DEFAULT_ROUTER, Bus
 from shared.client import Refused, VoicectlClient
 from shared.config import data_dir, default_token_file, load_or_create_token
 from shared.errors import BusError, OrdersFileError
-from shared.keys import ConverterKeys, RobotKeys, RobotNames
+from shared.keys import ConverterKeys, RobotKeys, RobotNames, check_ros_name
 from shared.messages import (
     Cancel,
     CancelAll,
@@ -167,6 +167,10 @@ def build_parser() -> argparse.ArgumentParser:
     secrets = sub.add_parser(
         "bus-secrets",
         help="make a secured bus's CA, router certificate, passwords and per-service configs",
+        description="Make a secured bus's CA, router certificate, passwords and one client "
+        "config per user: one per host service, and an executor-NAME and a robot-NAME per "
+        "robot, which may speak only for that robot. The robot named 'robot' also gets "
+        "executor.json5 and robot.json5.",
     )
     secrets.add_argument(
         "directory", type=Path, nargs="?", default=None, help="default: data dir/bus"
@@ -180,6 +184,25 @@ def build_parser() -> argparse.ArgumentParser:
         "the one their configs connect to; localhost and 127.0.0.1 are always included)",
     )
     secrets.add_argument("--port", type=int, default=7447, help="the router's TLS port")
+    secrets.add_argument(
+        "--robot",
+        action="append",
+        type=robot_name,
+        default=[],
+        metavar="NAME",
+        help="a robot of this deployment, as its services' --robot names it (repeatable; "
+        "default: robot)",
+    )
+    secrets.add_argument(
+        "--namespace",
+        action="append",
+        type=_robot_namespace,
+        default=[],
+        metavar="NAME=NAMESPACE",
+        help="a robot's ROS namespace, as its executor's --namespace (repeatable): its "
+        "executor may then drive and ask only the topics and actions under it, and its "
+        "robot side speak only under it",
+    )
 
     token = sub.add_parser("token", help="print the panel's API token (creating it if needed)")
     token.add_argument("--token-file", type=Path, default=None)
@@ -312,12 +335,34 @@ def _up(args: argparse.Namespace) -> int:
     return run_stack(children, web, args.router, ready)
 
 
-def _bus_secrets(args: argparse.Namespace) -> int:
-    from .bus_secrets import SecretsExist, write_bus_secrets
+def _robot_namespace(text: str) -> tuple[str, str]:
+    """argparse type for NAME=NAMESPACE."""
+    name, equals, namespace = text.partition("=")
+    if not equals:
+        raise argparse.ArgumentTypeError(f"{text!r} is not NAME=NAMESPACE ('bot1=/bot1')")
+    try:
+        return robot_name(name), check_ros_name(namespace, "ROS namespace")
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from exc
 
+
+def _bus_secrets(args: argparse.Namespace) -> int:
+    from .bus_secrets import DEFAULT_ROBOT, BusRobot, SecretsExist, write_bus_secrets
+
+    names = list(dict.fromkeys(args.robot or [DEFAULT_ROBOT]))
+    namespaces = dict(args.namespace)
+    strays = sorted(set(namespaces) - set(names))
+    if strays:
+        print(
+            f"voicectl bus-secrets: --namespace names robot '{strays[0]}', which no --robot "
+            f"names (robots: {', '.join(names)})",
+            file=sys.stderr,
+        )
+        return 2
+    robots = [BusRobot(name, namespaces.get(name, "")) for name in names]
     directory = (args.directory or data_dir() / "bus").expanduser().resolve()
     try:
-        written = write_bus_secrets(directory, args.host, args.port)
+        written = write_bus_secrets(directory, args.host, args.port, robots)
     except SecretsExist as exc:
         print(f"voicectl bus-secrets: {exc}", file=sys.stderr)
         return 1
@@ -325,6 +370,13 @@ def _bus_secrets(args: argparse.Namespace) -> int:
     print(f"bus secrets in {directory} (keys, passwords and client configs mode 0600)")
     print(f"router: voicectl router --config {directory / 'router.json5'}")
     print(f"clients: --config {directory}/<user>.json5 for {', '.join(clients)}")
+    for robot in robots:
+        scope = (
+            f"the ROS keys under {robot.namespace}"
+            if robot.namespace
+            else "any robot's ROS keys (no --namespace)"
+        )
+        print(f"robot {robot.name}: its executor may say voice/{robot.name}/... and {scope}")
     return 0
 
 

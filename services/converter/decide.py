@@ -10,7 +10,8 @@ and reported on its test split (docs/benchmarks.md, docs/speech.md):
 - Both make the same orders: taken, and a value the grammar doubted is no longer doubted.
 - They make different orders: nothing, never a guess between them.
 - Only Moonshine's words make orders: taken. It heard the person's words, free of the
-  grammar; on the dev split its orders were never wrong.
+  grammar; on the dev split its orders were never wrong. A number in them that has a
+  -teen or -ty twin ("fifty", "fifteen") is asked, offering the twin.
 - Only the grammar's: taken when Moonshine finds them nearly as likely as its own words
   ("breach the kitchen" heard for "reach the kitchen"), and Moonshine heard no other
   numbers. A person saying "front left" is heard as "front left" by Moonshine and as "turn
@@ -38,6 +39,15 @@ SOUNDS_LIKE_TWO = ("to", "too")
 _NUMBERS = re.compile(rf"(?<!\S){NUMBER_PATTERN}(?!\S)")
 _DIGITS = re.compile(r"(?<!\S)-?\d+(?:\.\d+)?(?!\S)")
 _LIST_NUMBER = re.compile(r"^\s*\d+[.)]\s+")
+_TEENS = ["thirteen", "fourteen", "fifteen", "sixteen", "seventeen", "eighteen", "nineteen"]
+_TENS = ["thirty", "forty", "fifty", "sixty", "seventy", "eighty", "ninety"]
+_PARTNERS = {
+    **dict(zip(_TEENS, _TENS, strict=True)),
+    **dict(zip(_TENS, _TEENS, strict=True)),
+    **{str(n): str((n - 10) * 10) for n in range(13, 20)},
+    **{str((n - 10) * 10): str(n) for n in range(13, 20)},
+}
+"""Numbers that people and models confuse with another: "fifteen" and "fifty"."""
 
 
 @dataclass(frozen=True)
@@ -200,7 +210,8 @@ def decide(grammar: Reading, second: Reading | None, rule: Rule = SHIPPED) -> De
             return _refuse(second, hearings, f"the two ears disagree ({both}): say it again")
         if grammar.orders == second.orders:
             return _take(replace(second, doubts=[]), hearings, f"both heard {_said(second)}")
-        return _take(second, hearings, f"{second.ear} heard {_said(second)}")
+        asked = replace(second, doubts=second.doubts or _teens_or_tens(second.text))
+        return _take(asked, hearings, f"{second.ear} heard {_said(second)}")
     if not grammar.orders or not (grammar.accepted or rule.overrule):
         rejected = second if second.heard else grammar
         return _refuse(rejected, hearings, rejected.reason)
@@ -211,6 +222,16 @@ def decide(grammar: Reading, second: Reading | None, rule: Rule = SHIPPED) -> De
         return _refuse(second, hearings, f"the two ears heard other numbers ({both}): say it again")
     backed = replace(grammar, accepted=True, doubts=[])
     return _take(backed, hearings, f"both heard {_said(grammar)}")
+
+
+def _teens_or_tens(text: str) -> list[Doubt]:
+    """A number only Moonshine heard that sounds like its -teen or -ty ("fifty" and
+    "fifteen": in babble it wrote 50 for a person's 15) is asked, offering the other."""
+    for position, word in enumerate(text.split(" ")):
+        other = _PARTNERS.get(word)
+        if other is not None:
+            return [Doubt(position=position, words=word, alternatives=[other], confidence=0.5)]
+    return []
 
 
 def numbers(text: str) -> list[float]:

@@ -16,6 +16,7 @@ is a module with a `load(options)` function and one entry here.
 from __future__ import annotations
 
 import importlib
+import importlib.util
 import math
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -179,13 +180,19 @@ def load_engine(options: EngineOptions) -> Engine:
     kind = ENGINES.get(options.name)
     if kind is None:
         raise EngineError(f"unknown engine {options.name!r}; engines: {', '.join(ENGINES)}")
+    # Found, not imported: the engine's module imports its library as it must be imported
+    # (onnxruntime with its telemetry off, moonshine.py).
+    if importlib.util.find_spec(kind.requires) is None:
+        raise EngineError(
+            f"the {kind.name} engine is not installed: pip install 'voicectl[{kind.extra}]' "
+            f"(no module named {kind.requires!r})"
+        )
     try:
-        importlib.import_module(kind.requires)
+        load: Callable[[EngineOptions], Engine] = importlib.import_module(kind.module).load
     except ImportError as exc:
         raise EngineError(
             f"the {kind.name} engine is not installed: pip install 'voicectl[{kind.extra}]' ({exc})"
         ) from exc
-    load: Callable[[EngineOptions], Engine] = importlib.import_module(kind.module).load
     return load(options)
 
 

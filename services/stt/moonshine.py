@@ -27,7 +27,7 @@ import shutil
 import tempfile
 import threading
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -40,7 +40,7 @@ _LOGGER = logging.getLogger(__name__)
 DISTRIBUTION = "moonshine-cpp"
 MODEL_DIR = "moonshine_cpp/models/base-en"
 FILES = ("encoder_model.ort", "decoder_model_merged.ort", "tokenizer.bin")
-PREPARATION = "1"
+PREPARATION = "2"
 """Changes whenever `prepare` makes other files, so that older caches are not used."""
 LAYERS = 8
 HEADS = 8
@@ -70,8 +70,19 @@ class Transcript:
     """The geometric mean of the chosen tokens' probabilities, 0..1 (0 for no text)."""
     seconds: float
     """Wall-clock time the transcription took."""
-    audio: Audio | None = None
+    audio: Audio | None = field(default=None, repr=False)
     """The encoder's view of the utterance, to weigh other words against (`likelihood`)."""
+
+
+def runtime() -> Any:
+    """onnxruntime, imported with its telemetry off. PyPI's build (1.32) carries Microsoft's
+    1DS telemetry, which on Linux writes a session file into the temporary directory and
+    would report to Microsoft's collector: a robot's recogniser reports to nobody."""
+    os.environ.setdefault("ORT_DISABLE_TELEMETRY", "1")
+    import onnxruntime
+
+    onnxruntime.disable_telemetry_events()
+    return onnxruntime
 
 
 class Cancelled(Exception):
@@ -107,8 +118,7 @@ def prepare(source: Path, cache: Path) -> Path:
     Blocking, a few seconds the first time. Several processes may prepare at once: each
     writes a folder of its own and the first rename wins.
     """
-    import onnxruntime
-
+    onnxruntime = runtime()
     digest = hashlib.blake2b(digest_size=8)
     for name in FILES[:2]:
         digest.update((source / name).read_bytes())
@@ -140,20 +150,31 @@ def prepare(source: Path, cache: Path) -> Path:
 
 def _convert(ort_file: Path, onnx_file: Path) -> None:
     """onnxruntime's own serialiser writes the ORT-format model as ONNX; its weight
-    products are then rewritten (`quantized_products`)."""
+    products are rewritten (`quantized_products`); then onnxruntime's graph optimisations
+    (the portable ones: no layout for this CPU) are run once and kept. Run at every load,
+    they took the process from 107 to 527 MB for a moment; kept, a load peaks at 232."""
     import onnx
-    import onnxruntime
 
-    options = onnxruntime.SessionOptions()
-    options.graph_optimization_level = onnxruntime.GraphOptimizationLevel.ORT_DISABLE_ALL
-    options.optimized_model_filepath = str(onnx_file)
-    options.log_severity_level = 3
-    onnxruntime.InferenceSession(str(ort_file), options, providers=["CPUExecutionProvider"])
-    model = onnx.load(str(onnx_file))
+    raw = onnx_file.with_suffix(".raw.onnx")
+    _serialise(ort_file, raw, "ORT_DISABLE_ALL")
+    model = onnx.load(str(raw))
     _name_subgraphs(model.graph, "main")
     if quantized_products(model) == 0:
         raise EngineError(f"{ort_file}: no int8 weights where Moonshine base has them")
-    onnx.save(model, str(onnx_file))
+    onnx.save(model, str(raw))
+    _serialise(raw, onnx_file, "ORT_ENABLE_EXTENDED")
+    raw.unlink()
+
+
+def _serialise(source: Path, target: Path, level: str) -> None:
+    """`source` loaded by onnxruntime with graph optimisations up to `level`, written to
+    `target` as ONNX."""
+    onnxruntime = runtime()
+    options = onnxruntime.SessionOptions()
+    options.graph_optimization_level = getattr(onnxruntime.GraphOptimizationLevel, level)
+    options.optimized_model_filepath = str(target)
+    options.log_severity_level = 3
+    onnxruntime.InferenceSession(str(source), options, providers=["CPUExecutionProvider"])
 
 
 def _name_subgraphs(graph: Any, prefix: str) -> None:
@@ -376,11 +397,18 @@ class Moonshine:
     """
 
     def __init__(
-        self, encoder: Path, decoder: Path, tokens: Path, threads: int = 1, arena: bool = True
+        self,
+        encoder: Path,
+        decoder: Path,
+        tokens: Path,
+        threads: int = 1,
+        arena: bool = True,
+        optimised: bool = False,
     ) -> None:
-        import onnxruntime
-
+        onnxruntime = runtime()
         options = onnxruntime.SessionOptions()
+        if optimised:  # `prepare` ran the optimisations once already
+            options.graph_optimization_level = onnxruntime.GraphOptimizationLevel.ORT_DISABLE_ALL
         options.intra_op_num_threads = threads
         options.inter_op_num_threads = 1
         options.enable_cpu_mem_arena = arena
@@ -396,7 +424,7 @@ class Moonshine:
     def prepared(cls, source: Path, folder: Path, threads: int = 1) -> Moonshine:
         """The model `prepare` made into `folder` from the files in `source`."""
         encoder, decoder = folder / "encoder.onnx", folder / "decoder.onnx"
-        return cls(encoder, decoder, source / "tokenizer.bin", threads)
+        return cls(encoder, decoder, source / "tokenizer.bin", threads, optimised=True)
 
     @classmethod
     def shipped(cls, source: Path, threads: int = 1) -> Moonshine:

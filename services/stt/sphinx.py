@@ -29,11 +29,14 @@ Per utterance, measured on generated speech (bench/stt.py), these choices matter
   0.3 s window) confirmed ends 460 to 490 ms after the speech. The decoder also gets
   `PRE_ROLL` seconds from before the speech, so that the first word can start. In steady
   noise (a fan, a motor) the detector hears speech until the noise stops, which may be
-  never: a frame is speech only if it is also 6 dB louder than the room, the quietest
-  tenth of the last 3 s. On the dev split that ended utterances in pink noise 255 ms
-  after the voice (p95, audio time) instead of at the end of the file, for 4 of 174
-  commands; counting frames 12 to 24 dB below the utterance's own level as silence had
-  cut word endings and lost 5 to 26. Babble, as loud as the room, still runs on.
+  never: a frame is speech only if it is also 4 dB louder than the room, the quietest
+  tenth of the last 3 s. 6 dB, chosen for pocketsphinx alone, ended utterances sooner in
+  pink noise, but cut a person's quieter last words at 5 to 10 dB of noise ("go forward
+  ten" of "... ten meters"). With Moonshine hearing too, on the dev split's commands in
+  pink noise and babble, 4 dB made 7 more right and 3 dB 10 more, none wrong; but at 3 dB
+  an utterance in pink noise 12 dB below the voice ended a second after the voice did
+  (docs/benchmarks.md). Counting frames 12 to 24 dB below the utterance's own level as
+  silence had cut word endings. Babble, as loud as the room, still runs on.
 """
 
 from __future__ import annotations
@@ -76,7 +79,7 @@ START_FRAMES = 3
 """Speech begins when this many of the last `START_WINDOW` VAD frames are speech."""
 MIN_SPEECH_FRAMES = 5
 """Fewer speech frames (0.15 s) are a click or a breath, not an utterance."""
-ROOM_MARGIN = 6.0
+ROOM_MARGIN = 4.0
 """dB a frame must stand out from the room (the quietest tenth of the last `ROOM_WINDOW`
 frames) to count as speech, beside the detector's own word."""
 ROOM_WINDOW = 100
@@ -413,7 +416,8 @@ class SphinxRecogniser:
             self._listener.drop()
         if self._decoder is not None:
             if self._utterance is not None:
-                self._decoder.decoder.end_utt()
+                if self._utterance.live:  # else the early final pass ended it already
+                    self._decoder.decoder.end_utt()
                 self._utterance = None
             self._engine.give_back(self._decoder)
             self._decoder = None
