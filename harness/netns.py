@@ -16,6 +16,7 @@ it with the loss probability: netem's `delay D loss L` on both ends of the link.
 
     python -m harness.netns shape --queue N --delay-ms 100 --loss 5   (inside a namespace)
     python -m harness.netns clean      (remove what runs of killed tests left behind)
+    python -m harness.netns rtps --seconds 10 --enough 3   (DDS's datagrams seen here)
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ import struct
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -52,7 +54,7 @@ LEASE = ("--cfg", f"transport/link/tx/lease:{LEASE_MS}")
 Side = Literal["host", "robot"]
 SIDES: tuple[Side, ...] = ("host", "robot")
 _PREFIX = "vcx"
-_NAME = re.compile(rf"^{_PREFIX}(\d+)n\d+[hr]$")
+_NAME = re.compile(rf"^{_PREFIX}(\d+)n\d+[hrl]$")
 _COUNTER = itertools.count()
 
 
@@ -246,6 +248,151 @@ class TwoHosts:
         self.close()
 
 
+class LoopbackOnly:
+    """One network namespace with nothing but loopback up, for processes that must reach
+    one another and nothing else: DDS participants (real ROS 2), which discover by
+    multicast. No route leaves it, so no packet of theirs can leave the machine. A
+    process outside joins a Zenoh router in it, or it one outside, through a Unix socket
+    (`socket`). Everything started here is stopped, and the namespace deleted, by
+    `close()`, whatever happened before; `clean_stale` removes those of killed runs."""
+
+    def __init__(self, logs: Path) -> None:
+        logs.mkdir(parents=True, exist_ok=True)
+        tag = f"{_PREFIX}{os.getpid()}n{next(_COUNTER)}"
+        self.name = f"{tag}l"
+        self._sockets = Path(tempfile.mkdtemp(prefix=f"{tag}-"))
+        self.processes = Processes(logs)
+        self._pdeathsig = ["setpriv", "--pdeathsig", "KILL"] if shutil.which("setpriv") else []
+        clean_stale()
+        try:
+            _run("ip", "netns", "add", self.name)
+            _run("ip", "-n", self.name, "link", "set", "lo", "up")
+        except BaseException:
+            self.close()
+            raise
+
+    def socket(self, name: str = "router") -> str:
+        """A Zenoh endpoint on a Unix socket that both sides of the namespace reach."""
+        return f"unixsock-stream/{self._sockets / name}.sock"
+
+    @property
+    def prefix(self) -> list[str]:
+        """What runs a command inside (it execs the next program)."""
+        return ["ip", "netns", "exec", self.name, *self._pdeathsig]
+
+    def start(
+        self,
+        module: str,
+        *args: str,
+        name: str,
+        python: str | Path | None = None,
+        env: dict[str, str] | None = None,
+    ) -> subprocess.Popen[bytes]:
+        """`python -m module args` inside; its output goes to a log."""
+        return self.processes.start(
+            module, *args, name=name, prefix=self.prefix, python=python, env=env
+        )
+
+    def run(self, *command: str, env: dict[str, str] | None = None) -> str:
+        """Run a command inside to its end; its output (RuntimeError if it fails)."""
+        done = subprocess.run(
+            [*self.prefix, *command], capture_output=True, text=True, timeout=60, env=env
+        )
+        if done.returncode != 0:
+            raise RuntimeError(f"{' '.join(command)}: {done.stderr.strip() or done.returncode}")
+        return done.stdout
+
+    def log(self, name: str) -> str:
+        return self.processes.log(name)
+
+    def dump(self) -> str:
+        return self.processes.dump()
+
+    def close(self) -> list[str]:
+        """Stop everything started here and delete the namespace; what did not stop cleanly."""
+        try:
+            unclean = self.processes.stop_all()
+        finally:
+            subprocess.run(["ip", "netns", "del", self.name], capture_output=True, timeout=30)
+            shutil.rmtree(self._sockets, ignore_errors=True)
+        return unclean
+
+    def __enter__(self) -> LoopbackOnly:
+        return self
+
+    def __exit__(self, *_: object) -> None:
+        self.close()
+
+
+# --- DDS's packets, counted: that they stay in the namespace -----------------------------
+
+_ETH_P_ALL = 0x0003
+_UDP = 17
+
+
+def is_rtps(frame: bytes) -> bool:
+    """Whether a link-layer frame (AF_PACKET, Ethernet framing, as loopback has too) is a
+    UDP datagram of RTPS, DDS's wire protocol: its payload starts with b'RTPS'."""
+    if len(frame) < 14:
+        return False
+    ethertype = int.from_bytes(frame[12:14], "big")
+    if ethertype == 0x0800 and len(frame) >= 34 and frame[23] == _UDP:
+        udp = 14 + (frame[14] & 0x0F) * 4
+    elif ethertype == 0x86DD and len(frame) >= 54 and frame[20] == _UDP:
+        udp = 14 + 40
+    else:
+        return False
+    return frame[udp + 8 : udp + 12] == b"RTPS"
+
+
+class RtpsCounter:
+    """Counts, on a thread of its own, the RTPS datagrams that cross any link of the
+    network namespace it was made in (sent or received), until closed; `reached` is set
+    once `enough` are seen. Needs root."""
+
+    def __init__(self, enough: int = 1) -> None:
+        self.count = 0
+        self.reached = threading.Event()
+        self._enough = enough
+        self._sniffer = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, socket.htons(_ETH_P_ALL))
+        self._sniffer.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 << 20)
+        self._sniffer.settimeout(0.1)
+        self._stopping = threading.Event()
+        self._thread = threading.Thread(target=self._count, name="rtps-counter", daemon=True)
+        self._thread.start()
+
+    def _count(self) -> None:
+        while not self._stopping.is_set():
+            try:
+                frame = self._sniffer.recv(65535)
+            except TimeoutError:
+                continue
+            if is_rtps(frame):
+                self.count += 1
+                if self.count >= self._enough:
+                    self.reached.set()
+
+    def close(self) -> int:
+        """Stop counting; the count."""
+        self._stopping.set()
+        self._thread.join()
+        self._sniffer.close()
+        return self.count
+
+    def __enter__(self) -> RtpsCounter:
+        return self
+
+    def __exit__(self, *_: object) -> None:
+        self.close()
+
+
+def count_rtps(seconds: float, enough: int) -> int:
+    """RTPS datagrams seen in this namespace within `seconds`, stopping early at `enough`."""
+    with RtpsCounter(enough) as counter:
+        counter.reached.wait(seconds)
+        return counter.count
+
+
 # --- the shaper: netem's delay and loss in user space, through NFQUEUE ---------------------
 
 _NETLINK_NETFILTER = 12
@@ -353,9 +500,14 @@ def main(argv: list[str] | None = None) -> int:
     shaper.add_argument("--delay-ms", type=float, default=100.0)
     shaper.add_argument("--loss", type=float, default=5.0, metavar="PERCENT")
     commands.add_parser("clean", help="delete namespaces left by killed runs")
+    rtps = commands.add_parser("rtps", help="count DDS's datagrams on this namespace's links")
+    rtps.add_argument("--seconds", type=float, default=10.0, help="count for this long")
+    rtps.add_argument("--enough", type=int, default=1, help="stop once this many are seen")
     args = parser.parse_args(argv)
     if args.command == "shape":
         shape(args.queue, args.delay_ms / 1000, args.loss / 100)
+    elif args.command == "rtps":
+        print(count_rtps(args.seconds, args.enough))
     else:
         print("\n".join(clean_stale()) or "nothing to clean")
     return 0

@@ -9,7 +9,7 @@ import os
 import signal
 import subprocess
 import sys
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
@@ -26,16 +26,27 @@ class Processes:
         self.started: list[tuple[str, Process, Path]] = []
 
     def start(
-        self, module: str, *args: str, name: str | None = None, prefix: Sequence[str] = ()
+        self,
+        module: str,
+        *args: str,
+        name: str | None = None,
+        prefix: Sequence[str] = (),
+        python: str | Path | None = None,
+        env: Mapping[str, str] | None = None,
     ) -> Process:
         """`python -m module args`, run through `prefix` when given (a command that execs
-        the next, as `ip netns exec NS` does); its output goes to its log."""
+        the next, as `ip netns exec NS` does), by another `python` (a venv of real ROS 2)
+        and with another `env` when given; its output goes to its log."""
         name = name or module.rsplit(".", 1)[-1]
         log = self.logs / f"{name}-{len(self.started)}.log"
-        env = {**os.environ, "PYTHONUNBUFFERED": "1", "VOICECTL_DATA": str(self.logs / "data")}
+        env = {
+            **(os.environ if env is None else env),
+            "PYTHONUNBUFFERED": "1",
+            "VOICECTL_DATA": str(self.logs / "data"),
+        }
         with log.open("wb") as out:
             process = subprocess.Popen(
-                [*prefix, sys.executable, "-m", module, *args],
+                [*prefix, str(python or sys.executable), "-m", module, *args],
                 stdout=out,
                 stderr=subprocess.STDOUT,
                 cwd=REPO,

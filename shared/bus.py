@@ -182,6 +182,11 @@ class Bus:
             bus._closers.close()
             session.close()
 
+    def at_close(self, func: Callable[[], object]) -> None:
+        """Call `func()` when the bus closes, before its session does (what was opened on
+        top of it: a robot transport's own node)."""
+        self._closers.callback(func)
+
     def _close_streams(self) -> None:
         for stream in list(self._streams):
             stream.close()
@@ -193,7 +198,8 @@ class Bus:
     def encode(self, message: Message) -> bytes:
         return self._encoder.encode(message)
 
-    def _call_soon(self, func: Callable[..., object], *args: Any) -> None:
+    def call_soon(self, func: Callable[..., object], *args: Any) -> None:
+        """Run `func(*args)` on the bus's loop, from any thread; nothing once it closes."""
         with contextlib.suppress(RuntimeError):  # the loop is closing; nothing to deliver to
             self._loop.call_soon_threadsafe(func, *args)
 
@@ -276,7 +282,7 @@ class Bus:
                 self._noise.warning(key, "dropped undecodable message on %s: %s", sample_key, exc)
                 return
             if on_loop:
-                self._call_soon(handler, sample_key, message)
+                self.call_soon(handler, sample_key, message)
             else:
                 handler(sample_key, message)
 
@@ -313,10 +319,12 @@ class Bus:
         timeout: float,
         urgent: bool = False,
         attachment: bytes | None = None,
+        complete: bool = False,
     ) -> bytes:
         """Send one query (with an `attachment` if given) and return the first good reply's
         payload. An `urgent` one (a stop, a cancel) waits for room instead of being
-        dropped, and goes first."""
+        dropped, and goes first. A `complete` one is asked only of queryables declared
+        complete, one reply per key (rmw_zenoh's clients ask so)."""
         future: asyncio.Future[bytes] = self._loop.create_future()
 
         def settle(result: bytes | BaseException) -> None:
@@ -335,14 +343,14 @@ class Bus:
                 return
             answered = True
             if reply.ok is not None:
-                self._call_soon(settle, reply.ok.payload.to_bytes())
+                self.call_soon(settle, reply.ok.payload.to_bytes())
             elif reply.err is not None:
                 text = reply.err.payload.to_string()
-                self._call_soon(settle, BusError(f"{key}: {text}"))
+                self.call_soon(settle, BusError(f"{key}: {text}"))
 
         def on_done() -> None:
             if not answered:  # one loop wake-up per request, not two
-                self._call_soon(settle, BusError(f"{key}: {self._unanswered}"))
+                self.call_soon(settle, BusError(f"{key}: {self._unanswered}"))
 
         qos: dict[str, Any] = {}
         if urgent:
@@ -351,6 +359,8 @@ class Bus:
                 "priority": zenoh.Priority.REAL_TIME,
                 "express": True,
             }
+        if complete:
+            qos.update(_COMPLETE)
         self._session.get(
             key,
             zenoh.handlers.Callback(on_reply, on_done, indirect=False),
@@ -362,7 +372,12 @@ class Bus:
         return await future
 
     def query_and_forget(
-        self, key: str, payload: bytes, timeout: float, attachment: bytes | None = None
+        self,
+        key: str,
+        payload: bytes,
+        timeout: float,
+        attachment: bytes | None = None,
+        complete: bool = False,
     ) -> None:
         """Send an urgent query whose answer nobody waits for, from any thread: a cancel
         sent by a thread whose event loop cannot wait for it (the executor's watchdog)."""
@@ -375,7 +390,16 @@ class Bus:
             congestion_control=zenoh.CongestionControl.BLOCK,
             priority=zenoh.Priority.REAL_TIME,
             express=True,
+            **(_COMPLETE if complete else {}),
         )
+
+    def keeping(self, key: str, depth: int = 1) -> Kept:
+        """A publisher of raw bytes (CDR) on `key` that keeps its last `depth` samples for
+        subscribers that come later, and asks them (ROS's transient local, as rmw_zenoh
+        publishes it: an action's status)."""
+        kept = Kept(self, key, depth)
+        self._closers.callback(kept.close)
+        return kept
 
     async def request(
         self,
@@ -646,7 +670,7 @@ class Bus:
 
         def on_sample(sample: zenoh.Sample) -> None:
             alive = sample.kind == zenoh.SampleKind.PUT
-            self._call_soon(handler, str(sample.key_expr), alive)
+            self.call_soon(handler, str(sample.key_expr), alive)
 
         subscriber = self._session.liveliness().declare_subscriber(
             key, _direct(on_sample), history=True
@@ -660,13 +684,13 @@ class Bus:
         publisher = self._session.declare_publisher(key)
 
         def on_status(status: zenoh.MatchingStatus) -> None:
-            self._call_soon(handler, status.matching)
+            self.call_soon(handler, status.matching)
 
         stop_publishing = self._undeclare_once(publisher)
         listener = publisher.declare_matching_listener(_direct(on_status))
         stop_listening = self._undeclare_once(listener)  # closed first: it lives in the publisher
         now: Any = publisher.matching_status
-        self._call_soon(handler, now.matching)
+        self.call_soon(handler, now.matching)
 
         def stop() -> None:
             stop_listening()
@@ -683,13 +707,13 @@ class Bus:
         querier = self._session.declare_querier(key)
 
         def on_status(status: zenoh.MatchingStatus) -> None:
-            self._call_soon(handler, status.matching)
+            self.call_soon(handler, status.matching)
 
         stop_querying = self._undeclare_once(querier)
         listener = querier.declare_matching_listener(_direct(on_status))
         stop_listening = self._undeclare_once(listener)  # closed first: it lives in the querier
         now: Any = querier.matching_status  # a MatchingStatus, whatever the stubs say
-        self._call_soon(handler, now.matching)
+        self.call_soon(handler, now.matching)
 
         def stop() -> None:
             stop_listening()
@@ -764,6 +788,31 @@ class Stream:
             self._closed = True
             self._publisher.undeclare()
             self._bus._streams.discard(self)
+
+
+class Kept:
+    """Raw bytes published on one key, the last `depth` kept by Zenoh's advanced publisher
+    for subscribers that come later (`Bus.keeping`)."""
+
+    def __init__(self, bus: Bus, key: str, depth: int) -> None:
+        self._publisher = zenoh.ext.declare_advanced_publisher(
+            bus.session,
+            key,
+            encoding=CDR,
+            congestion_control=zenoh.CongestionControl.BLOCK,
+            cache=zenoh.ext.CacheConfig(max_samples=depth),
+            publisher_detection=True,
+        )
+        self._closed = False
+
+    def put(self, payload: bytes, attachment: bytes | None = None) -> None:
+        if not self._closed:
+            self._publisher.put(payload, attachment=attachment)
+
+    def close(self) -> None:
+        if not self._closed:
+            self._closed = True
+            self._publisher.undeclare()
 
 
 class Latest:
@@ -855,6 +904,13 @@ def _open_session(options: BusOptions) -> zenoh.Session:
             why += "?"
         raise BusError(f"cannot reach the router at {options.where} ({why})") from failed[0]
     return opened[0]
+
+
+_COMPLETE: dict[str, Any] = {
+    "target": zenoh.QueryTarget.ALL_COMPLETE,
+    "consolidation": zenoh.ConsolidationMode.LATEST,
+}
+"""How rmw_zenoh's clients ask: only complete queryables, one reply per key."""
 
 
 def _direct(callback: Callable[[T], None]) -> zenoh.handlers.Callback[T]:

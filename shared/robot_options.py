@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from typing import TypeVar
 
 from .keys import RmwZenohKeys, RobotNames, check_ros_name
-from .robot.kinds import CameraType, CmdVelType, RosDistro, TransportKind
+from .robot.kinds import ON_ZENOH, CameraType, CmdVelType, RosDistro, TransportKind
 
 AUTO = "auto"
 _Kind = TypeVar("_Kind", RosDistro, CmdVelType, CameraType, TransportKind)
@@ -49,16 +49,30 @@ def _ros_name(what: str, allow_empty: bool = False) -> Callable[[str], str]:
     return parse
 
 
-def add_robot_arguments(parser: argparse.ArgumentParser, detect: bool) -> None:
-    """The robot's flags; with `detect`, the transport and types default to 'auto'."""
+def add_robot_arguments(
+    parser: argparse.ArgumentParser, detect: bool, transport: bool = True
+) -> None:
+    """The robot's flags; with `detect`, the transport and types default to 'auto';
+    without `transport`, no --transport (the STOP relay has one way to the robot)."""
     group = parser.add_argument_group("the robot: its ROS 2 graph over Zenoh")
+    if transport:
+        _add_transport(group, detect)
+    _add_rest(group, detect)
+
+
+def _add_transport(group: argparse._ArgumentGroup, detect: bool) -> None:
     group.add_argument(
         "--transport",
-        choices=[AUTO, *TransportKind] if detect else list(TransportKind),
+        choices=[AUTO, *TransportKind] if detect else list(ON_ZENOH),
         default=AUTO if detect else TransportKind.BRIDGE.value,
-        help="how the robot's ROS 2 graph is reached: zenoh-bridge-ros2dds ('bridge') or "
-        f"ROS 2 nodes on rmw_zenoh (default: {AUTO if detect else 'bridge'})",
+        help="how the robot's ROS 2 graph is reached: zenoh-bridge-ros2dds ('bridge'), "
+        "ROS 2 nodes on rmw_zenoh ('rmw-zenoh')"
+        + (", or as a plain ROS 2 node on DDS with rclpy ('ros2')" if detect else "")
+        + f" (default: {AUTO if detect else 'bridge'})",
     )
+
+
+def _add_rest(group: argparse._ArgumentGroup, detect: bool) -> None:
     group.add_argument(
         "--domain-id",
         type=_domain_id,
@@ -114,7 +128,7 @@ def robot_options(args: argparse.Namespace) -> RobotOptions:
             navigate_name=args.navigate,
             map_name=args.map,
         ),
-        transport=chosen(TransportKind, args.transport),
+        transport=chosen(TransportKind, getattr(args, "transport", TransportKind.ROS2)),
         domain_id=args.domain_id,
         distro=chosen(RosDistro, args.distro),
         cmd_vel_type=chosen(CmdVelType, args.cmd_vel_type),

@@ -190,7 +190,11 @@ class OccupancyGrid(NamedTuple):
 
 IMAGE_ENCODINGS = {"rgb8": 3, "bgr8": 3, "rgba8": 4, "bgra8": 4, "mono8": 1, "mono16": 2}
 
-_STORES = {RosDistro.HUMBLE: Stores.ROS2_HUMBLE, RosDistro.JAZZY: Stores.ROS2_JAZZY}
+_STORES = {
+    RosDistro.HUMBLE: Stores.ROS2_HUMBLE,
+    RosDistro.JAZZY: Stores.ROS2_JAZZY,
+    RosDistro.ROLLING: Stores.ROS2_KILTED,  # the newest release rosbags has
+}
 
 # --- type definitions -----------------------------------------------------------------------
 
@@ -208,8 +212,9 @@ string behavior_tree
 """
 
 # Checked against docs.ros.org's nav2_msgs pages (Humble: "std_msgs/Empty result") and Jazzy-era
-# copies of NavigateToPose.action; the constants do not change a byte on the wire. Rolling adds
-# TIMEOUT and two feedback fields (position/heading tracking error) that neither distro has.
+# copies of NavigateToPose.action; the constants do not change a byte on the wire. Rolling's
+# result is Jazzy's (more constants); its feedback has two more fields (position and heading
+# tracking error).
 _NAV_RESULT = {
     RosDistro.HUMBLE: """
 std_msgs/Empty result
@@ -223,14 +228,21 @@ uint16 error_code
 string error_msg
 """,
 }
+_NAV_RESULT[RosDistro.ROLLING] = _NAV_RESULT[RosDistro.JAZZY]
 
-_NAV_FEEDBACK = """
+_FEEDBACK = """
 geometry_msgs/PoseStamped current_pose
 builtin_interfaces/Duration navigation_time
 builtin_interfaces/Duration estimated_time_remaining
 int16 number_of_recoveries
 float32 distance_remaining
 """
+_NAV_FEEDBACK = {
+    RosDistro.HUMBLE: _FEEDBACK,
+    RosDistro.JAZZY: _FEEDBACK,
+    RosDistro.ROLLING: _FEEDBACK
+    + "float32 position_tracking_error\nfloat32 heading_tracking_error\n",
+}
 
 # The services and the feedback topic ROS 2 derives from any action (rosidl's action idl).
 _ACTION_WRAPPERS = {
@@ -260,7 +272,7 @@ def _definitions(distro: RosDistro) -> dict[str, str]:
     texts = {
         f"{NAVIGATE_TO_POSE}_Goal": _NAV_GOAL,
         f"{NAVIGATE_TO_POSE}_Result": _NAV_RESULT[distro],
-        f"{NAVIGATE_TO_POSE}_Feedback": _NAV_FEEDBACK,
+        f"{NAVIGATE_TO_POSE}_Feedback": _NAV_FEEDBACK[distro],
         f"{CANCEL_GOAL}_Request": _CANCEL_REQUEST,
         f"{CANCEL_GOAL}_Response": _CANCEL_RESPONSE,
     }
@@ -555,6 +567,11 @@ class Ros2Codec:
         stamp_s: float = 0.0,
     ) -> bytes:
         t = self._types
+        rolling = (
+            {"position_tracking_error": 0.0, "heading_tracking_error": 0.0}
+            if self.distro is RosDistro.ROLLING
+            else {}
+        )
         feedback = t[f"{NAVIGATE_TO_POSE}_Feedback"](
             current_pose=t["geometry_msgs/msg/PoseStamped"](
                 header=self._header(stamp_s, frame), pose=self._pose(current)
@@ -563,6 +580,7 @@ class Ros2Codec:
             estimated_time_remaining=self._duration(0.0),
             number_of_recoveries=0,
             distance_remaining=distance_remaining,
+            **rolling,
         )
         msg = t[f"{NAVIGATE_TO_POSE}_FeedbackMessage"](
             goal_id=self._uuid(goal_id), feedback=feedback
@@ -771,12 +789,20 @@ class Ros2Codec:
         )
 
 
+SAME_RESULT = {RosDistro.ROLLING: RosDistro.JAZZY}
+"""Distributions whose NavigateToPose result is another's: a get_result reply cannot tell
+them apart (their feedback can: `distro_from_hash`)."""
+
+
 def distro_of_result(raw: bytes) -> RosDistro:
-    """Which distribution's NavigateToPose layout a get_result reply is in. Any reply
-    tells, even the one an action server gives at once for a goal it does not know, so an
-    executor can learn its robot's distribution before sending a goal."""
+    """Which distribution's NavigateToPose layout a get_result reply is in (Jazzy for
+    Rolling's too, `SAME_RESULT`). Any reply tells, even the one an action server gives at
+    once for a goal it does not know, so an executor can learn its robot's distribution
+    before sending a goal."""
     fits = []
     for distro in RosDistro:
+        if distro in SAME_RESULT:
+            continue
         try:
             Ros2Codec(distro).read_get_result_response(raw)
         except CdrError:
@@ -786,6 +812,25 @@ def distro_of_result(raw: bytes) -> RosDistro:
         found = "every" if fits else "no"
         raise CdrError(f"{len(raw)} bytes fit {found} known NavigateToPose result layout")
     return fits[0]
+
+
+@functools.cache
+def distro_from_hash(ros_type: str, announced: str) -> RosDistro | None:
+    """The distribution a type hash a robot announced for `ros_type` is of: Humble for
+    its placeholder, else the one distribution whose hash it is; None when it is no
+    distribution's, or several's (a Twist is the same in Jazzy and Rolling)."""
+    if announced == NO_TYPE_HASH:
+        return RosDistro.HUMBLE
+    found = []
+    for distro in RosDistro:
+        if distro is RosDistro.HUMBLE:
+            continue
+        try:
+            if type_hash(distro, ros_type) == announced:
+                found.append(distro)
+        except KeyError:  # a type voicectl has no definition of: it tells nothing
+            return None
+    return found[0] if len(found) == 1 else None
 
 
 def _split_seconds(seconds: float) -> tuple[int, int]:

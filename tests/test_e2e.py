@@ -31,6 +31,7 @@ from shared.messages import (
     SttStatus,
 )
 from shared.robot import TransportKind
+from shared.robot.kinds import ON_ZENOH
 from shared.ros2 import Pose2D, Ros2Codec, RosDistro
 
 from .conftest import Stack, async_wait_until, wait_until
@@ -68,7 +69,7 @@ class RobotWatch:
         self.session.close()
 
 
-@pytest.mark.parametrize("stack", list(TransportKind), indirect=True, ids=str)
+@pytest.mark.parametrize("stack", list(ON_ZENOH), indirect=True, ids=str)
 def test_spoken_sequence_moves_the_simulated_robot(stack: Stack) -> None:
     """The demo, on a robot behind zenoh-bridge-ros2dds and on one whose nodes speak
     rmw_zenoh (`voicectl up --transport rmw-zenoh`): the same orders, the same motion."""

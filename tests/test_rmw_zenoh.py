@@ -2,9 +2,10 @@
 
 Pinned byte for byte: keys, tokens, type hashes, GIDs and the attachment's encoding (at a
 fixed time). On a router: a publication's exact key, payload and attachment (sequence
-numbers, the GID of its publisher's token); a service call's key (voicectl asks whatever
-the type hash), payload and attachment (its sequence number, the GID of its client's
-token; the time is the call's own); a reply's echo of the request's sequence number and
+numbers, the GID of its publisher's token); a service call's key (the exact one, as
+rmw_zenoh's clients ask, and only of complete queryables), payload and attachment (its
+sequence number, the GID of its client's token; the time is the call's own); an action's
+status kept for a late client; a reply's echo of the request's sequence number and
 GID; the seam's action client (shared/robot/action.py) against an action server.
 
 The expected values were worked out from ros2/rmw_zenoh's docs/design.md and its
@@ -20,9 +21,11 @@ from __future__ import annotations
 
 import asyncio
 
+import pytest
 import zenoh
 from zenoh.ext import Int64, z_serialize
 
+from shared.errors import BusError
 from shared.keys import RMW_QOS_DEFAULT, RmwKind, RmwToken, RmwZenohKeys
 from shared.messages import ExecutorInfo
 from shared.robot import Interface, Role, TransportKind, open_transport
@@ -239,12 +242,9 @@ async def test_a_publication_and_a_service_call_carry_what_rmw_zenoh_needs(route
             )
             assert codec.read_send_goal_response(reply)
             ((key, payload, attachment),) = asked
-            # A call asks whatever type hash the robot's server has; rmw_zenoh's own
-            # clients ask the exact key. The payload is the request as it was given.
-            assert key == (
-                "0/bot1/navigate_to_pose/_action/send_goal/"
-                "nav2_msgs::action::dds_::NavigateToPose_SendGoal_/*"
-            )
+            # A call asks the exact key, as rmw_zenoh's own clients do. The payload is the
+            # request as it was given.
+            assert key == goal_key
             assert payload == request
             assert len(attachment) == 33
             assert attachment[16] == 0x10  # the GID's length, before the GID
@@ -427,3 +427,65 @@ async def test_the_action_client_sends_follows_and_cancels_a_goal(router: str) -
             assert client.status(goal_id) is None  # followed no longer
         finally:
             client.close()
+
+
+async def test_a_call_asks_only_the_exact_key_of_a_complete_server(router: str) -> None:
+    """rmw_zenoh's clients ask their own type hash, of complete queryables, one reply per
+    key: a server of another hash, or one not declared complete, is not asked."""
+    codec = Ros2Codec()
+    name = "navigate_to_pose/_action/cancel_goal"
+    dds = dds_type_name(CANCEL_GOAL)
+    keys = RmwZenohKeys(0)
+    asked: list[str] = []
+
+    def answer(query: zenoh.Query) -> None:
+        asked.append(str(query.key_expr))
+        query.reply(query.key_expr, codec.cancel_goal_response(0), attachment=bytes(33))
+
+    with joined(router) as bus, joined(router) as robot:
+        other_hash = robot.session.declare_queryable(
+            keys.data(name, dds, "RIHS01_" + "0" * 64), answer, complete=True
+        )
+        incomplete = robot.session.declare_queryable(
+            keys.data(name, dds, type_hash(RosDistro.JAZZY, CANCEL_GOAL)), answer
+        )
+        transport = open_transport(bus, TransportKind.RMW_ZENOH, "voicectl_stop", "", 0)
+        with pytest.raises(BusError):
+            await transport.call(name, CANCEL_GOAL, codec.cancel_goal_request(), 1.0)
+        assert asked == []
+        exact = robot.session.declare_queryable(
+            keys.data(name, dds, type_hash(RosDistro.JAZZY, CANCEL_GOAL)), answer, complete=True
+        )
+        try:
+            reply = await transport.call(name, CANCEL_GOAL, codec.cancel_goal_request(), 5.0)
+            assert codec.read_cancel_goal_response(reply).return_code == 0
+            assert asked == [keys.data(name, dds, type_hash(RosDistro.JAZZY, CANCEL_GOAL))]
+        finally:
+            for queryable in (other_hash, incomplete, exact):
+                queryable.undeclare()
+
+
+async def test_an_action_status_is_kept_for_a_client_that_comes_later(router: str) -> None:
+    """An action's status is transient local: published before a client subscribes, the
+    client still gets the last one, as from rmw_zenoh's cached publisher."""
+    codec = Ros2Codec()
+    status = "navigate_to_pose/_action/status"
+    goal = bytes(range(16))
+    with joined(router) as robot_bus, joined(router) as bus:
+        robot = open_transport(robot_bus, TransportKind.RMW_ZENOH, "voicectl_sim", "")
+        robot.publish(
+            status,
+            "action_msgs/msg/GoalStatusArray",
+            codec.goal_status_array([(goal, GoalStatus.EXECUTING)]),
+        )
+        client = open_transport(bus, TransportKind.RMW_ZENOH, "voicectl_executor", "")
+        heard: list[list[tuple[bytes, GoalStatus]]] = []
+        client.subscribe(
+            status,
+            "action_msgs/msg/GoalStatusArray",
+            codec.read_goal_status_array,
+            heard.append,
+            latched=True,
+        )
+        await async_wait_until(lambda: heard, 5.0, "the kept status")
+        assert heard[0] == [(goal, GoalStatus.EXECUTING)]

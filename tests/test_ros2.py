@@ -15,6 +15,7 @@ from hypothesis import strategies as st
 from shared.errors import VoicectlError
 from shared.ros2 import (
     CANCEL_ALL,
+    SAME_RESULT,
     CameraType,
     CancelCode,
     CdrError,
@@ -24,7 +25,9 @@ from shared.ros2 import (
     Pose2D,
     Ros2Codec,
     RosDistro,
+    distro_from_hash,
     distro_of_result,
+    type_hash,
     typestore,
 )
 
@@ -155,7 +158,8 @@ def test_message_types_are_known_by_the_names_bridge_tokens_give() -> None:
 def test_any_get_result_reply_tells_its_distro(codec: Ros2Codec, status: GoalStatus) -> None:
     """Even the reply for a goal the server does not know, which is how the executor
     finds out before its first goal."""
-    assert distro_of_result(codec.get_result_response(status)) is codec.distro
+    told = distro_of_result(codec.get_result_response(status))
+    assert told is SAME_RESULT.get(codec.distro, codec.distro)
 
 
 def test_a_get_result_reply_in_no_known_layout_says_so() -> None:
@@ -220,6 +224,9 @@ def expected_messages(distro: RosDistro) -> dict[str, tuple[Any, str]]:
         ),
     )
     zeros = np.zeros(36, dtype=np.float64)
+    rolling: dict[str, float] = {}
+    if distro is RosDistro.ROLLING:
+        rolling = {"position_tracking_error": 0.0, "heading_tracking_error": 0.0}
     if distro is RosDistro.HUMBLE:
         result = t[f"{NAV}_Result"](result=t["std_msgs/msg/Empty"]())
     else:
@@ -268,6 +275,7 @@ def expected_messages(distro: RosDistro) -> dict[str, tuple[Any, str]]:
                     estimated_time_remaining=duration(0),
                     number_of_recoveries=0,
                     distance_remaining=1.0,
+                    **rolling,
                 ),
             ),
             f"{NAV}_FeedbackMessage",
@@ -455,3 +463,28 @@ def test_transform_carries_the_pose_as_rosbags_would_encode_it(distro: RosDistro
     )
     expected = bytes(store.serialize_cdr(message, "tf2_msgs/msg/TFMessage", little_endian=True))
     assert raw == expected
+
+
+def test_rolling_feedback_has_two_more_fields_and_a_hash_of_its_own() -> None:
+    """Rolling's NavigateToPose feedback is Jazzy's plus two float32: neither reads the
+    other's, and the hash a robot announces for it names the distribution."""
+    jazzy, rolling = Ros2Codec(RosDistro.JAZZY), Ros2Codec(RosDistro.ROLLING)
+    pose = Pose2D(1.0, 2.0, 0.5)
+    ours = rolling.feedback(GOAL_ID, pose, 1.5, 2.0)
+    assert len(ours) == len(jazzy.feedback(GOAL_ID, pose, 1.5, 2.0)) + 8
+    assert rolling.read_feedback(ours).distance_remaining == 1.5
+    with pytest.raises(CdrError):
+        jazzy.read_feedback(ours)
+    with pytest.raises(CdrError):
+        rolling.read_feedback(jazzy.feedback(GOAL_ID, pose, 1.5, 2.0))
+    feedback = "nav2_msgs/action/NavigateToPose_FeedbackMessage"
+    assert type_hash(RosDistro.ROLLING, feedback) != type_hash(RosDistro.JAZZY, feedback)
+    for distro in (RosDistro.JAZZY, RosDistro.ROLLING):
+        assert distro_from_hash(feedback, type_hash(distro, feedback)) is distro
+    # A Twist is the same in both: its hash tells only that it is not Humble's.
+    twist = "geometry_msgs/msg/Twist"
+    assert distro_from_hash(twist, type_hash(RosDistro.JAZZY, twist)) is None
+    assert distro_from_hash(twist, "TypeHashNotSupported") is RosDistro.HUMBLE
+    assert distro_from_hash(twist, "RIHS01_" + "0" * 64) is None
+    # Its result is Jazzy's: a get_result reply names Jazzy.
+    assert distro_of_result(rolling.get_result_response(GoalStatus.SUCCEEDED)) is RosDistro.JAZZY

@@ -31,12 +31,12 @@ from shared.messages import (
     StateReply,
 )
 from shared.process import add_bus_arguments, bus_options, robot_name
-from shared.robot.kinds import TransportKind
+from shared.robot.kinds import ON_ZENOH, TransportKind
 
 from .health import add_health_arguments, check
 from .stack import Child, PanelAddress, port_in_use, run_stack
 
-SERVICES = ("router", "converter", "stt", "supervisor", "executor", "sim", "web")
+SERVICES = ("router", "converter", "stt", "supervisor", "executor", "relay", "sim", "web")
 SHIPPED_ORDERS = shipped_orders()
 """orders/ of the checkout, or the installed copy of its files."""
 _ENCODER = msgspec.json.Encoder()
@@ -69,7 +69,7 @@ def build_parser() -> argparse.ArgumentParser:
     up.add_argument("--time-scale", type=float, default=1.0, help="simulator speed-up")
     up.add_argument(
         "--transport",
-        choices=list(TransportKind),
+        choices=list(ON_ZENOH),
         default=TransportKind.BRIDGE.value,
         help="how the simulated robot shows its ROS 2 graph: as zenoh-bridge-ros2dds does "
         "('bridge', the default) or as nodes on rmw_zenoh ('rmw-zenoh')",

@@ -20,7 +20,7 @@ from shared.process import (
     run_service,
     serve,
 )
-from shared.robot import TransportKind, detect_transport, open_transport
+from shared.robot import TransportKind, detect_transport, open_transport, transports
 from shared.robot_options import add_robot_arguments, robot_options
 
 from .builtin import builtin_executors
@@ -165,6 +165,10 @@ async def main(args: argparse.Namespace) -> None:
         bindings = load_bindings(args)
     except BindingError as exc:
         raise ServiceError(str(exc)) from exc
+    chosen = robot_options(args).transport
+    problem = transports()[chosen].unavailable() if chosen is not None else None
+    if problem is not None:
+        raise ServiceError(f"--transport {chosen}: {problem}")
     with open_bus(args) as bus:
         transport = await choose_transport(bus, args)
         service = executor_service(bus, args, bindings, transport)
@@ -181,18 +185,20 @@ async def main(args: argparse.Namespace) -> None:
 
 async def choose_transport(bus: Bus, args: argparse.Namespace) -> TransportKind:
     """The transport `--transport` names, or with `auto` the one the robot's graph
-    announces itself in (the bridge when it announces nothing)."""
+    announces itself in; when it announces nothing on Zenoh, a plain ROS 2 node where
+    rclpy can be imported, else the bridge."""
     options = robot_options(args)
     if options.transport is not None:
         return options.transport
     found = await detect_transport(bus, options.names, options.domain_id, DETECT_WAIT)
     if found is None:
         _LOGGER.warning(
-            "the robot announced nothing in %g s; reaching it through the bridge (see --transport)",
+            "the robot announced nothing in %g s and rclpy cannot be imported here; reaching "
+            "it through the bridge (see --transport)",
             DETECT_WAIT,
         )
         return TransportKind.BRIDGE
-    _LOGGER.info("the robot's graph speaks %s", found)
+    _LOGGER.info("the robot's graph speaks %s", found)  # ros2: none answered on Zenoh
     return found
 
 

@@ -40,6 +40,7 @@ from shared.robot.stop import RobotStop
 from shared.robot_options import RobotOptions
 from shared.ros2 import (
     NAVIGATION_ERRORS,
+    SAME_RESULT,
     CameraType,
     CdrError,
     CmdVelType,
@@ -158,6 +159,7 @@ class RobotLink:
         """Why navigation cannot be used (the configured distribution is not the robot's)."""
         self._distro_checked = False
         self._probing: asyncio.Task[None] | None = None
+        self._probe_again = False
         self.navigation_seen = False
         """Whether the robot's NavigateToPose server has shown itself (announced or answered)."""
         self.announced_cmd_vel: CmdVelType | None = None
@@ -222,6 +224,7 @@ class RobotLink:
     def _on_interface(self, interface: Interface, present: bool) -> None:
         if not present:
             return
+        self._adopt_announced_distro()
         names = self.names
         match interface.role:
             case Role.SUBSCRIBER if interface.name == names.cmd_vel:
@@ -231,6 +234,8 @@ class RobotLink:
             case Role.ACTION_SERVER if interface.name == names.topic(names.navigate_name):
                 self.navigation_seen = True
                 self._probe_soon()
+            case Role.SERVICE_SERVER if interface.name == names.navigate("get_result"):
+                self._probe_soon()  # its key now known (rmw_zenoh: the hash in it)
 
     def _learn_cmd_vel(self, ros_type: str, type_hash: str = "") -> None:
         found = CmdVelType.of(ros_type)
@@ -261,10 +266,37 @@ class RobotLink:
 
     # --- the distribution -----------------------------------------------------------------
 
-    def _probe_soon(self) -> None:
-        if self._distro_checked or (self._probing is not None and not self._probing.done()):
+    def _adopt_announced_distro(self) -> None:
+        """Take the distribution the robot's announcements name (rmw_zenoh's hashes) where
+        a get_result reply cannot tell it (`SAME_RESULT`: Rolling's result is Jazzy's, its
+        feedback is not), unless one was configured."""
+        announced = self.transport.announced_distro()
+        if announced is None or announced is self.distro or self.options.distro is not None:
             return
+        if self.distro is not None and SAME_RESULT.get(announced) is not self.distro:
+            return  # the probe's answer stands: the announcements name another layout
+        self.distro = announced
+        self.navigation.codec = Ros2Codec(announced)
+        _LOGGER.info(
+            "the robot's navigation speaks ROS 2 %s (from its type hashes)", announced.title()
+        )
+        self._on_change()
+
+    def _probe_soon(self) -> None:
+        """Probe the distribution now, or again once the probe under way has failed (a
+        server announced meanwhile may answer where the first probe found none)."""
+        if self._distro_checked:
+            return
+        if self._probing is not None and not self._probing.done():
+            self._probe_again = True
+            return
+        self._probe_again = False
         self._probing = asyncio.get_running_loop().create_task(self._probe_distro())
+        self._probing.add_done_callback(self._probed)
+
+    def _probed(self, _probe: asyncio.Task[None]) -> None:
+        if self._probe_again:
+            self._probe_soon()
 
     async def _probe_distro(self) -> None:
         """Ask get_result about a goal that does not exist: an action server answers at
@@ -283,6 +315,11 @@ class RobotLink:
             return
         self._distro_checked = True
         configured = self.options.distro
+        # Rolling's result is Jazzy's: what tells it is its hashes, or the configuration.
+        for told in (configured, self.transport.announced_distro()):
+            if told is not None and SAME_RESULT.get(told) is found:
+                found = told
+                break
         if configured is not None and configured is not found:
             self.distro_problem = (
                 f"the robot's navigation speaks ROS 2 {found.title()}, not {configured.title()} "

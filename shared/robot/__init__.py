@@ -47,6 +47,7 @@ __all__ = [
 TRANSPORTS = (
     "bridge:BridgeTransport",
     "rmw_zenoh:RmwZenohTransport",
+    "dds:Ros2Transport",
 )
 """Every robot transport, as 'module:class' in this package, imported when first used
 (a transport imports the bus, which imports the messages, which import this package).
@@ -94,8 +95,9 @@ async def detect_transport(
     bus: Bus, names: RobotNames, domain_id: int, timeout: float
 ) -> TransportKind | None:
     """Which layout the robot's graph announces itself in: the first liveliness token, of
-    any transport's layout, naming one of the robot's topics or its action; None if none
-    came within `timeout` seconds."""
+    any transport's layout, naming one of the robot's topics or its action. If none came
+    within `timeout` seconds, the first transport whose graph is not on Zenoh that this
+    process can reach (a ROS 2 environment: rclpy), else None."""
     import asyncio
 
     from ..keys import ACTION_MEMBERS
@@ -104,7 +106,8 @@ async def detect_transport(
     wanted |= {names.navigate(member) for member in ACTION_MEMBERS}
     found: asyncio.Future[TransportKind] = asyncio.get_running_loop().create_future()
     own = str(bus.session.zid())
-    layouts = {kind: cls.announcements(domain_id, own) for kind, cls in transports().items()}
+    announced = {kind: cls.announcements(domain_id, own) for kind, cls in transports().items()}
+    layouts = {kind: layout for kind, layout in announced.items() if layout is not None}
 
     def watcher(kind: TransportKind) -> Callable[[str, bool], None]:
         name_of = layouts[kind].name_of
@@ -120,7 +123,8 @@ async def detect_transport(
         async with asyncio.timeout(timeout):
             return await found
     except TimeoutError:
-        return None
+        off_zenoh = (kind for kind, layout in announced.items() if layout is None)
+        return next((kind for kind in off_zenoh if not transports()[kind].unavailable()), None)
     finally:
         for stop in stops:
             stop()

@@ -83,16 +83,20 @@ class ActionClient:
         follows (`following`)."""
         if self._unsubscribe:
             return
-        codec = self.codec  # what feedback and status carry is the same in every distribution
+        codec = self.codec  # status is the same in every distribution
         self._unsubscribe = [
-            self.transport.subscribe(
-                self.member("feedback"), NAVIGATE_FEEDBACK, codec.read_feedback, self._on_feedback
+            self.transport.subscribe(  # the feedback in the codec of the day (Rolling's differs)
+                self.member("feedback"),
+                NAVIGATE_FEEDBACK,
+                lambda raw: self.codec.read_feedback(raw),
+                self._on_feedback,
             ),
-            self.transport.subscribe(
+            self.transport.subscribe(  # transient local: the last status, also to a late client
                 self.member("status"),
                 GOAL_STATUS_ARRAY,
                 codec.read_goal_status_array,
                 self._on_status,
+                latched=True,
             ),
         ]
 

@@ -16,6 +16,13 @@ class TransportKind(StrEnum):
     """zenoh-bridge-ros2dds in front of a DDS graph."""
     RMW_ZENOH = "rmw-zenoh"
     """ROS 2 nodes on rmw_zenoh: no bridge, no DDS."""
+    ROS2 = "ros2"
+    """A plain ROS 2 node on DDS (rclpy): no bridge, no Zenoh on the robot."""
+
+
+ON_ZENOH = (TransportKind.BRIDGE, TransportKind.RMW_ZENOH)
+"""The transports whose robots are on Zenoh: those voicectl's simulator plays, and those a
+process with Zenoh alone reaches directly."""
 
 
 class RosDistro(StrEnum):
@@ -24,6 +31,9 @@ class RosDistro(StrEnum):
 
     HUMBLE = "humble"
     JAZZY = "jazzy"
+    ROLLING = "rolling"
+    """Nav2's NavigateToPose feedback has two more fields than Jazzy's (its result is
+    Jazzy's): told apart by its type hash, on rmw_zenoh."""
 
 
 class _TopicType(StrEnum):

@@ -7,8 +7,9 @@ rmw_zenoh_cpp sources as released for Humble (0.1.9), Jazzy (0.2.10) and Kilted 
   publishes goes to the exact key the robot's side announced (its token carries its type
   hash), as this transport has seen it since it was opened or as the executor saw it
   (`expect`), or, before either is known, to the key of the type hash this distribution
-  computes (`shared.ros2.type_hash`); what it hears or asks (a service call), it hears or
-  asks whatever the hash.
+  computes (`shared.ros2.type_hash`). A service call asks that exact key too, as rmw_zenoh's
+  clients do (complete queryables only, one reply per key). What it hears, it hears
+  whatever the hash.
 - An attachment on every publication, query and reply, in zenoh's own serialization:
   int64 sequence number (per publisher or client, from 1), int64 source timestamp in
   nanoseconds since the epoch, then the 16-byte source GID as a sequence (a 0x10 length
@@ -17,6 +18,8 @@ rmw_zenoh_cpp sources as released for Humble (0.1.9), Jazzy (0.2.10) and Kilted 
 - GIDs: XXH3-128 of the entity's liveliness token, low half first, little-endian.
 - Services are queryables declared complete (rmw_zenoh's clients ask only those); an action
   is its three services and two topics under ``<action>/_action/``.
+- A transient local publication (an action's status) is Zenoh's advanced publisher with a
+  cache of its depth: a late subscriber asking for history gets the last status.
 - A liveliness token per node and per publisher, subscription, client and server
   (``@ros2_lv/...``), from which `ros2 node list` and `ros2 topic info` on the robot show
   voicectl, and from which voicectl learns what the robot offers, with which types and
@@ -38,7 +41,7 @@ from typing import Self, TypeVar
 
 import xxhash
 
-from ..bus import Bus
+from ..bus import Bus, Kept
 from ..keys import (
     RMW_QOS_DEFAULT,
     RMW_QOS_LATCHED,
@@ -46,8 +49,15 @@ from ..keys import (
     RmwToken,
     RmwZenohKeys,
 )
-from ..ros2 import NO_TYPE_HASH, RosDistro, dds_type_name, ros_type_of, type_hash
-from .kinds import TransportKind
+from ..ros2 import (
+    NO_TYPE_HASH,
+    RosDistro,
+    dds_type_name,
+    distro_from_hash,
+    ros_type_of,
+    type_hash,
+)
+from .kinds import CmdVelType, TransportKind
 from .transport import (
     Announcements,
     Decode,
@@ -141,6 +151,9 @@ class RmwZenohTransport(RobotTransport):
         self.distro = distro
         """The robot's distribution as configured, or as its tokens' hashes say; None until
         known (Jazzy's hashes are sent meanwhile)."""
+        self._configured = distro is not None
+        self._learnt: RosDistro | None = None
+        """The distribution the robot's tokens name, configured or not."""
         self._zid = str(bus.session.zid())
         self._ids = _IDS.setdefault(bus, itertools.count())
         self._node_id = next(self._ids)
@@ -158,6 +171,8 @@ class RmwZenohTransport(RobotTransport):
         bus.announce(self.keys.token(node_token))
         self._following = False
         """The robot's tokens are watched (`follow`, `discover`): what they say is learnt."""
+        self._kept: dict[str, Kept] = {}
+        """Transient local publications, by key: their publishers keep the last sample."""
 
     @classmethod
     def open(
@@ -201,7 +216,7 @@ class RmwZenohTransport(RobotTransport):
             known = self._entities.get((kind, name, ros_type))
             if known is not None:
                 return known
-            qos = RMW_QOS_LATCHED if name.endswith("/_action/status") else RMW_QOS_DEFAULT
+            qos = RMW_QOS_LATCHED if _latched(name) else RMW_QOS_DEFAULT
             token = RmwToken(
                 self._zid,
                 self._node_id,
@@ -223,9 +238,15 @@ class RmwZenohTransport(RobotTransport):
 
     def publish(self, name: str, ros_type: str, payload: bytes, urgent: bool = False) -> None:
         entity = self.entity(RmwKind.PUBLISHER, name, ros_type)
-        self._bus.publish_bytes(
-            self._exact(name, ros_type), payload, urgent=urgent, attachment=entity.attachment()
-        )
+        key = self._exact(name, ros_type)
+        if _latched(name):
+            with self._lock:
+                kept = self._kept.get(key)
+                if kept is None:
+                    kept = self._kept[key] = self._bus.keeping(key, depth=1)
+            kept.put(payload, attachment=entity.attachment())
+            return
+        self._bus.publish_bytes(key, payload, urgent=urgent, attachment=entity.attachment())
 
     def subscribe(
         self, name: str, ros_type: str, decode: Decode[T], handler: Handle[T], latched: bool = False
@@ -243,17 +264,22 @@ class RmwZenohTransport(RobotTransport):
     ) -> bytes:
         entity = self.entity(RmwKind.SERVICE_CLIENT, name, service_type)
         return await self._bus.request_bytes(
-            self._any_hash(name, service_type),
+            self._exact(name, service_type),
             request,
             timeout,
             urgent=urgent,
             attachment=entity.attachment(),
+            complete=True,
         )
 
     def call_and_forget(self, name: str, service_type: str, request: bytes, timeout: float) -> None:
         entity = self.entity(RmwKind.SERVICE_CLIENT, name, service_type)
         self._bus.query_and_forget(
-            self._any_hash(name, service_type), request, timeout, attachment=entity.attachment()
+            self._exact(name, service_type),
+            request,
+            timeout,
+            attachment=entity.attachment(),
+            complete=True,
         )
 
     def serve(
@@ -348,10 +374,40 @@ class RmwZenohTransport(RobotTransport):
                 types = self._subscribed.setdefault(token.name, [])
                 if ros_type not in types:
                     types.append(ros_type)
-        found = RosDistro.HUMBLE if token.type_hash == NO_TYPE_HASH else RosDistro.JAZZY
-        if self.distro is None:
-            self.distro = found
-            _LOGGER.info("the robot's rmw_zenoh speaks ROS 2 %s (from its tokens)", found.title())
+        with contextlib.suppress(ValueError):  # a type name voicectl cannot read
+            ros_type = ros_type_of(token.dds_type)
+            # What the robot serves and publishes; not what voicectl's own processes ask,
+            # hear or drive with (their hashes are their guesses).
+            robot_side = token.kind is RmwKind.SERVICE_SERVER or (
+                token.kind is RmwKind.PUBLISHER and CmdVelType.of(ros_type) is None
+            )
+            if robot_side:
+                self._learn_distro(ros_type, token.type_hash)
+
+    def _learn_distro(self, ros_type: str, announced: str) -> None:
+        """The distribution a hash names, if it names one alone (Nav2's feedback tells
+        Rolling from Jazzy; a Twist, the same in both, says only 'Jazzy or later')."""
+        found = distro_from_hash(ros_type, announced)
+        learnt = self._learnt
+        if found is None:
+            if learnt is None and announced != NO_TYPE_HASH:
+                learnt = RosDistro.JAZZY  # a hash: Jazzy or later, until one tells
+        elif not (learnt is RosDistro.ROLLING and found is RosDistro.JAZZY):
+            learnt = found  # (a Jazzy hash of a type Rolling did not change says nothing)
+        if learnt is None or learnt is self._learnt:
+            return
+        self._learnt = learnt
+        _LOGGER.info("the robot's rmw_zenoh speaks ROS 2 %s (from its tokens)", learnt.title())
+        if not self._configured:
+            self.distro = learnt
+
+    def announced_distro(self) -> RosDistro | None:
+        return self._learnt
+
+
+def _latched(name: str) -> bool:
+    """Whether topic `name` is transient local: an action's status, as rcl_action makes it."""
+    return name.endswith("/_action/status")
 
 
 def _reply_to(asked: bytes | None) -> bytes:

@@ -46,7 +46,7 @@ from ..ros2 import (
     Ros2Codec,
     RosDistro,
 )
-from . import open_transport, transports
+from . import TransportKind, open_transport, transports
 from .action import CANCEL_TIMEOUT, ActionClient
 from .action import Cancelled as Cancelled  # where the supervisor has always found it
 from .transport import Interface, RobotTransport, Role
@@ -103,7 +103,9 @@ def prepare(
             stop_codec(UNANNOUNCED)
             return
         stop_codec(info.distro)
-        transports()[info.transport].prepare(info.distro, (info.cmd_vel_type.ros_type, CANCEL_GOAL))
+        transports()[_stop_kind(info)].prepare(
+            info.distro, (info.cmd_vel_type.ros_type, CANCEL_GOAL)
+        )
 
     building = asyncio.ensure_future(asyncio.to_thread(build))
     _BUILDING.add(building)
@@ -200,13 +202,21 @@ def _names(info: ExecutorInfo) -> RobotNames:
 
 def _transport(info: ExecutorInfo, names: RobotNames, bus: Bus, node: str) -> RobotTransport:
     """The transport a stop of the robot `info` announces uses (one per process and robot:
-    `open_transport` keeps it)."""
-    return open_transport(bus, info.transport, node, names.namespace, info.domain_id, info.distro)
+    `open_transport` keeps it): its own, or, for a graph this process cannot reach (DDS),
+    the one its STOP relay serves."""
+    kind = _stop_kind(info)
+    return open_transport(bus, kind, node, names.namespace, info.domain_id, info.distro)
+
+
+def _stop_kind(info: ExecutorInfo) -> TransportKind:
+    return transports()[info.transport].stop_through or info.transport
 
 
 def _unannounced(bus: Bus, node: str) -> list[RobotTransport]:
-    """Every transport in the registry's order, in domain 0 without a namespace, its
-    distribution learnt from the robot's announcements: where a supervisor that never
+    """Every transport on Zenoh in the registry's order, in domain 0 without a namespace,
+    its distribution learnt from the robot's announcements: where a supervisor that never
     heard of an executor looks for its robot (a transport that learns nothing from them,
-    the bridge, opens without declaring anything and finds no cmd_vel type)."""
-    return [open_transport(bus, kind, node) for kind in transports()]
+    the bridge, opens without declaring anything and finds no cmd_vel type; a robot on
+    DDS is reached through its STOP relay, on the bridge's layout)."""
+    kinds = [kind for kind, cls in transports().items() if cls.stop_through is None]
+    return [open_transport(bus, kind, node) for kind in kinds]

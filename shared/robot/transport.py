@@ -79,6 +79,10 @@ class RobotTransport(abc.ABC):
     (a stop from Zenoh's thread or a watchdog): they never wait for the event loop."""
 
     kind: ClassVar[TransportKind]
+    stop_through: ClassVar[TransportKind | None] = None
+    """The transport through which a process that has Zenoh alone (the supervisor, the
+    panel, `voicectl stop`) stops a robot of this kind, where it cannot reach the robot's
+    graph itself (DDS: through the STOP relay's layout); None: through this one."""
 
     @classmethod
     @abc.abstractmethod
@@ -91,9 +95,17 @@ class RobotTransport(abc.ABC):
 
     @classmethod
     @abc.abstractmethod
-    def announcements(cls, domain_id: int, own: str) -> Announcements:
+    def announcements(cls, domain_id: int, own: str) -> Announcements | None:
         """How a robot's graph in ROS domain `domain_id` announces itself in this layout,
-        to a process whose Zenoh session is `own` (its id) (`detect_transport`)."""
+        to a process whose Zenoh session is `own` (its id) (`detect_transport`); None for
+        a graph that announces nothing on Zenoh (DDS)."""
+
+    @classmethod
+    def unavailable(cls) -> str | None:
+        """Why this process cannot open this transport (rclpy cannot be imported), in one
+        line; None when it can. Told before the bus opens; and `detect_transport` picks a
+        graph that announces nothing on Zenoh only where it is available."""
+        return None
 
     @classmethod
     @abc.abstractmethod
@@ -157,6 +169,12 @@ class RobotTransport(abc.ABC):
         where the robot listens even before this transport has seen the robot's own
         announcement, which wins once seen. Nothing to do where a key does not depend on
         what the robot announces (the bridge)."""
+
+    def announced_distro(self) -> RosDistro | None:
+        """The robot's distribution as its announcements tell it (rmw_zenoh's type hashes:
+        Nav2's feedback tells Rolling from Jazzy, where a get_result reply cannot), whatever
+        was configured; None where they tell nothing (the bridge, DDS)."""
+        return None
 
     @abc.abstractmethod
     def subscriber_types(self, name: str) -> list[str]:

@@ -1,0 +1,1 @@
+"""The STOP relay: where a robot on DDS is stopped by processes that have Zenoh alone."""
