@@ -173,6 +173,10 @@ class StopRig:
             ROBOT,
             "--stall-limit",
             f"{self.stall_limit:g}",
+            # Named, not detected: on a busy machine the simulator may announce itself
+            # after `auto` has given up waiting, and these tests are about STOP.
+            "--transport",
+            self.transport.value,
             *executors,
         )
 
