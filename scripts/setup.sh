@@ -29,11 +29,23 @@ install_debian_packages() {
 }
 
 # make_venv EXTRAS : create the virtualenv and install the project (editable) into it.
+# The install is skipped when the venv already holds these extras of this pyproject.toml
+# (a stamp in the venv says so): the code is editable, only the dependencies need pip.
 make_venv() {
     local extras="$1"
+    local stamp="$VENV/.voicectl-installed"
+    local want
+    want="$(sha256sum <pyproject.toml | cut -d" " -f1) ${extras}"
+    if [ -x "$VENV/bin/python" ] && [ -f "$stamp" ] && grep -qxF "$want" "$stamp"; then
+        return 0
+    fi
     if [ ! -x "$VENV/bin/python" ]; then
+        echo "setup: making $VENV and installing voicectl${extras} into it (about a minute, once)"
         python3 -m venv "$VENV"
+    else
+        echo "setup: installing voicectl${extras} into $VENV (its dependencies changed)"
     fi
     "$VENV/bin/python" -m pip install -q --disable-pip-version-check --upgrade pip >/dev/null
     "$VENV/bin/python" -m pip install -q --disable-pip-version-check -e ".${extras}"
+    echo "$want" >>"$stamp"
 }
