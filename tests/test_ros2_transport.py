@@ -199,9 +199,18 @@ async def test_stop_halts_a_real_ros2_robot_and_cancels_its_goal(dds: DdsRobot, 
         print(case, f"zero {zero * 1000:.1f} ms, cancel {cancel * 1000:.1f} ms", stopped)
         assert zero < STOP_BOUND, (zero, stopped)
         assert cancel < STOP_BOUND, (cancel, stopped)
-        assert "navigation cancelled" in stopped.detail, stopped
+        # The supervisor answers after CONFIRM_WAIT (0.3 s) with what it has heard by then;
+        # on a busy machine the cancel's answer may come back through the relay later, and
+        # the supervisor's state says it once it has.
+        detail = stopped.detail
+        if "navigation has not answered the cancel yet" in detail:
+            settled = await client.wait_state(
+                lambda s: "navigation cancelled" in s.stop_detail, "the cancel's late answer"
+            )
+            detail = settled.stop_detail
+        assert "navigation cancelled" in detail, (detail, stopped)
         if case != "executor-killed":
-            assert stopped.confirmed, stopped
+            assert "executor: latched" in detail, (detail, stopped)
         # Standing: no pose relayed from a second after the STOP moves.
         if case != "executor-killed":
             settle = asked + 0.5
