@@ -43,7 +43,7 @@ make_venv() {
         echo "setup: making $VENV and installing voicectl${extras} into it (about a minute, once)"
         python3 -m venv "$VENV"
     else
-        echo "setup: installing voicectl${extras} into $VENV (its dependencies changed)"
+        echo "setup: installing voicectl${extras} into $VENV (new extras, or pyproject.toml changed)"
     fi
     "$VENV/bin/python" -m pip install -q --disable-pip-version-check --upgrade pip >/dev/null
     "$VENV/bin/python" -m pip install -q --disable-pip-version-check -e ".${extras}"
