@@ -81,6 +81,9 @@ SETTLE = 0.5
 handed an order: a link that has just come back can drop again at once, and an order sent
 then reaches nobody and fails."""
 PUBLISH_INTERVAL = 0.02
+SAVE_WAIT = 2.0
+"""How long a change that is answered only once on disk (a reorder) waits for the store;
+past it, the answer says the change is not on disk yet (it is kept, and lands later)."""
 CONFIRM_WAIT = 0.3
 """How long an emergency stop waits for navigation and the executor to confirm before it
 is acknowledged: the zero velocity is out before, so this delays only the answer."""
@@ -226,8 +229,11 @@ class RobotSupervisor:
                 moved = self._queue.reorder(order_id, position)
                 if moved is None:
                     return Failed(reason=f"order '{order_id}' is not queued")
-                self._changed()
-                return Done(detail=f"moved {order_id} to position {moved}")
+                detail = f"moved {order_id} to position {moved}"
+                saved = self._changed()
+                if saved is not None and not await self._committed(saved):
+                    detail += f" (not on disk yet: {self._store.trouble or 'the store is slow'})"
+                return Done(detail=detail)
             case GetState():
                 return StateReply(state=self._queue.snapshot())
             case GetHistory(offset=offset, limit=limit):
@@ -615,11 +621,20 @@ class RobotSupervisor:
             _LOGGER.info("%s: %s %s %s", self.robot, order_id, status, message)
             self._changed()
 
-    def _changed(self) -> None:
-        """Store what changed (in order), publish soon, wake the dispatcher."""
+    def _changed(self) -> asyncio.Future[None] | None:
+        """Store what changed (in order), publish soon, wake the dispatcher; the store's
+        commit of it, if anything is to be stored."""
         operations = self.changes()
-        if operations:
-            self._store.keep(operations)
+        return self._store.keep(operations) if operations else None
+
+    @staticmethod
+    async def _committed(saved: asyncio.Future[None]) -> bool:
+        """Whether `saved` is on disk within SAVE_WAIT (it is kept in any case)."""
+        try:
+            await asyncio.wait_for(asyncio.shield(saved), SAVE_WAIT)
+        except Exception:  # slow, or failed alone: logged by the store
+            return False
+        return True
 
     def changes(self) -> list[Operation]:
         """What changed since the last call, as store operations to run in order; the

@@ -186,11 +186,16 @@ class OrderStore:
         self._send(Call(operation, functools.partial(_settle_soon, loop, future), reads=reads))
         return await future
 
-    def keep(self, operations: list[Operation]) -> None:
+    def keep(self, operations: list[Operation]) -> asyncio.Future[None]:
         """Queue `operations` as one, to be committed whatever it takes: when the disk
         refuses them they are tried again, in order with every other kept write, until
-        they commit. For changes of state nobody waits for (an order's end, the stop)."""
-        self._send(Call(_all(operations), _ignore, kept=True))
+        they commit. For changes of state (an order's end, the stop); the future resolves
+        once they are committed, for whoever answers only then (a reorder)."""
+        loop = asyncio.get_running_loop()
+        future: asyncio.Future[None] = loop.create_future()
+        future.add_done_callback(_said)
+        self._send(Call(_all(operations), functools.partial(_settle_soon, loop, future), kept=True))
+        return future
 
     def write(self, operations: list[Operation]) -> asyncio.Future[None]:
         """Queue `operations` as one, tried once; the future resolves when they are
@@ -582,6 +587,14 @@ def _report(call: Call, ok: bool, value: Any) -> None:
 
 def _ignore(_ok: bool, _value: Any) -> None:
     pass
+
+
+def _said(done: asyncio.Future[None]) -> None:
+    """A kept write that failed alone (a bad operation) is logged, whether or not anyone
+    awaits it."""
+    error = None if done.cancelled() else done.exception()
+    if error is not None:
+        _LOGGER.error("order store: write failed: %s", error)
 
 
 def _all(operations: list[Operation]) -> Operation:
