@@ -254,6 +254,16 @@ async def test_a_cancelled_goal_the_robot_keeps_is_named_in_the_result(
         assert result.message.startswith("cancelled; navigation refused to cancel goal ")
 
 
+def distances_left(harness: ExecutorHarness, order_id: str) -> list[float]:
+    """The distance left to the goal in each progress event of an order, as Nav2's
+    feedback gave it."""
+    return [
+        e.progress.distance_linear
+        for e in harness.events[order_id]
+        if isinstance(e, OrderProgress) and e.progress.distance_linear is not None
+    ]
+
+
 @RMW_ZENOH_ONLY
 async def test_a_goal_s_feedback_reaches_the_order_s_progress(
     router: str, start: Start, transport: TransportKind
@@ -263,11 +273,7 @@ async def test_a_goal_s_feedback_reaches_the_order_s_progress(
     async with harness_on(router, transport=transport) as harness:
         result = await harness.finished(await harness.execute(goal("map", 1.0)))
         assert result.status == OrderStatus.SUCCEEDED, result.message
-        remaining = [
-            e.progress.distance_linear
-            for e in harness.events[result.order_id]
-            if isinstance(e, OrderProgress) and e.progress.distance_linear is not None
-        ]
+        remaining = distances_left(harness, result.order_id)
         assert remaining, "no feedback reached the order's progress"
         assert remaining[0] == pytest.approx(1.0, abs=0.2)
         assert remaining[-1] < remaining[0]
@@ -286,11 +292,7 @@ async def test_a_rolling_robot_is_known_by_its_hashes_and_its_feedback_read(
         await executor_info(harness, lambda info: info.distro is RosDistro.ROLLING)
         result = await harness.finished(await harness.execute(goal("map", 1.0)))
         assert result.status == OrderStatus.SUCCEEDED, result.message
-        remaining = [
-            e.progress.distance_linear
-            for e in harness.events[result.order_id]
-            if isinstance(e, OrderProgress) and e.progress.distance_linear is not None
-        ]
+        remaining = distances_left(harness, result.order_id)
         assert remaining, "no feedback reached the order's progress"
         assert remaining[0] == pytest.approx(1.0, abs=0.2)
 
