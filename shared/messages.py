@@ -63,6 +63,9 @@ class Order(Data, kw_only=True):
     params: dict[str, ParamValue] = msgspec.field(default_factory=dict)
     """Every key of the order and its case that is not a known one."""
     target_pose: TargetPose | None = None
+    confirm: bool = False
+    """The orders file asks for a spoken yes before it runs, when no one presses Send
+    (`voicectl listen`); the panel's Send is itself the confirmation."""
 
 
 class ParseProblem(Data, omit_defaults=True):

@@ -24,6 +24,8 @@ class CaseSpec:
     values: dict[str, ParamValue]
     slots: dict[str, SlotSpec] = field(default_factory=dict)
     line: int | None = None
+    confirm: bool | None = None
+    """Overrides the order's `confirm` when set."""
 
 
 @dataclass(frozen=True)
@@ -40,6 +42,11 @@ class OrderSpec:
     """The file it came from, for error messages."""
     slots: dict[str, SlotSpec] = field(default_factory=dict)
     line: int | None = None
+    confirm: bool = False
+    """Read back and wait for a spoken yes before it runs (hands-free listening)."""
+
+    def confirms(self, case: CaseSpec | None) -> bool:
+        return case.confirm if case is not None and case.confirm is not None else self.confirm
 
     def target_pose(
         self, case: CaseSpec | None, filled: dict[str, ParamValue] | None = None
@@ -131,4 +138,5 @@ class Command:
             description=description,
             params=self.order.params(self.case, filled),
             target_pose=self.order.target_pose(self.case, filled),
+            confirm=self.order.confirms(self.case),
         )

@@ -27,7 +27,7 @@ from .patterns import PLACEHOLDER, SLOT_GROUP, SLOT_STUB, check_regex, combined,
 from .slots import SlotSpec
 from .text import normalise
 
-RESERVED_KEYS = frozenset({"voice_alias", "label", "description", "cases", "slots"})
+RESERVED_KEYS = frozenset({"voice_alias", "label", "description", "cases", "slots", "confirm"})
 DEFAULT_SEPARATOR = "then"
 DEFAULT_SKIP_WORDS = ("a", "the", "to", "please", "now")
 """Words people add around and inside commands ("please reach the kitchen now"): the
@@ -139,6 +139,7 @@ def _order_from_dict(name: str, spec: Any, source: str) -> OrderSpec:
         raise _Problem("'description' must be a string", _line(spec, "description"))
     slots = _slots(spec)
     values = _values(spec)
+    confirm = _confirm(spec)
     raw_cases = spec.get("cases", {})
     if raw_cases is None:
         raw_cases = {}
@@ -161,6 +162,7 @@ def _order_from_dict(name: str, spec: Any, source: str) -> OrderSpec:
         source=source,
         slots=slots,
         line=_line(spec),
+        confirm=bool(confirm),
     )
     for case in order.cases or (None,):
         at = f" case '{case.name}'" if case else ""
@@ -192,7 +194,16 @@ def _case_from_dict(name: str, spec: Any) -> CaseSpec:
         values=_values(spec),
         slots=_slots(spec),
         line=_line(spec),
+        confirm=_confirm(spec),
     )
+
+
+def _confirm(spec: dict[str, Any]) -> bool | None:
+    """`confirm: true`: hands-free, the order is read back and runs only on a spoken yes."""
+    confirm = spec.get("confirm")
+    if confirm is not None and not isinstance(confirm, bool):
+        raise _Problem("'confirm' must be true or false", _line(spec, "confirm"))
+    return confirm
 
 
 def _required_str(spec: dict[str, Any], key: str) -> str:
