@@ -15,13 +15,14 @@ from __future__ import annotations
 
 import math
 from collections import deque
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 
 from shared.errors import VoicectlError
 from shared.messages import FRAME_BYTES, SAMPLE_RATE
+from shared.sound import Suppressor as Suppressor  # re-exported: moved to shared/
+from shared.sound import whole as whole
 
 NOISE_FLOOR = 30.0
 """Standard deviation of the added noise, in 16-bit sample units (about -60 dBFS)."""
@@ -73,36 +74,8 @@ class Loudness:
         return level > room + self._margin
 
 
-class Suppressor:
-    """WebRTC's noise suppression over a stream (PyPI `webrtc-noise-gain`), in 10 ms steps:
-    it follows the noise as the stream goes, so it hears every frame, speech or not."""
-
-    STEP = FRAME_BYTES // 2
-
-    def __init__(self, level: int) -> None:
-        from webrtc_noise_gain import AudioProcessor
-
-        self._processor = AudioProcessor(0, level)  # 0: no automatic gain
-        self._pending = bytearray()
-
-    def process(self, pcm: bytes) -> bytes:
-        """The same audio with less noise, as many bytes as whole 10 ms steps make; what
-        is left comes out with the next call."""
-        self._pending += pcm
-        steps = whole(self._pending, self.STEP)
-        return b"".join(self._processor.Process10ms(step).audio for step in steps)
-
-
 def seconds(pcm_bytes: int) -> float:
     return pcm_bytes / BYTES_PER_SECOND
-
-
-def whole(pending: bytearray, size: int) -> Iterator[bytes]:
-    """Take every whole `size`-byte piece off the front of `pending`, in order."""
-    while len(pending) >= size:
-        piece = bytes(pending[:size])
-        del pending[:size]
-        yield piece
 
 
 def frames(pcm: bytes) -> list[bytes]:
