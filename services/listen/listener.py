@@ -1,0 +1,381 @@
+"""The robot's own ear: a local audio source streamed to the recogniser, hands-free.
+
+One thread reads the source and does everything that must not wait for the event loop:
+the spotter hears every frame; after the wake phrase the audio goes to the recogniser as
+an ordinary audio session (the panel's microphone is another); "stop", heard alone while
+the robot moves, is acted on from that thread's hit at once. The event loop takes the
+converter's proposals for this listener's sessions, submits the whole and certain ones
+(asking first when an order says `confirm: true`), and speaks the answers.
+
+Without a wake phrase every utterance goes to the recogniser, as with the panel's open
+microphone. Either way only whole orders the recogniser is sure of are submitted: what it
+doubts is asked about aloud, never guessed.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import threading
+import time
+import uuid
+from collections import deque
+from collections.abc import Callable, Coroutine
+from dataclasses import dataclass, field
+from typing import Any
+
+from shared.bus import Bus, Stream, json_decoder
+from shared.client import Refused, Unreachable, VoicectlClient
+from shared.errors import BusError
+from shared.keys import RobotKeys
+from shared.messages import (
+    AudioChunk,
+    AudioStart,
+    AudioStop,
+    OrderRecord,
+    OrderStatus,
+    PartialTranscript,
+    Proposal,
+    StateUpdate,
+)
+from shared.process import Service
+
+from . import answers
+from .spotter import STOP_THRESHOLD, WAKE_THRESHOLD, Phrase, Spotted, Spotter
+
+_LOGGER = logging.getLogger(__name__)
+
+BYTES_PER_SECOND = 32000
+ROOM_BEFORE = 0.6
+"""Seconds of the room from before the wake phrase, sent ahead of the command: the
+recogniser learns the room's level from the start of a session."""
+ECHO_TAIL = 0.3
+"""Seconds the microphone stays muted after the robot's own voice ends (room echo)."""
+CONFIRM_WORDS = (Phrase("yes", 1e-10), Phrase("no", 1e-10))
+
+
+@dataclass(frozen=True)
+class ListenConfig:
+    robot: str
+    wake: str = ""
+    """The wake phrase; empty: every utterance goes to the recogniser."""
+    wake_threshold: float = WAKE_THRESHOLD
+    stop_word: bool = True
+    """Hearing "stop" alone while the robot moves stops it, wake phrase or not."""
+    stop_threshold: float = STOP_THRESHOLD
+    awake: float = 5.0
+    """Seconds the listener stays awake after the wake phrase or the last thing said."""
+    confirm_seconds: float = 6.0
+    """How long a read-back waits for "yes" or "no"; silence means no."""
+
+
+@dataclass
+class _Awake:
+    """A wake phrase heard: one audio session to the recogniser."""
+
+    session: str
+    stream: Stream
+    seq: int = 0
+    last_heard: float = field(default_factory=time.monotonic)
+    """When the person last said something in it (monotonic)."""
+
+
+Speak = Callable[[str], None]
+"""Say a sentence aloud (blocking; the listener mutes its ear meanwhile)."""
+
+
+class Listener(Service):
+    """`voicectl listen`: reads `read()` until it returns None (the end of a file), or until
+    stopped."""
+
+    def __init__(
+        self,
+        bus: Bus,
+        config: ListenConfig,
+        read: Callable[[], bytes | None],
+        speak: Speak | None = None,
+    ) -> None:
+        self._bus = bus
+        self._config = config
+        self._keys = RobotKeys(config.robot)
+        self._read = read
+        self._speak = speak
+        self._client = VoicectlClient(bus)
+        self._loop = asyncio.get_running_loop()
+        phrases = [Phrase(config.wake, config.wake_threshold)] if config.wake else []
+        if config.stop_word:
+            phrases.append(Phrase("stop", config.stop_threshold))
+        self._spotter = Spotter(phrases) if phrases else None
+        self._answer: Spotter | None = None
+        """Listens for "yes" or "no" while an order waits for confirmation."""
+        self._answered: asyncio.Future[str] | None = None
+        self._recent: deque[tuple[float, bytes]] = deque()
+        """(stream time, audio) of the last seconds: the room before a wake phrase."""
+        self._clock = 0.0
+        self._reset_wanted = False
+        """Set on the loop after the robot spoke; the reader's thread resets the spotter."""
+        self._awake: _Awake | None = None
+        self._muted_until = 0.0
+        """Monotonic time until which the microphone is not heard (the robot speaks)."""
+        self._moving = False
+        self._stopped = False
+        self._mine: dict[str, str] = {}
+        """Orders this listener submitted, by id: their description, for the outcome."""
+        self._ends: list[Callable[[], None]] = []
+        self._reader: threading.Thread | None = None
+        self._finished: asyncio.Future[None] = self._loop.create_future()
+        self._closing = False
+        self._speaking: asyncio.Lock = asyncio.Lock()
+        self._tasks: set[asyncio.Future[None]] = set()
+        self.stops = 0
+        """How many times "stop" was acted on (for tests and benches)."""
+
+    async def start(self) -> None:
+        keys = self._keys
+        self._ends += [
+            self._bus.subscribe(keys.proposal, json_decoder(Proposal), self._on_proposal),
+            self._bus.subscribe(keys.partial, json_decoder(PartialTranscript), self._on_partial),
+            self._bus.subscribe(
+                keys.state, json_decoder(StateUpdate), self._on_state, history=True
+            ),
+        ]
+        if not self._config.wake:
+            self._wake_now()
+        self._reader = threading.Thread(target=self._read_all, name="listen", daemon=True)
+        self._reader.start()
+        _LOGGER.info(
+            "listening for %s%s",
+            repr(self._config.wake) if self._config.wake else "commands",
+            " and 'stop'" if self._config.stop_word else "",
+        )
+
+    async def run(self) -> None:
+        """Until the source ends (then the last session's answers are awaited), or forever."""
+        await self._finished
+        while self._awake is not None:  # the last utterance's proposal, then the pause
+            await asyncio.sleep(0.1)
+            self._check_awake()
+        async with self._speaking:
+            pass
+
+    async def stop(self) -> None:
+        self._closing = True
+        if self._reader is not None:
+            await asyncio.to_thread(self._reader.join, 5.0)
+        for end in self._ends:
+            end()
+        self._sleep()
+
+    # --- on the reader's thread --------------------------------------------------------
+
+    def _read_all(self) -> None:
+        try:
+            while not self._closing and (pcm := self._read()) is not None:
+                self._hear(pcm)
+        except Exception:  # the reader's end must reach the loop, whatever ended it
+            _LOGGER.exception("the audio source failed")
+        finally:
+            self._loop.call_soon_threadsafe(self._ended)
+
+    def _ended(self) -> None:
+        if not self._finished.done():
+            self._finished.set_result(None)
+
+    def _hear(self, pcm: bytes) -> None:
+        start = self._clock
+        self._clock += len(pcm) / BYTES_PER_SECOND
+        muted = time.monotonic() < self._muted_until
+        # While the robot speaks, and while it waits for a yes or no, the recogniser gets
+        # the silence of a muted microphone: neither is a command.
+        heard = bytes(len(pcm)) if muted or self._answer is not None else pcm
+        self._recent.append((start, heard))
+        while self._recent and self._recent[0][0] < self._clock - ROOM_BEFORE - 3.0:
+            self._recent.popleft()
+        awake = self._awake
+        if awake is not None:
+            self._send(awake, heard)
+        if muted:
+            return
+        if self._reset_wanted and self._spotter is not None:
+            self._reset_wanted = False
+            self._spotter.reset()
+        if self._answer is not None:
+            for hit in self._answer.accept(pcm):
+                self._loop.call_soon_threadsafe(self._on_answer, hit.phrase)
+        if self._spotter is None:
+            return
+        for hit in self._spotter.accept(pcm):
+            self._on_hit(hit)
+
+    def _on_hit(self, hit: Spotted) -> None:
+        if hit.phrase == "stop":
+            if self._moving and not self._stopped and hit.alone:
+                _LOGGER.info("heard 'stop' at %.2f s: stopping the robot", hit.end)
+                self._loop.call_soon_threadsafe(self._stop_robot)
+            return
+        if self._awake is None:
+            _LOGGER.info("heard the wake phrase at %.2f s", hit.end)
+            awake = self._wake_now()
+            # The room before the phrase, then what was said after it: the phrase itself
+            # is not for the recogniser, whose grammar does not know it.
+            room = [f for at, f in self._recent if hit.start - ROOM_BEFORE <= at < hit.start]
+            after = [f for at, f in self._recent if at >= hit.end]
+            for frame in [*room, *after]:
+                self._send(awake, frame)
+        elif self._awake is not None:
+            self._awake.last_heard = time.monotonic()
+
+    def _wake_now(self) -> _Awake:
+        session = uuid.uuid4().hex[:16]
+        stream = self._bus.stream(self._keys.stt_audio(session))
+        stream.send(AudioStart())
+        awake = _Awake(session, stream)
+        self._awake = awake
+        if self._config.wake:
+            self._loop.call_soon_threadsafe(self._watch_awake)
+        return awake
+
+    def _send(self, awake: _Awake, pcm: bytes) -> None:
+        for at in range(0, len(pcm), 32000):  # at most one second per chunk
+            awake.stream.send(AudioChunk(seq=awake.seq, pcm=pcm[at : at + 32000]))
+            awake.seq += 1
+
+    # --- on the event loop -------------------------------------------------------------
+
+    def _watch_awake(self) -> None:
+        self._loop.call_later(0.25, self._check_awake_later)
+
+    def _check_awake_later(self) -> None:
+        if self._awake is not None and self._config.wake:
+            self._check_awake()
+            if self._awake is not None:
+                self._watch_awake()
+
+    def _check_awake(self) -> None:
+        """Back to sleep after a pause of `awake` seconds (with a wake phrase), or at the
+        end of the source (without one)."""
+        awake = self._awake
+        if awake is None:
+            return
+        quiet = time.monotonic() - awake.last_heard
+        if (self._config.wake and quiet > self._config.awake) or (
+            self._finished.done() and not self._config.wake and quiet > self._config.awake
+        ):
+            self._sleep()
+
+    def _sleep(self) -> None:
+        awake, self._awake = self._awake, None
+        if awake is not None:
+            awake.stream.send(AudioStop())
+            awake.stream.close()
+            _LOGGER.info("session %s ended", awake.session)
+
+    def _on_partial(self, _key: str, partial: PartialTranscript) -> None:
+        if self._awake is not None and partial.session == self._awake.session:
+            self._awake.last_heard = time.monotonic()
+
+    def _on_proposal(self, _key: str, proposal: Proposal) -> None:
+        awake = self._awake
+        if awake is None or proposal.session != awake.session:
+            return
+        awake.last_heard = time.monotonic()
+        self._keep(self._act_on(proposal))
+
+    async def _act_on(self, proposal: Proposal) -> None:
+        certain = proposal.orders and not (proposal.errors or proposal.doubts or proposal.rejected)
+        words = answers.proposal_words(proposal)
+        if not certain:
+            await self.say(words)
+            return
+        if any(order.confirm for order in proposal.orders):
+            if not await self._confirmed(words):
+                await self.say("cancelled")
+                return
+        else:
+            await self.say(words)
+        try:
+            ids = await self._client.submit(
+                self._config.robot, proposal.orders, transcript=proposal.transcript
+            )
+        except (Refused, Unreachable) as exc:
+            _LOGGER.warning("not submitted: %s", exc)
+            await self.say(answers.refused_words(str(exc)))
+            return
+        for order_id, order in zip(ids, proposal.orders, strict=False):
+            self._mine[order_id] = order.description
+        _LOGGER.info("submitted %s: %s", ", ".join(ids), proposal.transcript)
+
+    async def _confirmed(self, words: str) -> bool:
+        """Read the orders back and wait for "yes"; "no", or nothing, is no."""
+        self._answered = self._loop.create_future()
+        await self.say(f"{words}. Yes or no?")
+        self._answer = Spotter(list(CONFIRM_WORDS))
+        try:
+            async with asyncio.timeout(self._config.confirm_seconds):
+                answer = await self._answered
+        except TimeoutError:
+            answer = ""
+        finally:
+            self._answer = None
+            self._answered = None
+        _LOGGER.info("confirmation: %s", answer or "no answer")
+        return answer == "yes"
+
+    def _on_answer(self, word: str) -> None:
+        if self._answered is not None and not self._answered.done():
+            self._answered.set_result(word)
+
+    def _on_state(self, _key: str, update: StateUpdate) -> None:
+        state = update.state
+        self._moving = state.current is not None
+        if state.stopped and not self._stopped:
+            self._keep(self.say(answers.stopped_words()))
+        self._stopped = state.stopped
+        for record in state.history:
+            if record.id in self._mine:
+                del self._mine[record.id]
+                self._said_outcome(record)
+
+    def _said_outcome(self, record: OrderRecord) -> None:
+        if record.status is OrderStatus.CANCELLED and self._stopped:
+            return  # "stopped" says it
+        words = answers.outcome_words(record)
+        if words:
+            self._keep(self.say(words))
+
+    def _stop_robot(self) -> None:
+        self.stops += 1
+        self._stopped = True
+        self._keep(self._stop_now())
+
+    async def _stop_now(self) -> None:
+        try:
+            stopped = await self._client.stop(self._config.robot)
+        except BusError as exc:
+            _LOGGER.error("'stop' heard, but nothing could be stopped: %s", exc)
+            return
+        _LOGGER.info("stopped (%s)", "confirmed" if stopped.confirmed else stopped.detail)
+
+    def _keep(self, work: Coroutine[Any, Any, None]) -> None:
+        """Run `work` on its own, holding it until done (the loop keeps weak references)."""
+        task = asyncio.ensure_future(work)
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+
+    async def say(self, words: str) -> None:
+        """Speak `words` if this listener has a voice, muting the ear meanwhile so that
+        the robot never hears itself."""
+        _LOGGER.info("answer: %s", words)
+        speak = self._speak
+        if speak is None or not words:
+            return
+        async with self._speaking:
+            self._muted_until = float("inf")
+            try:
+                await asyncio.to_thread(speak, words)
+            except Exception as exc:  # a voice that fails must not end the listener
+                _LOGGER.warning("could not speak %r: %s", words, exc)
+            finally:
+                self._muted_until = time.monotonic() + ECHO_TAIL
+                # The spotter's search may hold the robot's own words: it starts again.
+                self._reset_wanted = True

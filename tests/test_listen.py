@@ -1,0 +1,194 @@
+"""`voicectl listen` against the whole stack: a file, and standard input fed at real time as
+a microphone would be, become orders the simulator carries out; the wake phrase gates
+commands; "stop" alone stops a moving robot without it; a read-back answered "no", or not
+at all, moves nothing."""
+
+from __future__ import annotations
+
+import queue
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+from harness.speech_set import pink_noise
+from services.stt.audio import read_wav
+from shared.bus import Bus
+from shared.client import VoicectlClient
+from shared.messages import GetState, OrderStatus, Release, State, StateReply
+
+from .conftest import REPO, Speak, Stack, wait_until
+from .support import on_bus
+
+pytestmark = pytest.mark.e2e
+
+VOICE = "flite:rms"
+"""A voice the spotter and both ears hear well (bench/wake.py has them all)."""
+CHUNK = 3200
+"""100 ms of 16 kHz 16-bit audio: what the feeder writes at a time."""
+
+
+class Mouth:
+    """`voicectl listen -` with a room that is never silent: faint pink noise at real
+    time, and whatever `say` queues in its place."""
+
+    def __init__(self, stack: Stack, *args: str) -> None:
+        self.lines: list[str] = []
+        self._said: queue.SimpleQueue[bytes] = queue.SimpleQueue()
+        self._room = pink_noise(16000 * 60, 60.0, seed=5)
+        self._process = subprocess.Popen(
+            [sys.executable, "-m", "voicectl", "listen", "-", "--connect", stack.router, *args],
+            stdin=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            cwd=REPO,
+            env=stack.env,
+        )
+        self._closing = threading.Event()
+        self._threads = [
+            threading.Thread(target=self._feed, daemon=True),
+            threading.Thread(target=self._read, daemon=True),
+        ]
+        for thread in self._threads:
+            thread.start()
+
+    def say(self, wav: Path) -> None:
+        self._said.put(read_wav(wav))
+
+    def heard(self, text: str) -> int:
+        """How many log lines so far contain `text`."""
+        return sum(text in line for line in list(self.lines))
+
+    def close(self) -> int:
+        self._closing.set()
+        self._threads[0].join(timeout=5)
+        try:
+            code = self._process.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            self._process.kill()
+            code = self._process.wait()
+        self._threads[1].join(timeout=5)
+        return code
+
+    def _feed(self) -> None:
+        assert self._process.stdin is not None
+        started, sent, at = time.monotonic(), 0, 0
+        pending = b""
+        try:
+            while not self._closing.is_set():
+                if not pending:
+                    try:
+                        pending = self._said.get_nowait()
+                    except queue.Empty:
+                        room = self._room[at : at + CHUNK // 2]
+                        at = (at + CHUNK // 2) % (len(self._room) - CHUNK)
+                        pending = room.astype("<i2").tobytes()
+                piece, pending = pending[:CHUNK], pending[CHUNK:]
+                self._process.stdin.write(piece)
+                self._process.stdin.flush()
+                sent += len(piece)
+                ahead = started + sent / 32000 - time.monotonic()
+                if ahead > 0:
+                    time.sleep(ahead)
+        except (BrokenPipeError, ValueError):
+            return
+        self._process.stdin.close()
+
+    def _read(self) -> None:
+        assert self._process.stderr is not None
+        for raw in self._process.stderr:
+            line = raw.decode(errors="replace").rstrip()
+            self.lines.append(line)
+            print("listen:", line)
+
+
+def state(stack: Stack) -> State:
+    async def ask(bus: Bus) -> State:
+        reply = await VoicectlClient(bus).ask("robot", GetState())
+        assert isinstance(reply, StateReply)
+        return reply.state
+
+    return on_bus(stack.router, ask)
+
+
+def descriptions(known: State) -> list[tuple[str, OrderStatus]]:
+    records = [*known.history, *known.queue] + ([known.current] if known.current else [])
+    return [(record.order.description, record.status) for record in records]
+
+
+def test_a_file_becomes_orders_the_simulator_carries_out(stack: Stack, speech: Speak) -> None:
+    wav = speech("turn left then take a photo", VOICE)
+    said = stack.voicectl("listen", str(wav), "--connect", stack.router, "--awake", "2")
+    assert said.returncode == 0, said.stderr
+    wait_until(
+        lambda: ("take picture", OrderStatus.SUCCEEDED) in descriptions(state(stack)),
+        60.0,
+        "the spoken orders to run",
+    )
+    assert descriptions(state(stack)) == [  # history: the latest first
+        ("take picture", OrderStatus.SUCCEEDED),
+        ("turn left", OrderStatus.SUCCEEDED),
+    ]
+
+
+def test_the_wake_phrase_gates_commands_and_stop_needs_none(stack: Stack, speech: Speak) -> None:
+    mouth = Mouth(stack, "--wake", "hey robot", "--awake", "3")
+    try:
+        wait_until(lambda: mouth.heard("listening for 'hey robot'"), 30.0, "the listener")
+        mouth.say(speech("go to the kitchen", VOICE))  # no wake phrase: not for the robot
+        mouth.say(speech("hey robot, turn left", VOICE))
+        wait_until(
+            lambda: ("turn left", OrderStatus.SUCCEEDED) in descriptions(state(stack)),
+            60.0,
+            "the command after the wake phrase to run",
+        )
+        assert mouth.heard("heard the wake phrase") == 1
+        assert not [d for d, _ in descriptions(state(stack)) if "kitchen" in d]
+
+        async def drive(bus: Bus) -> list[str]:
+            client = VoicectlClient(bus)
+            parsed = await client.parse(" then ".join(["move forward ten meters"] * 4))
+            return await client.submit("robot", parsed.orders, "a long drive")
+
+        on_bus(stack.router, drive)
+        wait_until(lambda: state(stack).current is not None, 30.0, "the drive to start")
+        mouth.say(speech("stop", VOICE))  # no wake phrase
+        wait_until(lambda: state(stack).stopped, 30.0, "the spoken stop")
+        stopped = state(stack)
+        assert stopped.current is None and not stopped.queue
+        assert mouth.heard("heard 'stop'") == 1
+
+        async def release(bus: Bus) -> None:
+            await VoicectlClient(bus).ask("robot", Release())
+
+        on_bus(stack.router, release)
+    finally:
+        assert mouth.close() == 0
+
+
+def test_a_read_back_answered_no_or_not_at_all_moves_nothing(stack: Stack, speech: Speak) -> None:
+    """demo.yaml asks before going to the dumpster: "no" and silence move nothing, "yes"
+    (the check that the test can fail) sends it."""
+    mouth = Mouth(stack, "--wake", "hey robot", "--awake", "2")
+    command = speech("hey robot, go to the dumpster", VOICE)
+    try:
+        wait_until(lambda: mouth.heard("listening for 'hey robot'"), 30.0, "the listener")
+        for answer, logged in (("no", "confirmation: no"), (None, "no answer"), ("yes", ": yes")):
+            asked = mouth.heard("Yes or no?")
+            mouth.say(command)
+            wait_until(lambda n=asked: mouth.heard("Yes or no?") > n, 30.0, "the read-back")
+            if answer is not None:
+                mouth.say(speech(answer, VOICE))
+            wait_until(lambda text=logged: mouth.heard(text), 30.0, f"the answer {answer!r}")
+            sleeping = mouth.heard("ended")
+            wait_until(lambda n=sleeping: mouth.heard("ended") > n, 30.0, "the listener to sleep")
+        wait_until(
+            lambda: [d for d, _ in descriptions(state(stack)) if "dumpster" in d],
+            30.0,
+            "the order said yes to",
+        )
+        assert [d for d, _ in descriptions(state(stack)) if "dumpster" in d] == ["reach dumpster"]
+    finally:
+        assert mouth.close() == 0
