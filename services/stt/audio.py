@@ -20,16 +20,12 @@ from pathlib import Path
 
 import numpy as np
 
-from shared.errors import VoicectlError
+from shared.errors import AudioError
 from shared.messages import FRAME_BYTES, SAMPLE_RATE
 
 NOISE_FLOOR = 30.0
 """Standard deviation of the added noise, in 16-bit sample units (about -60 dBFS)."""
 BYTES_PER_SECOND = SAMPLE_RATE * 2
-
-
-class AudioError(VoicectlError):
-    """Audio that cannot be used; the text says what and where."""
 
 
 class NoiseFloor:
