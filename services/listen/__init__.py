@@ -1,0 +1,1 @@
+"""`voicectl listen`: a local sound source streamed into the recogniser, hands-free."""
