@@ -25,3 +25,8 @@ class ServiceError(VoicectlError):
 class StoreError(VoicectlError):
     """The supervisor's order store cannot do what was asked: its disk is full, its file
     is damaged or was emptied, or another supervisor holds it."""
+
+
+class AudioError(VoicectlError):
+    """Audio that cannot be used, or a sound device that cannot be opened; the text says
+    what and where ("microphone 'USB Audio' is busy")."""

@@ -21,7 +21,7 @@ from hypothesis import strategies as st
 
 from services.converter.grammar import build_grammar
 from services.converter.orders import OrderSet
-from services.stt.audio import AudioError, frames, read_wav
+from services.stt.audio import frames, read_wav
 from services.stt.engine import EngineError, EngineOptions, Final, Heard, finals, load_engine
 from services.stt.lexicon import (
     espeak_pronunciations,
@@ -31,6 +31,7 @@ from services.stt.lexicon import (
     variants,
 )
 from services.stt.wordgraph import GrammarError, compile_jsgf
+from shared.errors import AudioError
 from shared.messages import FRAME_BYTES, AudioChunk, AudioMessage
 
 from .conftest import REPO, Speak, voicectl

@@ -14,9 +14,10 @@ import msgspec
 
 from services.converter.decide import decide, problem, readings
 from services.converter.parser import Parser
-from services.stt.audio import AudioError, read_wav
+from services.stt.audio import read_wav
 from services.stt.engine import Engine, finals
 from services.stt.service import transcript_of
+from shared.errors import AudioError
 from shared.messages import Doubt, Hearing, Order, ParseProblem
 
 MAX_FILE_SECONDS = 600.0

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from shared.errors import VoicectlError
+from shared.errors import AudioError
 from shared.messages import FRAME_BYTES, SAMPLE_RATE
 from shared.sound import Suppressor as Suppressor  # re-exported: moved to shared/
 from shared.sound import whole as whole
@@ -27,10 +27,6 @@ from shared.sound import whole as whole
 NOISE_FLOOR = 30.0
 """Standard deviation of the added noise, in 16-bit sample units (about -60 dBFS)."""
 BYTES_PER_SECOND = SAMPLE_RATE * 2
-
-
-class AudioError(VoicectlError):
-    """Audio that cannot be used; the text says what and where."""
 
 
 class NoiseFloor:
