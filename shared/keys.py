@@ -81,6 +81,12 @@ class RobotKeys:
         return f"{self.prefix}/stt/audio/*"
 
     @property
+    def stt_check(self) -> str:
+        """Whether some audio says a phrase (a listener's wake phrase), asked of the
+        recogniser."""
+        return f"{self.prefix}/stt/check"
+
+    @property
     def partial(self) -> str:
         """Growing partial transcripts while someone speaks."""
         return f"{self.prefix}/stt/partial"

@@ -219,6 +219,35 @@ class SessionEnded(Message):
     refused: bool = False
 
 
+MAX_CHECK_SECONDS = 4.0
+
+
+class CheckPhrase(Message):
+    """Does this audio say `phrase`? Asked by a listener whose spotter heard its wake
+    phrase (`voicectl listen --wake`): the recogniser's neural ear checks, so that a false
+    wake sends nothing."""
+
+    pcm: bytes
+    """16 kHz mono 16-bit PCM around the phrase, at most `MAX_CHECK_SECONDS`."""
+    phrase: str
+
+    def __post_init__(self) -> None:
+        if len(self.pcm) > MAX_CHECK_SECONDS * SAMPLE_RATE * 2 or len(self.pcm) % 2:
+            raise ValueError(f"pcm must be whole samples, at most {MAX_CHECK_SECONDS:g} s")
+
+
+class PhraseCheck(Message):
+    """The answer to `CheckPhrase`."""
+
+    checked: bool
+    """False when this recogniser has no neural ear to check with: the spotter decides."""
+    heard: bool = False
+    text: str = ""
+    """What the ear wrote for the audio."""
+    support: float | None = None
+    """How likely the ear finds the phrase beside its own words (see `Transcription`)."""
+
+
 class Hearing(Data):
     """One ear's reading of an utterance, as the converter judged it."""
 
@@ -524,6 +553,8 @@ class StateUpdate(Message):
 SupervisorReply = Submitted | Done | Stopped | Failed | StateReply | HistoryPage
 
 ConverterReply = ParseReply | Grammar | Failed
+
+SttReply = PhraseCheck | Failed
 
 
 # --- executor ------------------------------------------------------------------------------

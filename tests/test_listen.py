@@ -70,6 +70,8 @@ class Mouth:
             self._process.kill()
             code = self._process.wait()
         self._threads[1].join(timeout=5)
+        if self._process.stderr is not None:
+            self._process.stderr.close()
         return code
 
     def _feed(self) -> None:

@@ -36,7 +36,7 @@ from shared.robot.kinds import ON_ZENOH, TransportKind
 from .health import add_health_arguments, check
 from .stack import Child, PanelAddress, port_in_use, run_stack
 
-SERVICES = ("router", "converter", "stt", "supervisor", "executor", "relay", "sim", "web")
+SERVICES = ("router", "converter", "stt", "supervisor", "executor", "relay", "sim", "web", "listen")
 SHIPPED_ORDERS = shipped_orders()
 """orders/ of the checkout, or the installed copy of its files."""
 _ENCODER = msgspec.json.Encoder()

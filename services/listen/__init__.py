@@ -1,1 +1,2 @@
-"""`voicectl listen`: the robot's own ear (a microphone, a file or standard input), its wake phrase and its voice."""
+"""`voicectl listen`: the robot's own ear (a microphone, a file or standard input),
+its wake phrase and its voice."""

@@ -29,14 +29,19 @@ from shared.client import Refused, Unreachable, VoicectlClient
 from shared.errors import BusError
 from shared.keys import RobotKeys
 from shared.messages import (
+    MAX_CHECK_SECONDS,
     AudioChunk,
     AudioStart,
     AudioStop,
+    CheckPhrase,
+    Failed,
     OrderRecord,
     OrderStatus,
     PartialTranscript,
+    PhraseCheck,
     Proposal,
     StateUpdate,
+    SttReply,
 )
 from shared.process import Service
 
@@ -49,6 +54,9 @@ BYTES_PER_SECOND = 32000
 ROOM_BEFORE = 0.6
 """Seconds of the room from before the wake phrase, sent ahead of the command: the
 recogniser learns the room's level from the start of a session."""
+CHECK_BEFORE = 0.25
+"""Seconds before the spotted phrase sent with it for the check (its start is rough)."""
+CHECK_TIMEOUT = 5.0
 ECHO_TAIL = 0.3
 """Seconds the microphone stays muted after the robot's own voice ends (room echo)."""
 CONFIRM_WORDS = (Phrase("yes", 1e-10), Phrase("no", 1e-10))
@@ -78,6 +86,8 @@ class _Awake:
     seq: int = 0
     last_heard: float = field(default_factory=time.monotonic)
     """When the person last said something in it (monotonic)."""
+    checked: asyncio.Future[bool] | None = None
+    """Whether the recogniser's neural ear heard the wake phrase too; None without one."""
 
 
 Speak = Callable[[str], None]
@@ -101,6 +111,7 @@ class Listener(Service):
         self._read = read
         self._speak = speak
         self._client = VoicectlClient(bus)
+        self._check_decoder = json_decoder(SttReply)
         self._loop = asyncio.get_running_loop()
         phrases = [Phrase(config.wake, config.wake_threshold)] if config.wake else []
         if config.stop_word:
@@ -222,6 +233,10 @@ class Listener(Service):
             after = [f for at, f in self._recent if at >= hit.end]
             for frame in [*room, *after]:
                 self._send(awake, frame)
+            # Streaming starts at once; what it becomes is submitted only once the
+            # recogniser's neural ear agrees the phrase was said (`_heard_wake`).
+            phrase = [f for at, f in self._recent if hit.start - CHECK_BEFORE <= at < hit.end]
+            self._loop.call_soon_threadsafe(self._check_wake, awake, b"".join(phrase))
         elif self._awake is not None:
             self._awake.last_heard = time.monotonic()
 
@@ -242,6 +257,37 @@ class Listener(Service):
 
     # --- on the event loop -------------------------------------------------------------
 
+    def _check_wake(self, awake: _Awake, pcm: bytes) -> None:
+        awake.checked = asyncio.ensure_future(self._heard_wake(pcm))
+
+    async def _heard_wake(self, pcm: bytes) -> bool:
+        """Whether the recogniser's neural ear hears the wake phrase in `pcm` too: the
+        spotter alone wakes about 25 times an hour on speech that never says it
+        (docs/benchmarks.md). A recogniser without such an ear leaves it to the spotter."""
+        request = CheckPhrase(pcm=pcm[-int(MAX_CHECK_SECONDS * 32000) :], phrase=self._config.wake)
+        try:
+            reply = await self._bus.request(
+                self._keys.stt_check, request, self._check_decoder, CHECK_TIMEOUT
+            )
+        except BusError as exc:
+            _LOGGER.warning("the wake phrase could not be checked (%s): the spotter decides", exc)
+            return True
+        match reply:
+            case PhraseCheck(checked=False):
+                return True
+            case PhraseCheck(heard=heard, text=text, support=support):
+                _LOGGER.info(
+                    "wake phrase %s: the recogniser heard %r (%s)",
+                    "confirmed" if heard else "not confirmed",
+                    text,
+                    "no support" if support is None else f"{support:+.2f}",
+                )
+                return heard
+            case Failed(reason=reason):
+                _LOGGER.warning("the wake phrase could not be checked (%s)", reason)
+                return True
+        return True
+
     def _watch_awake(self) -> None:
         self._loop.call_later(0.25, self._check_awake_later)
 
@@ -255,7 +301,7 @@ class Listener(Service):
         """Back to sleep after a pause of `awake` seconds (with a wake phrase), or at the
         end of the source (without one)."""
         awake = self._awake
-        if awake is None:
+        if awake is None or self._answered is not None:  # a read-back waits for its answer
             return
         quiet = time.monotonic() - awake.last_heard
         if (self._config.wake and quiet > self._config.awake) or (
@@ -279,9 +325,14 @@ class Listener(Service):
         if awake is None or proposal.session != awake.session:
             return
         awake.last_heard = time.monotonic()
-        self._keep(self._act_on(proposal))
+        self._keep(self._act_on(proposal, awake))
 
-    async def _act_on(self, proposal: Proposal) -> None:
+    async def _act_on(self, proposal: Proposal, awake: _Awake) -> None:
+        if awake.checked is not None and not await awake.checked:
+            _LOGGER.info("a false wake: %r not acted on", proposal.transcript)
+            if self._awake is awake:
+                self._sleep()
+            return
         certain = proposal.orders and not (proposal.errors or proposal.doubts or proposal.rejected)
         words = answers.proposal_words(proposal)
         if not certain:
@@ -318,6 +369,8 @@ class Listener(Service):
         finally:
             self._answer = None
             self._answered = None
+            if self._awake is not None:
+                self._awake.last_heard = time.monotonic()
         _LOGGER.info("confirmation: %s", answer or "no answer")
         return answer == "yes"
 

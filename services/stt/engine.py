@@ -26,7 +26,7 @@ from typing import Any, Protocol
 from msgspec import Struct
 
 from shared.errors import VoicectlError
-from shared.messages import Doubt, Grammar, Transcription
+from shared.messages import Doubt, Grammar, PhraseCheck, Transcription
 
 from .audio import frames
 
@@ -92,6 +92,10 @@ class Engine(Protocol):
         """A recogniser for one stream, with the grammar in use now. Utterances longer
         than `max_utterance` seconds are cut; with `segment` False the whole stream is one
         utterance (offline transcription). Raises EngineError before any grammar."""
+
+    def check(self, pcm: bytes, phrase: str) -> PhraseCheck:
+        """Whether `pcm` says `phrase`, by an ear bound to no grammar; `checked` False
+        for an engine that has none."""
 
     def close(self) -> None:
         """Give back what the engine holds beyond this process's memory (its workers)."""

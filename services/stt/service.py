@@ -27,7 +27,10 @@ from shared.messages import (
     AudioMessage,
     AudioStart,
     AudioStop,
+    CheckPhrase,
+    Failed,
     Grammar,
+    Message,
     PartialTranscript,
     SessionEnded,
     SttStatus,
@@ -211,6 +214,7 @@ class SttService(Service):
         self.bus.subscribe(
             self._keys.stt_audio_any, json_decoder(AudioMessage), self._on_audio, on_loop=False
         )
+        self.bus.serve(self._keys.stt_check, json_decoder(CheckPhrase), self._on_check)
         self.bus.announce(self._keys.alive("stt"))
         _LOGGER.info("stt ready for robot %s with %s", self._robot, self.engine.name)
 
@@ -236,6 +240,12 @@ class SttService(Service):
                     self._stop(session)
                     idle = f"no audio for {self.limits.idle_seconds:g} s: the microphone closed"
                     self._tell(session.name, SessionEnded(reason=idle))
+
+    async def _on_check(self, request: CheckPhrase) -> Message:
+        try:
+            return await asyncio.to_thread(self.engine.check, request.pcm, request.phrase)
+        except EngineError as exc:
+            return Failed(reason=str(exc))
 
     # --- grammar ---------------------------------------------------------------------------
 

@@ -19,7 +19,7 @@ from typing import Any
 
 import vosk
 
-from shared.messages import Doubt, Grammar
+from shared.messages import Doubt, Grammar, PhraseCheck
 
 from .audio import seconds, whole
 from .engine import (
@@ -83,6 +83,9 @@ class VoskEngine:
         self._pool: list[tuple[str, Any]] = []
         """Idle recognisers, each with the version of the grammar it was built with."""
         self._lock = threading.Lock()
+
+    def check(self, pcm: bytes, phrase: str) -> PhraseCheck:
+        return PhraseCheck(checked=False)  # bound to the grammar, like pocketsphinx
 
     def close(self) -> None:
         """Nothing beyond this process's memory."""

@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING, Any
 
 from msgspec import Struct
 
-from shared.messages import Grammar
+from shared.messages import Grammar, PhraseCheck
 
 from .engine import EngineError, EngineOptions, Recogniser, RecognitionEvent, load_engine
 
@@ -68,7 +68,12 @@ class _Close(Struct, frozen=True, tag=True):
     recogniser: int
 
 
-_Call = _UseGrammar | _Open | _Accept | _Finish | _Close
+class _Check(Struct, frozen=True, tag=True):
+    pcm: bytes
+    phrase: str
+
+
+_Call = _UseGrammar | _Open | _Accept | _Finish | _Close | _Check
 
 
 class _Reply(Struct, frozen=True):
@@ -104,6 +109,11 @@ class ProcessEngine:
         number: int = worker.call(_Open(max_utterance, segment))
         worker.sessions += 1
         return _RemoteRecogniser(worker, number)
+
+    def check(self, pcm: bytes, phrase: str) -> PhraseCheck:
+        worker = min(self._workers, key=lambda w: w.sessions)
+        checked: PhraseCheck = worker.call(_Check(pcm, phrase))
+        return checked
 
     def close(self) -> None:
         for worker in self._workers:
@@ -211,6 +221,8 @@ def _serve(connection: Connection, options: EngineOptions) -> None:
                 case _Close(recogniser=number):
                     recognisers.pop(number).close()
                     reply = _Reply()
+                case _Check(pcm=pcm, phrase=phrase):
+                    reply = _Reply(engine.check(pcm, phrase))
         except EngineError as exc:
             reply = _Reply(error=str(exc))
         except Exception as exc:  # the session logs it; the worker serves the others
