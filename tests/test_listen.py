@@ -5,15 +5,20 @@ at all, moves nothing."""
 
 from __future__ import annotations
 
+import os
 import queue
+import signal
 import subprocess
 import sys
 import threading
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
+from harness.pulse import PulseAudio
+from harness.pulse import unavailable as pulse_unavailable
 from harness.speech_set import pink_noise
 from services.stt.audio import read_wav
 from shared.bus import Bus
@@ -159,7 +164,8 @@ def test_the_wake_phrase_gates_commands_and_stop_needs_none(stack: Stack, speech
         mouth.say(speech("stop", VOICE))  # no wake phrase
         wait_until(lambda: state(stack).stopped, 30.0, "the spoken stop")
         stopped = state(stack)
-        assert stopped.current is None and not stopped.queue
+        assert stopped.current is None
+        assert not stopped.queue
         assert mouth.heard("heard 'stop'") == 1
 
         async def release(bus: Bus) -> None:
@@ -194,3 +200,79 @@ def test_a_read_back_answered_no_or_not_at_all_moves_nothing(stack: Stack, speec
         assert [d for d, _ in descriptions(state(stack)) if "dumpster" in d] == ["reach dumpster"]
     finally:
         assert mouth.close() == 0
+
+
+needs_device = pytest.mark.skipif(
+    pulse_unavailable() is not None and not os.environ.get("CI"), reason=f"{pulse_unavailable()}"
+)
+
+
+@needs_device
+def test_through_a_sound_device_the_robot_never_hears_its_own_voice(
+    stack: Stack, speech: Speak
+) -> None:
+    """A real device path: a private PulseAudio's null sink, whose monitor is the
+    listener's microphone and into which it speaks its answers. The answer "turn left" is
+    played back into the microphone; muted while it speaks, the listener does not take its
+    own words for a second order."""
+    with PulseAudio() as pulse:
+        env = {**stack.env, **pulse.env}
+        listen = subprocess.Popen(
+            [
+                *(sys.executable, "-m", "voicectl", "listen", "mic", "--connect", stack.router),
+                *("--speak", "--speaker", "speaker", "--awake", "3"),
+            ],
+            stderr=subprocess.PIPE,
+            text=True,
+            cwd=REPO,
+            env=env,
+        )
+        lines: list[str] = []
+
+        def read() -> None:
+            assert listen.stderr is not None
+            for line in listen.stderr:
+                lines.append(line.rstrip())
+                print("listen:", line.rstrip())
+
+        reader = threading.Thread(target=read, daemon=True)
+        reader.start()
+        try:
+            wait_until(lambda: any("listening for commands" in x for x in lines), 30, "listen")
+            pulse.play(speech("turn left", VOICE))
+            with pulse.recording() as recording:  # from here on, only the robot speaks
+                wait_until(
+                    lambda: any("answer: done: turn left" in x for x in lines),
+                    60.0,
+                    "the order to run and be answered",
+                )
+                wait_until(lambda: listen_spoke(lines), 30.0, "the answers to be spoken")
+                heard = recording.pcm
+            # The answers did reach the microphone's path.
+            assert loudest(heard) > 1000
+            pulse.play(speech("turn right", VOICE))
+            wait_until(
+                lambda: ("turn right", OrderStatus.SUCCEEDED) in descriptions(state(stack)),
+                60.0,
+                "the second command to run",
+            )
+            # Whatever the microphone heard of the robot's voice came before "turn right".
+            assert descriptions(state(stack)) == [
+                ("turn right", OrderStatus.SUCCEEDED),
+                ("turn left", OrderStatus.SUCCEEDED),
+            ]
+        finally:
+            listen.send_signal(signal.SIGINT)
+            assert listen.wait(timeout=30) == 0, "\n".join(lines)
+            reader.join(timeout=5)
+            if listen.stderr is not None:
+                listen.stderr.close()
+
+
+def listen_spoke(lines: list[str]) -> bool:
+    return sum("answer:" in line for line in lines) >= 2
+
+
+def loudest(pcm: bytes) -> float:
+    samples = np.frombuffer(pcm[: len(pcm) // 2 * 2], dtype="<i2").astype(np.float32)
+    return float(np.abs(samples).max()) if len(samples) else 0.0
