@@ -92,9 +92,8 @@ async def main(args: argparse.Namespace) -> None:
 def _voice(args: argparse.Namespace, stack: contextlib.ExitStack) -> Speak | None:
     if args.speak is None:
         return None
-    from shared.tts import load_voice
-
     from shared.errors import VoicectlError
+    from shared.tts import load_voice
 
     try:
         voice = load_voice(args.speak)
