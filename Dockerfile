@@ -1,6 +1,7 @@
 # voicectl's images, one per role (docs/deploy.md, "Containers"); compose.yaml picks the
 # service by command:
 #   docker build --target robot -t voicectl-robot:latest .   the executor and nothing else
+#   docker build --target listen -t voicectl-listen:latest .  the robot's ear and voice
 #   docker build --target host -t voicectl:latest .          every other service
 # `docker build .` builds the host image (the last stage). Build with BuildKit
 # (DOCKER_BUILDKIT=1, or any docker with buildx).
@@ -44,7 +45,11 @@ ARG VOICECTL_EXTRAS=host
 RUN --mount=type=secret,id=ca \
     python3 /tmp/build/install.py deps /tmp/build/pyproject.toml "$VOICECTL_EXTRAS"
 
-# voicectl's wheel, built once for both roles. Installed, not editable: the shipped
+FROM venv AS listen-deps
+RUN --mount=type=secret,id=ca \
+    python3 /tmp/build/install.py deps /tmp/build/pyproject.toml listen,mic
+
+# voicectl's wheel, built once for every role. Installed, not editable: the shipped
 # orders travel inside it, so the images hold no source tree.
 FROM venv AS wheel
 COPY README.md /tmp/build/
@@ -55,6 +60,10 @@ COPY orders /tmp/build/orders
 RUN --mount=type=secret,id=ca python3 /tmp/build/install.py wheel /tmp/build /tmp/wheels
 
 FROM robot-deps AS robot-install
+COPY --from=wheel /tmp/wheels /tmp/wheels
+RUN python3 /tmp/build/install.py voicectl /tmp/wheels
+
+FROM listen-deps AS listen-install
 COPY --from=wheel /tmp/wheels /tmp/wheels
 RUN python3 /tmp/build/install.py voicectl /tmp/wheels
 
@@ -76,6 +85,19 @@ CMD ["executor", "--help"]
 FROM robot AS router
 ENTRYPOINT ["voicectl", "router"]
 CMD ["--listen", "tcp/0.0.0.0:7447"]
+
+# The robot's ear and voice (`voicectl listen`): the wake phrase spotter, PortAudio for
+# the sound device the container is given (libasound2-plugins: ALSA's pulse plugin, for a
+# host whose sound goes through PulseAudio), espeak-ng to answer.
+FROM base AS listen
+RUN apt-get update \
+    && apt-get install -y --no-install-recommends libportaudio2 libasound2-plugins espeak-ng \
+    && apt-get clean && rm -rf /var/lib/apt/lists/*
+COPY --from=listen-install /opt/voicectl /opt/voicectl
+USER voicectl
+WORKDIR /home/voicectl
+ENTRYPOINT ["voicectl"]
+CMD ["listen", "--help"]
 
 # The host: every service, with the embedded speech engine.
 FROM base AS host

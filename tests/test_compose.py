@@ -39,7 +39,7 @@ VARIABLE = re.compile(r"\$\{(\w+)(?:(:?[-?])([^}]*))?\}")
 ROLES = {
     "host": {"router", "converter", "stt", "supervisor", "web"},
     "sim": {"sim-router", "sim", "executor"},
-    "robot": {"robot-router", "robot-executor", "bridge"},
+    "robot": {"robot-router", "robot-executor", "robot-listen", "bridge"},
 }
 """Which containers each profile runs (compose.yaml's header and docs/deploy.md)."""
 
@@ -130,15 +130,16 @@ def test_compose_up_runs_the_whole_stack_with_the_simulator() -> None:
     assert default_profiles() == {"host", "sim"}
     running = enabled(default_profiles())
     commands = {SERVICES_COMPOSED[name]["command"][0] for name in running & set(VOICECTL)}
-    # Every voicectl service but the router, which is zenohd's, and the STOP relay, which
-    # runs on a robot on DDS beside its executor (the simulator is on Zenoh).
-    assert commands == set(SERVICES) - {"router", "relay"}
+    # Every voicectl service but the router, which is zenohd's, the STOP relay, which runs
+    # on a robot on DDS beside its executor (the simulator is on Zenoh), and the listener,
+    # which needs a robot's sound device (the robot profile runs it).
+    assert commands == set(SERVICES) - {"router", "relay", "listen"}
     assert SERVICES_COMPOSED["router"]["image"].startswith("eclipse/zenoh:")
 
 
 def test_the_robot_runs_its_executor_next_to_the_bridge_instead_of_the_simulator() -> None:
     robot = enabled({"robot"})
-    assert robot == {"robot-router", "robot-executor", "bridge"}
+    assert robot == {"robot-router", "robot-executor", "robot-listen", "bridge"}
     assert SERVICES_COMPOSED["robot-executor"]["command"][0] == "executor"
     assert "sim" not in enabled({"host", "robot"})
 
@@ -170,18 +171,23 @@ def test_each_command_is_valid_for_its_service(name: str) -> None:
 
 def test_images_by_role() -> None:
     stages = set(re.findall(r"^FROM \S+ AS (\S+)$", DOCKERFILE, re.MULTILINE))
-    assert {"robot", "host"} <= stages
+    assert {"robot", "listen", "host"} <= stages
+    images = {
+        "robot": "voicectl-robot:latest",
+        "listen": "voicectl-listen:latest",
+        "host": "voicectl:latest",
+    }
     for name, service in VOICECTL.items():
         role = "robot" if "robot" in service["profiles"] else "host"
+        if service["command"][0] == "listen":
+            role = "listen"
         assert service["build"] == {
             "context": ".",
             "target": role,
             "args": {"BASE_IMAGE": "python:3.11-slim-bookworm"},
             "secrets": ["ca"],
         }, name
-        assert service["image"] == (
-            "voicectl-robot:latest" if role == "robot" else "voicectl:latest"
-        )
+        assert service["image"] == images[role]
     assert re.findall(r"^FROM .*$", DOCKERFILE, re.MULTILINE)[-1].endswith(" AS host")
 
 
@@ -246,8 +252,8 @@ def test_a_ca_bundle_reaches_pip_as_a_secret_never_as_a_layer() -> None:
     # Each step that downloads (each role's dependencies, the wheel's build backend)
     # mounts the secret; nothing copies a CA into an image.
     downloads = re.findall(r"install\.py (?:deps|wheel) ", DOCKERFILE)
-    assert len(downloads) == 3
-    assert DOCKERFILE.count("RUN --mount=type=secret,id=ca") == 3
+    assert len(downloads) == 4  # robot, listen and host dependencies; the wheel
+    assert DOCKERFILE.count("RUN --mount=type=secret,id=ca") == 4
     assert "/run/secrets/ca" in (REPO / "deploy" / "install.py").read_text()
     assert not re.search(r"^COPY .*(ca|cert)", DOCKERFILE, re.M | re.I)
     document = yaml.safe_load((REPO / "compose.yaml").read_text())
