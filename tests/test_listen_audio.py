@@ -332,6 +332,31 @@ def test_the_speaker_plays_into_the_sink(device: PulseAudio) -> None:
     assert abs(np.argmax(spectrum) * SAMPLE_RATE / len(heard) - 440) < 5
 
 
+@needs_device
+def test_the_microphone_hears_on_after_the_speaker_played(device: PulseAudio, speech: Path) -> None:
+    """As in `voicectl listen --speak`: one process reads the microphone while another thread
+    plays its answers through the speaker (the same sink), and then someone else speaks
+    into the sink. The microphone hears the answers and what comes after them."""
+    samples, rate = soundfile.read(str(speech), dtype="int16", always_2d=True)
+    answer = samples.mean(axis=1).astype("<i2").tobytes()
+    capture = Capture(open_source("mic"))
+    sink = open_sink("speaker")
+    try:
+        capture.more(0.1)
+        start = len(capture.chunks)
+        speaker = threading.Thread(target=lambda: [sink.play(answer, rate) for _ in range(2)])
+        speaker.start()
+        speaker.join(timeout=30)
+        assert not speaker.is_alive(), "the speaker did not finish"
+        capture.more(0.3)
+        answers = pcm_envelope(b"".join(capture.chunks[start:]))
+        assert best_match(file_envelope(speech), answers) > 0.8
+        assert hears(device, capture, speech) > 0.8
+    finally:
+        sink.close()
+        capture.stop()
+
+
 def test_a_wav_sink_collects_every_utterance(tmp_path: Path) -> None:
     path = tmp_path / "said.wav"
     sink = open_sink(f"file:{path}")
