@@ -25,3 +25,7 @@ class ServiceError(VoicectlError):
 class StoreError(VoicectlError):
     """The supervisor's order store cannot do what was asked: its disk is full, its file
     is damaged or was emptied, or another supervisor holds it."""
+
+
+class TtsError(VoicectlError):
+    """Speech could not be made: the engine is not installed, failed, or took too long."""
