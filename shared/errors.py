@@ -30,3 +30,7 @@ class StoreError(VoicectlError):
 class AudioError(VoicectlError):
     """Audio that cannot be used, or a sound device that cannot be opened; the text says
     what and where ("microphone 'USB Audio' is busy")."""
+
+
+class TtsError(VoicectlError):
+    """Speech could not be made: the engine is not installed, failed, or took too long."""

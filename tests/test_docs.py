@@ -284,3 +284,15 @@ def test_speech_doc_transcribe_example_prints_what_it_shows(tmp_path: Path) -> N
     assert [(o["order"], o["case"]) for o in printed["orders"]] == [
         (o["order"], o["case"]) for o in shown["orders"]
     ]
+
+
+def test_speech_doc_voice_command_and_table_are_what_the_panel_takes() -> None:
+    from services.web.__main__ import parse_args
+    from shared.tts import VOICES
+
+    doc = DOCS / "speech.md"
+    command = block_after(doc, "## Spoken answers", "sh").strip()
+    assert command.startswith(".venv/bin/voicectl web ")
+    assert parse_args(command.removeprefix(".venv/bin/voicectl web ").split()).voice == "flite"
+    table = doc.read_text().partition("## Spoken answers")[2]
+    assert set(re.findall(r"^\| `([a-z][a-z-]*)`", table, re.MULTILINE)) == {*VOICES, "none"}

@@ -80,6 +80,7 @@ class AudioListener:
         ("POST", "/api/release"),
         ("POST", "/api/resume"),
         ("POST", "/api/reorder"),
+        ("POST", "/api/speech"),
     ],
 )
 def test_every_api_route_needs_the_token(client: TestClient, method: str, path: str) -> None:

@@ -24,6 +24,7 @@ from collections.abc import Callable, Coroutine
 from dataclasses import dataclass, field
 from typing import Any
 
+from shared import answers
 from shared.bus import Bus, Stream, json_decoder
 from shared.client import Refused, Unreachable, VoicectlClient
 from shared.errors import BusError
@@ -41,11 +42,11 @@ from shared.messages import (
     PhraseCheck,
     Proposal,
     StateUpdate,
+    Stopped,
     SttReply,
 )
 from shared.process import Service
 
-from . import answers
 from .spotter import (
     STOP_LOOP_PENALTY,
     STOP_THRESHOLD,
@@ -375,7 +376,9 @@ class Listener(Service):
             )
         except (Refused, Unreachable) as exc:
             _LOGGER.warning("not submitted: %s", exc)
-            await self.say(answers.refused_words(str(exc)))
+            await self.say(
+                f"not sent: {answers.short(exc.reason if isinstance(exc, Refused) else str(exc))}"
+            )
             return
         for order_id, order in zip(ids, proposal.orders, strict=False):
             self._mine[order_id] = order.description
@@ -406,8 +409,8 @@ class Listener(Service):
     def _on_state(self, _key: str, update: StateUpdate) -> None:
         state = update.state
         self._moving = state.current is not None
-        if state.stopped and not self._stopped:
-            self._keep(self.say(answers.stopped_words()))
+        if state.stopped and not self._stopped:  # stopped from elsewhere (the panel, the CLI)
+            self._keep(self.say(answers.stopped_words(Stopped(confirmed=True, detail=""))))
         self._stopped = state.stopped
         for record in state.history:
             if record.id in self._mine:
@@ -433,6 +436,7 @@ class Listener(Service):
             _LOGGER.error("'stop' heard, but nothing could be stopped: %s", exc)
             return
         _LOGGER.info("stopped (%s)", "confirmed" if stopped.confirmed else stopped.detail)
+        await self.say(answers.stopped_words(stopped))
 
     def _keep(self, work: Coroutine[Any, Any, None]) -> None:
         """Run `work` on its own, holding it until done (the loop keeps weak references)."""
@@ -453,6 +457,8 @@ class Listener(Service):
                 await asyncio.to_thread(speak, words)
             except Exception as exc:  # a voice that fails must not end the listener
                 _LOGGER.warning("could not speak %r: %s", words, exc)
+            else:
+                _LOGGER.info("spoke: %s", words)
             finally:
                 self._muted_until = time.monotonic() + ECHO_TAIL
                 # The spotter's search may hold the robot's own words: it starts again.

@@ -20,7 +20,7 @@ import uvicorn
 
 from shared.bus import Bus
 from shared.config import default_token_file, load_or_create_token
-from shared.errors import ServiceError
+from shared.errors import ServiceError, TtsError
 from shared.process import (
     Service,
     add_bus_arguments,
@@ -30,6 +30,7 @@ from shared.process import (
     run_service,
     serve,
 )
+from shared.tts import VOICES, Voice, load_voice
 
 from .app import Access, Panel, create_app
 from .audio import MAX_MESSAGE
@@ -84,6 +85,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         metavar="ORIGIN",
         help="another origin (scheme://host:port) whose pages may open the microphone socket",
     )
+    parser.add_argument(
+        "--voice",
+        default="espeak-ng",
+        choices=[*VOICES, "none"],
+        help="speech engine that says the panel's answers when a page asks (default: "
+        "espeak-ng); none turns spoken answers off",
+    )
     add_bus_arguments(parser)
     return parser.parse_args(argv)
 
@@ -131,12 +139,22 @@ async def main(args: argparse.Namespace) -> None:
         raise ServiceError(problem)
     token_file = args.token_file or default_token_file()
     access = Access(load_or_create_token(token_file), origins=args.allow_origin)
-    panel = Panel(args.robot, access)
+    panel = Panel(args.robot, access, _voice(args.voice))
     # The bus first, as every service opens it: a stop while it waits for the router ends
     # the process then; inside uvicorn's lifespan that wait would hold the loop that a
     # stop must reach.
     with open_bus(args) as bus:
         await _serve(args, panel, bus, token_file)
+
+
+def _voice(engine: str) -> Voice | None:
+    """The engine asked for, or a one-line reason the panel does not start."""
+    if engine == "none":
+        return None
+    try:
+        return load_voice(engine)
+    except TtsError as exc:
+        raise ServiceError(f"{exc}; or --voice none") from exc
 
 
 async def _serve(args: argparse.Namespace, panel: Panel, bus: Bus, token_file: Path) -> None:

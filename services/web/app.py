@@ -32,7 +32,7 @@ from starlette.websockets import WebSocket
 
 from shared.bus import Bus, BusOptions
 from shared.client import Refused, Unreachable, VoicectlClient
-from shared.errors import VoicectlError
+from shared.errors import TtsError, VoicectlError
 from shared.keys import RobotKeys, check_chunk
 from shared.messages import (
     Cancel,
@@ -53,6 +53,7 @@ from shared.messages import (
     SupervisorReply,
 )
 from shared.process import running
+from shared.tts import MAX_TEXT, Voice, to_wav
 
 from .audio import AudioSocket
 from .hub import END, Hub
@@ -77,6 +78,11 @@ class SubmitBody(msgspec.Struct, forbid_unknown_fields=True):
 
 class TextBody(msgspec.Struct, forbid_unknown_fields=True):
     text: str
+
+
+class SpeechBody(msgspec.Struct, forbid_unknown_fields=True):
+    text: Annotated[str, msgspec.Meta(min_length=1, max_length=MAX_TEXT)]
+    """A short answer to say aloud ("stopped"), as the panel shows it."""
 
 
 class CancelBody(msgspec.Struct, forbid_unknown_fields=True):
@@ -144,11 +150,13 @@ def _as_api_errors() -> Iterator[None]:
 
 
 class Panel:
-    """The API's handlers; the bus and the hub arrive when the app starts."""
+    """The API's handlers; the bus and the hub arrive when the app starts. `voice` speaks
+    the panel's answers (/api/speech); None turns that off."""
 
-    def __init__(self, robot: str, access: Access) -> None:
+    def __init__(self, robot: str, access: Access, voice: Voice | None = None) -> None:
         self.default_robot = robot
         self.access = access
+        self.voice = voice
         self._bus: Bus | None = None
         self._client: VoicectlClient | None = None
         self.hub: Hub | None = None
@@ -202,6 +210,7 @@ class Panel:
             Route("/api/release", api(self._release), methods=["POST"]),
             Route("/api/resume", api(self._resume), methods=["POST"]),
             Route("/api/reorder", api(self._reorder), methods=["POST"]),
+            Route("/api/speech", api(self._speech), methods=["POST"]),
             Route("/api/state", api(self._state)),
             Route("/api/history", api(self._history)),
             Route("/api/events", api(self._events)),
@@ -327,6 +336,20 @@ class Panel:
         keys = self._robot(request)
         body = await self._body(request, ReorderBody)
         return await self._done(keys, Reorder(order_id=body.order_id, position=body.position))
+
+    async def _speech(self, request: Request) -> Response:
+        """`text` spoken by the service's voice, as a WAV for the browser to play."""
+        if self.voice is None:
+            raise ApiError(404, "spoken answers are off (voicectl web --voice none)")
+        body = await self._body(request, SpeechBody)
+        try:
+            # An engine is a child process per phrase: tens of milliseconds off the loop.
+            speech = await asyncio.to_thread(self.voice.speak, body.text)
+        except ValueError as exc:
+            raise ApiError(400, str(exc)) from exc
+        except TtsError as exc:
+            raise ApiError(503, str(exc)) from exc
+        return Response(to_wav(speech), media_type="audio/wav")
 
     async def _history(self, request: Request) -> object:
         keys = self._robot(request)

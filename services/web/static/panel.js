@@ -11,6 +11,8 @@ const store = {
   set robot(value) { localStorage.setItem("voicectl-robot", value); },
   get autoSend() { return localStorage.getItem("voicectl-auto-send") === "1"; },
   set autoSend(on) { localStorage.setItem("voicectl-auto-send", on ? "1" : "0"); },
+  get speakAnswers() { return localStorage.getItem("voicectl-speak-answers") === "1"; },
+  set speakAnswers(on) { localStorage.setItem("voicectl-speak-answers", on ? "1" : "0"); },
 };
 
 const view = {
@@ -29,7 +31,10 @@ const view = {
   map: null, // the robot's own map, when it has one
   startedAt: {}, // order id -> the pose where it started (a relative goal is from there)
   drawing: false,
+  finished: null, // ids of the history shown, to tell which orders have just ended
 };
+const voice = { context: null, asked: null, playing: null }; // the spoken answers, see say
+const answers = window.voicectlAnswers;
 const TRAIL = 300;
 const PART_NAMES = { converter: "orders", stt: "speech", supervisor: "queue", executor: "executor", robot: "odometry" };
 
@@ -115,6 +120,7 @@ async function start() {
   $("login").hidden = true;
   $("panel").hidden = false;
   $("auto-send").checked = store.autoSend;
+  $("speak-answers").checked = store.speakAnswers;
   try {
     const known = await api("/api/robots");
     showRobots(known.robots);
@@ -136,6 +142,7 @@ function selectRobot(name) {
   view.trail = [];
   view.map = null;
   view.startedAt = {};
+  view.finished = null;
   $("pose").textContent = "no position yet";
   $("parts").replaceChildren();
   $("queue").replaceChildren();
@@ -401,6 +408,7 @@ function showEars(proposal) {
 
 function propose(proposal) {
   showEars(proposal);
+  say(answers.proposalWords(proposal));
   if (proposal.rejected) {
     // Why, in plain words, on the line that showed what was heard ("I heard '…': not a
     // command"); a suggestion, if the converter had one, below it.
@@ -609,7 +617,66 @@ function showState(state) {
   const more = length - state.queue.length;
   if (more > 0) $("queue").append(el("li", `… and ${more} more`, "muted"));
   if (view.historyOffset === 0) showHistory(state.history, null);
+  announceEnded(state);
   redraw();
+}
+
+function announceEnded(state) {
+  // The order that has just ended, said once; the history the page opened with is not
+  // news. Under an emergency stop the stop's own answer says it all.
+  const fresh = view.finished ? state.history.filter((record) => !view.finished.has(record.id)) : [];
+  view.finished = new Set(state.history.map((record) => record.id));
+  if (fresh.length && !state.stopped) say(answers.outcomeWords(fresh[0]));
+}
+
+// --- answering aloud ---------------------------------------------------------------------------
+
+function voiceContext() {
+  // A page may sound only once the person has clicked or typed in it: the context is made,
+  // or woken, in such an event (the setting's click, or any later one).
+  voice.context = voice.context || new AudioContext();
+  if (voice.context.state === "suspended") voice.context.resume();
+  return voice.context;
+}
+
+function hush() {
+  if (voice.asked) voice.asked.abort();
+  if (voice.playing) voice.playing.stop();
+  voice.asked = null;
+  voice.playing = null;
+}
+
+async function say(text) {
+  // The service speaks `text` (POST /api/speech, a WAV) and the page plays it. A new answer
+  // replaces the one asked for or playing: stale speech is never queued.
+  if (!store.speakAnswers || !text) return;
+  hush();
+  const asked = new AbortController();
+  voice.asked = asked;
+  try {
+    const response = await fetch("/api/speech", {
+      method: "POST",
+      headers: { Authorization: `Bearer ${store.token}`, "Content-Type": "application/json" },
+      body: JSON.stringify({ text }),
+      signal: asked.signal,
+    });
+    if (!response.ok) throw new Error((await response.json().catch(() => ({}))).error || response.statusText);
+    const context = voiceContext();
+    const sound = await context.decodeAudioData(await response.arrayBuffer());
+    if (voice.asked !== asked) return; // a newer answer came meanwhile
+    if (context.state !== "running") {
+      setStatus("Click anywhere on the page once to let it speak answers.");
+      return;
+    }
+    const source = context.createBufferSource();
+    source.buffer = sound;
+    source.connect(context.destination);
+    source.onended = () => { if (voice.playing === source) voice.playing = null; };
+    source.start();
+    voice.playing = source;
+  } catch (error) {
+    if (error.name !== "AbortError") setStatus(`cannot speak answers: ${error.message}`);
+  }
 }
 
 function showHistory(records, total) {
@@ -665,6 +732,13 @@ $("send").onclick = async () => {
 };
 $("clear").onclick = () => { view.staged = []; showStaged(); };
 $("auto-send").onchange = (event) => { store.autoSend = event.target.checked; };
+$("speak-answers").onchange = (event) => {
+  store.speakAnswers = event.target.checked;
+  if (event.target.checked) voiceContext(); else hush();
+};
+for (const kind of ["pointerdown", "keydown"]) {
+  document.addEventListener(kind, () => { if (store.speakAnswers) voiceContext(); }, true);
+}
 $("cancel-all").onclick = () => {
   if (confirm("Cancel the running order and every queued one?")) {
     api("/api/cancel_all", {}).catch(report);
@@ -673,7 +747,10 @@ $("cancel-all").onclick = () => {
 // Never asks: it stops now, and says what stopped the robot (or what did not confirm).
 $("stop").onclick = () =>
   api("/api/stop", {})
-    .then((stopped) => setStatus(stopped.confirmed ? "Stopped." : `STOP NOT CONFIRMED: ${stopped.detail}`))
+    .then((stopped) => {
+      setStatus(stopped.confirmed ? "Stopped." : `STOP NOT CONFIRMED: ${stopped.detail}`);
+      say(answers.stoppedWords(stopped));
+    })
     .catch(report);
 $("release").onclick = () => api("/api/release", {}).catch(report);
 $("resume").onclick = () => api("/api/resume", {}).catch(report);
