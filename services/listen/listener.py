@@ -30,6 +30,7 @@ from shared.client import Refused, Unreachable, VoicectlClient
 from shared.errors import BusError
 from shared.keys import RobotKeys
 from shared.messages import (
+    FRAME_BYTES,
     MAX_CHECK_SECONDS,
     AudioChunk,
     AudioStart,
@@ -221,7 +222,8 @@ class Listener(Service):
         # While the robot speaks, and while it waits for a yes or no, the recogniser gets
         # the silence of a muted microphone: neither is a command.
         heard = bytes(len(pcm)) if muted or self._answer is not None else pcm
-        self._recent.append((start, heard))
+        for at in range(0, len(heard), FRAME_BYTES):  # by 20 ms frames: where a phrase ends
+            self._recent.append((start + at / BYTES_PER_SECOND, heard[at : at + FRAME_BYTES]))
         while self._recent and self._recent[0][0] < self._clock - ROOM_BEFORE - 3.0:
             self._recent.popleft()
         awake = self._awake
@@ -253,8 +255,7 @@ class Listener(Service):
             # is not for the recogniser, whose grammar does not know it.
             room = [f for at, f in self._recent if hit.start - ROOM_BEFORE <= at < hit.start]
             after = [f for at, f in self._recent if at >= hit.end]
-            for frame in [*room, *after]:
-                self._send(awake, frame)
+            self._send(awake, b"".join([*room, *after]))
             # Streaming starts at once; what it becomes is submitted only once the
             # recogniser's neural ear agrees the phrase was said (`_heard_wake`).
             phrase = [f for at, f in self._recent if hit.start - CHECK_BEFORE <= at]
