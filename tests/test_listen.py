@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import os
 import queue
+import shlex
 import signal
 import subprocess
 import sys
@@ -28,6 +29,7 @@ from shared.messages import GetState, OrderStatus, Release, State, StateReply
 
 from .conftest import REPO, Speak, Stack, wait_until
 from .support import on_bus
+from .test_docs import block_after
 
 pytestmark = pytest.mark.e2e
 
@@ -126,10 +128,15 @@ def descriptions(known: State) -> list[tuple[str, OrderStatus]]:
     return [(record.order.description, record.status) for record in records]
 
 
-def test_a_file_becomes_orders_the_simulator_carries_out(stack: Stack, speech: Speak) -> None:
-    wav = speech("turn left then take a photo", VOICE)
-    said = stack.voicectl("listen", str(wav), "--connect", stack.router, "--awake", "2")
-    assert said.returncode == 0, said.stderr
+def test_a_file_becomes_orders_the_simulator_carries_out(stack: Stack, tmp_path: Path) -> None:
+    """docs/listen.md's example, run line by line (its /tmp files in the test's own)."""
+    block = block_after(REPO / "docs" / "listen.md", "heard through the whole stack", "sh")
+    for command in block.strip().splitlines():
+        argv = shlex.split(command.replace("/tmp/", f"{tmp_path}/"))
+        if argv[0] == ".venv/bin/voicectl":
+            argv = [sys.executable, "-m", "voicectl", *argv[1:], "--connect", stack.router]
+        done = subprocess.run(argv, capture_output=True, text=True, cwd=REPO, env=stack.env)
+        assert done.returncode == 0, (command, done.stderr)
     wait_until(
         lambda: ("take picture", OrderStatus.SUCCEEDED) in descriptions(state(stack)),
         60.0,
