@@ -672,6 +672,17 @@ def test_host_image_builds_and_parses() -> None:
 
 @needs_images
 @BUILD_TIMEOUT
+def test_listen_image_builds_and_says_in_one_line_that_no_microphone_is_there() -> None:
+    """The robot's ear without the host's /dev/snd (none here): one line, naming it."""
+    build("robot-listen")
+    assert "usage: voicectl listen" in output("voicectl-listen:latest", "listen", "--help")
+    said = output("voicectl-listen:latest", "listen", "mic", "--connect", "tcp/127.0.0.1:9")
+    assert said.strip().splitlines()[-1].startswith("voicectl listen: "), said
+    assert "microphone" in said or "sound device" in said, said
+
+
+@needs_images
+@BUILD_TIMEOUT
 def test_robot_image_builds_and_runs_the_executor() -> None:
     build("robot-executor")
     assert "usage: voicectl health" in output("voicectl-robot:latest", "health", "--help")

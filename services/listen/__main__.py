@@ -83,7 +83,7 @@ async def main(args: argparse.Namespace) -> None:
             raise ServiceError(str(exc)) from exc
         with open_bus(args) as bus:
             try:
-                listener = Listener(bus, config, source.read, speak)
+                listener = Listener(bus, config, source.read, source.close, speak)
             except SpotterError as exc:
                 raise ServiceError(str(exc)) from exc
             await serve(listener)

@@ -109,19 +109,21 @@ Speak = Callable[[str], None]
 
 class Listener(Service):
     """`voicectl listen`: reads `read()` until it returns None (the end of a file), or until
-    stopped."""
+    stopped; `interrupt()` makes a waiting `read()` return None."""
 
     def __init__(
         self,
         bus: Bus,
         config: ListenConfig,
         read: Callable[[], bytes | None],
+        interrupt: Callable[[], None],
         speak: Speak | None = None,
     ) -> None:
         self._bus = bus
         self._config = config
         self._keys = RobotKeys(config.robot)
         self._read = read
+        self._interrupt = interrupt
         self._speak = speak
         self._client = VoicectlClient(bus)
         self._check_decoder = json_decoder(SttReply)
@@ -153,16 +155,14 @@ class Listener(Service):
         """Monotonic time until which the microphone is not heard (the robot speaks)."""
         self._moving = False
         self._stopped = False
-        self._mine: dict[str, str] = {}
-        """Orders this listener submitted, by id: their description, for the outcome."""
+        self._mine: set[str] = set()
+        """The ids of the orders this listener submitted: their outcomes are said."""
         self._ends: list[Callable[[], None]] = []
         self._reader: threading.Thread | None = None
         self._finished: asyncio.Future[None] = self._loop.create_future()
         self._closing = False
         self._speaking: asyncio.Lock = asyncio.Lock()
         self._tasks: set[asyncio.Future[None]] = set()
-        self.stops = 0
-        """How many times "stop" was acted on (for tests and benches)."""
 
     async def start(self) -> None:
         keys = self._keys
@@ -189,11 +189,12 @@ class Listener(Service):
         while self._awake is not None:  # the last utterance's proposal, then the pause
             await asyncio.sleep(0.1)
             self._check_awake()
-        async with self._speaking:
-            pass
+        while self._tasks:  # what the last proposal started: its answer, its submit
+            await asyncio.gather(*self._tasks, return_exceptions=True)
 
     async def stop(self) -> None:
         self._closing = True
+        self._interrupt()
         if self._reader is not None:
             await asyncio.to_thread(self._reader.join, 5.0)
         for end in self._ends:
@@ -381,8 +382,7 @@ class Listener(Service):
                 f"not sent: {answers.short(exc.reason if isinstance(exc, Refused) else str(exc))}"
             )
             return
-        for order_id, order in zip(ids, proposal.orders, strict=False):
-            self._mine[order_id] = order.description
+        self._mine.update(ids)
         _LOGGER.info("submitted %s: %s", ", ".join(ids), proposal.transcript)
 
     async def _confirmed(self, words: str) -> bool:
@@ -415,7 +415,7 @@ class Listener(Service):
         self._stopped = state.stopped
         for record in state.history:
             if record.id in self._mine:
-                del self._mine[record.id]
+                self._mine.discard(record.id)
                 self._said_outcome(record)
 
     def _said_outcome(self, record: OrderRecord) -> None:
@@ -426,7 +426,6 @@ class Listener(Service):
             self._keep(self.say(words))
 
     def _stop_robot(self) -> None:
-        self.stops += 1
         self._stopped = True
         self._keep(self._stop_now())
 
