@@ -198,6 +198,8 @@ async def main_async(
     print(line("command end -> answer begins", answers))
     print(line("espeak-ng makes 'turn left'", made))
     print(f"not heard: {missed} of {args.rounds} rounds each")
+    if args.log:
+        print("\n".join(lines))
 
 
 async def until_running(client: VoicectlClient, timeout: float = 10.0) -> None:
@@ -213,10 +215,11 @@ async def until_running(client: VoicectlClient, timeout: float = 10.0) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--rounds", type=int, default=10)
+    parser.add_argument("--log", action="store_true", help="print the listener's log")
     args = parser.parse_args()
     said = cache_dir() / "bench-listen" / "answers.wav"  # the listener's voice: a file
     said.unlink(missing_ok=True)
-    with stack_up("voicectl-bench-listen-") as (_, _, _, _, router):
+    with stack_up("voicectl-bench-listen-") as (_, stack_lines, _, _, router):
         lines: list[str] = []
         listener = start_listener(router, said, lines)
         try:
@@ -224,6 +227,8 @@ def main() -> None:
         finally:
             listener.terminate()
             listener.wait(10)
+            if args.log:
+                print("\n".join(x for x in stack_lines if "utterance" in x or "->" in x))
 
 
 if __name__ == "__main__":

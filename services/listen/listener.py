@@ -70,6 +70,8 @@ the moment it was spotted (its boundaries are rough). On the dev split this wind
 confirmed 13 of 16 phrases said alone with 2 false wakes in 18 minutes; the phrase's
 own boundaries gave 12 and 4, the last 1.6 s 15 and 5."""
 CHECK_TIMEOUT = 5.0
+PHRASE_SECONDS = 2.0
+"""Longer than any wake phrase takes to say."""
 ECHO_TAIL = 0.3
 """Seconds the microphone stays muted after the robot's own voice ends (room echo)."""
 CONFIRM_WORDS = (Phrase("yes", 1e-10), Phrase("no", 1e-10))
@@ -148,8 +150,8 @@ class Listener(Service):
         self._recent: deque[tuple[float, bytes]] = deque()
         """(stream time, audio) of the last seconds: the room before a wake phrase."""
         self._clock = 0.0
-        self._reset_wanted = False
-        """Set on the loop after the robot spoke; the reader's thread resets the spotter."""
+        self._last_wake = -PHRASE_SECONDS
+        """Where the last wake phrase heard began (stream time)."""
         self._awake: _Awake | None = None
         self._muted_until = 0.0
         """Monotonic time until which the microphone is not heard (the robot speaks)."""
@@ -230,12 +232,10 @@ class Listener(Service):
         awake = self._awake
         if awake is not None:
             self._send(awake, heard)
-        if muted:
-            return
-        if self._reset_wanted:
-            self._reset_wanted = False
+        if muted:  # the spotters' clocks run on with the stream's
             for spotter in self._spotters:
-                spotter.reset()
+                spotter.skip(len(pcm))
+            return
         if self._answer is not None:
             for hit in self._answer.accept(pcm):
                 self._loop.call_soon_threadsafe(self._on_answer, hit.phrase)
@@ -251,6 +251,12 @@ class Listener(Service):
             return
         if self._awake is None:
             _LOGGER.info("heard the wake phrase at %.2f s", hit.end)
+            # A search that fired early, on the phrase's first part, and was turned down
+            # restarted inside the phrase: this hit's start is then late. The phrase began
+            # no later than that first hit.
+            if hit.start - self._last_wake < PHRASE_SECONDS:
+                hit = Spotted(hit.phrase, self._last_wake, hit.end)
+            self._last_wake = hit.start
             awake = self._wake_now()
             # The room before the phrase, then what was said after it: the phrase itself
             # is not for the recogniser, whose grammar does not know it.
@@ -461,5 +467,3 @@ class Listener(Service):
                 _LOGGER.info("spoke: %s", words)
             finally:
                 self._muted_until = time.monotonic() + ECHO_TAIL
-                # The spotter's search may hold the robot's own words: it starts again.
-                self._reset_wanted = True

@@ -129,9 +129,11 @@ class Spotter:
                 self._restart(keep=True)
         return found
 
-    def reset(self) -> None:
-        """Forget what was heard (after the robot's own voice): a phrase must start anew."""
+    def skip(self, pcm_bytes: int) -> None:
+        """Audio not heard (the microphone muted while the robot speaks): the clock runs
+        on, and a phrase must start anew after it."""
         self._restart(keep=False)
+        self._origin += pcm_bytes / 2 / SAMPLE_RATE
 
     def close(self) -> None:
         self._decoder.end_utt()
