@@ -87,10 +87,10 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     )
     parser.add_argument(
         "--voice",
-        default="espeak-ng",
+        default=None,
         choices=[*VOICES, "none"],
         help="speech engine that says the panel's answers when a page asks (default: "
-        "espeak-ng); none turns spoken answers off",
+        "espeak-ng when installed, else none); none turns spoken answers off",
     )
     add_bus_arguments(parser)
     return parser.parse_args(argv)
@@ -147,13 +147,17 @@ async def main(args: argparse.Namespace) -> None:
         await _serve(args, panel, bus, token_file)
 
 
-def _voice(engine: str) -> Voice | None:
-    """The engine asked for, or a one-line reason the panel does not start."""
+def _voice(engine: str | None) -> Voice | None:
+    """The engine asked for, or a one-line reason the panel does not start. Unasked, a
+    missing espeak-ng turns spoken answers off: the panel works without them."""
     if engine == "none":
         return None
     try:
-        return load_voice(engine)
+        return load_voice(engine or "espeak-ng")
     except TtsError as exc:
+        if engine is None:
+            _LOGGER.warning("spoken answers are off: %s", exc)
+            return None
         raise ServiceError(f"{exc}; or --voice none") from exc
 
 
