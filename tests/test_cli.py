@@ -32,6 +32,7 @@ def test_parse_prints_one_json_object() -> None:
                 "description": "turn left",
                 "params": {},
                 "target_pose": {"frame": "base_link", "x": 0.0, "y": 0.0, "yaw": 1.57},
+                "confirm": False,
             }
         ],
         "errors": [{"text": "dance", "reason": "no order matches"}],
@@ -43,6 +44,12 @@ def test_parse_without_frame_has_null_pose_and_params() -> None:
     (order,) = json.loads(done.stdout)["orders"]
     assert order["target_pose"] is None
     assert order["params"] == {"wait": 5}
+
+
+def test_an_order_that_asks_for_a_spoken_yes_says_so() -> None:
+    done = voicectl("parse", "--orders", "orders/demo.yaml", "go to the dumpster")
+    (order,) = json.loads(done.stdout)["orders"]
+    assert order["confirm"] is True
 
 
 def test_parse_with_a_bad_file_exits_2_in_one_line(tmp_path: Path) -> None:
@@ -210,3 +217,13 @@ async def test_say_tells_a_person_what_was_sent_and_when(router: str, processes:
             readable = datetime.datetime.fromisoformat(record[f"{key}_iso"])
             assert readable.tzinfo is not None, record  # a time a person can place
             assert abs(readable.timestamp() - epoch) < 1.0, (key, record)
+
+
+def test_confirm_must_be_true_or_false(tmp_path: Path) -> None:
+    orders = tmp_path / "orders.yaml"
+    orders.write_text('orders:\n  x:\n    voice_alias: "x"\n    label: "l"\n    confirm: "yes"\n')
+    done = voicectl("parse", "--orders", str(orders), "x")
+    assert done.returncode == 2
+    assert done.stderr.strip() == (
+        f"voicectl parse: {orders}: order 'x': 'confirm' must be true or false"
+    )
