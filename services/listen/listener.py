@@ -70,6 +70,7 @@ the moment it was spotted (its boundaries are rough). On the dev split this wind
 confirmed 13 of 16 phrases said alone with 2 false wakes in 18 minutes; the phrase's
 own boundaries gave 12 and 4, the last 1.6 s 15 and 5."""
 CHECK_TIMEOUT = 5.0
+RECENT_SESSIONS = 4
 PHRASE_SECONDS = 2.0
 """Longer than any wake phrase takes to say."""
 ECHO_TAIL = 0.3
@@ -153,6 +154,8 @@ class Listener(Service):
         self._last_wake = -PHRASE_SECONDS
         """Where the last wake phrase heard began (stream time)."""
         self._awake: _Awake | None = None
+        self._sessions: dict[str, _Awake] = {}
+        """The last sessions, the current one included, whose proposals are acted on."""
         self._muted_until = 0.0
         """Monotonic time until which the microphone is not heard (the robot speaks)."""
         self._moving = False
@@ -242,6 +245,11 @@ class Listener(Service):
         for spotter in self._spotters:
             for hit in spotter.accept(pcm):
                 self._on_hit(hit)
+        # Someone still speaking keeps the listener awake, however late the recogniser's
+        # partial transcripts come on a busy host.
+        awake = self._awake
+        if awake is not None and self._spotters and self._spotters[0].last_loud >= start:
+            awake.last_heard = time.monotonic()
 
     def _on_hit(self, hit: Spotted) -> None:
         if hit.phrase == "stop":
@@ -276,6 +284,9 @@ class Listener(Service):
         stream.send(AudioStart())
         awake = _Awake(session, stream)
         self._awake = awake
+        self._sessions[session] = awake
+        while len(self._sessions) > RECENT_SESSIONS:
+            del self._sessions[next(iter(self._sessions))]
         if self._config.wake:
             self._loop.call_soon_threadsafe(self._watch_awake)
         return awake
@@ -357,8 +368,9 @@ class Listener(Service):
             self._awake.last_heard = time.monotonic()
 
     def _on_proposal(self, _key: str, proposal: Proposal) -> None:
-        awake = self._awake
-        if awake is None or proposal.session != awake.session:
+        # A session just put to sleep may still have its last utterance's proposal coming.
+        awake = self._sessions.get(proposal.session)
+        if awake is None:
             return
         awake.last_heard = time.monotonic()
         self._keep(self._act_on(proposal, awake))

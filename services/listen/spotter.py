@@ -110,6 +110,11 @@ class Spotter:
         self._decoder.start_utt()
 
     @property
+    def last_loud(self) -> float:
+        """Stream time of the last loud frame heard (someone speaking), or -1."""
+        return next((at for at, loud in reversed(self._loud) if loud), -1.0)
+
+    @property
     def clock(self) -> float:
         """Seconds of audio heard so far."""
         return self._origin + self._fed / SAMPLE_RATE
