@@ -92,12 +92,12 @@ async def main(args: argparse.Namespace) -> None:
 def _voice(args: argparse.Namespace, stack: contextlib.ExitStack) -> Speak | None:
     if args.speak is None:
         return None
-    from shared.errors import VoicectlError
+    from shared.errors import TtsError
     from shared.tts import load_voice
 
     try:
         voice = load_voice(args.speak)
-    except VoicectlError as exc:
+    except TtsError as exc:
         raise AudioError(str(exc)) from exc
     sink = open_sink(args.speaker)
     stack.callback(sink.close)

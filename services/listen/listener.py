@@ -189,9 +189,9 @@ class Listener(Service):
         )
 
     async def run(self) -> None:
-        """Until the source ends (then the last session's answers are awaited), or forever."""
-        await self._finished
-        while self._awake is not None:  # the last utterance's proposal, then the pause
+        """Until the source ends (then the last session's answers are awaited), or forever;
+        meanwhile a pause of `awake` seconds puts the listener back to sleep."""
+        while not (self._finished.done() and self._awake is None):
             await asyncio.sleep(0.1)
             self._check_awake()
         while self._tasks:  # what the last proposal started: its answer, its submit
@@ -287,8 +287,6 @@ class Listener(Service):
         self._sessions[session] = awake
         while len(self._sessions) > RECENT_SESSIONS:
             del self._sessions[next(iter(self._sessions))]
-        if self._config.wake:
-            self._loop.call_soon_threadsafe(self._watch_awake)
         return awake
 
     def _send(self, awake: _Awake, pcm: bytes) -> None:
@@ -335,15 +333,6 @@ class Listener(Service):
                 return True
         return True
 
-    def _watch_awake(self) -> None:
-        self._loop.call_later(0.25, self._check_awake_later)
-
-    def _check_awake_later(self) -> None:
-        if self._awake is not None and self._config.wake:
-            self._check_awake()
-            if self._awake is not None:
-                self._watch_awake()
-
     def _check_awake(self) -> None:
         """Back to sleep after a pause of `awake` seconds (with a wake phrase), or at the
         end of the source (without one)."""
@@ -351,9 +340,7 @@ class Listener(Service):
         if awake is None or self._answered is not None:  # a read-back waits for its answer
             return
         quiet = time.monotonic() - awake.last_heard
-        if (self._config.wake and quiet > self._config.awake) or (
-            self._finished.done() and not self._config.wake and quiet > self._config.awake
-        ):
+        if quiet > self._config.awake and (self._config.wake or self._finished.done()):
             self._sleep()
 
     def _sleep(self) -> None:
