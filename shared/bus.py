@@ -768,10 +768,14 @@ class Stream:
             key, encoding=JSON, congestion_control=zenoh.CongestionControl.BLOCK
         )
         self._closed = False
+        self._lock = threading.Lock()
+        """A put and the undeclare never overlap: a sender's thread and the bus closing
+        may reach them at once, and Zenoh refuses that ("Already borrowed")."""
 
     def send(self, message: Message) -> None:
-        if not self._closed:
-            self._publisher.put(self._bus.encode(message))
+        with self._lock:
+            if not self._closed:
+                self._publisher.put(self._bus.encode(message))
 
     async def matched(self, timeout: float) -> bool:
         """Whether a subscriber is there, waiting up to `timeout` seconds for one."""
@@ -784,10 +788,12 @@ class Stream:
         return True
 
     def close(self) -> None:
-        if not self._closed:
+        with self._lock:
+            if self._closed:
+                return
             self._closed = True
             self._publisher.undeclare()
-            self._bus._streams.discard(self)
+        self._bus._streams.discard(self)
 
 
 class Kept:

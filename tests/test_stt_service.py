@@ -155,6 +155,30 @@ async def test_speech_becomes_a_proposal_while_partials_grow(
         assert proposal.errors == []
 
 
+async def test_speech_sent_before_the_grammar_is_heard_once_it_comes(
+    router: str, processes: Processes, speech: Speak
+) -> None:
+    """A session opened while the stack starts (the recogniser up, the converter not yet)
+    is held, not refused: the CI run that found it lost a hands-free command this way."""
+    wav = speech("turn right")
+    with joined(router) as bus:
+        listener = Listener(bus)
+        stt = processes.start("services.stt", "--connect", router, "--debug")
+        await stream(bus, "early", wav, stop=False)
+        await async_wait_until(
+            lambda: "session early cannot be recognised yet" in processes.log(stt),
+            WAIT,
+            "the recogniser to hold the early audio",
+        )
+        processes.start("services.converter", "--connect", router, "--orders", str(ORDERS))
+        await listener.ready()
+        bus.publish(KEYS.stt_audio("early"), AudioStop())
+        [final] = await listener.final("early")
+        assert final.text == "turn right"
+        assert not final.rejected, final.reason
+        assert [o.order for o in (await listener.proposal("early")).orders] == ["rotation"]
+
+
 async def test_speech_that_is_not_a_command_is_rejected(
     router: str, processes: Processes, speech: Speak
 ) -> None:

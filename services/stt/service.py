@@ -83,6 +83,11 @@ class Session:
         """Done once the last event of the session is published."""
         self._aborted = False
         self._publisher: asyncio.Task[None] | None = None
+        self._recogniser: Recogniser | None = None
+        self._refused = ""
+        """Why no recogniser could be made (no grammar yet); said at the end if it lasts."""
+        self._held: collections.deque[bytes] = collections.deque()
+        """Audio heard while no recogniser could be made (on the session's thread)."""
         loop.call_soon_threadsafe(self._start_publisher)  # made on Zenoh's thread
         self._thread = threading.Thread(target=self._work, name=f"stt-{name}", daemon=True)
         self._thread.start()
@@ -126,35 +131,58 @@ class Session:
     # --- on the session's thread ---------------------------------------------------------
 
     def _work(self) -> None:
-        recogniser: Recogniser | None = None
-        refused = ""
-        """Why no recogniser could be made (no grammar yet); said once, at the end."""
         while (pcm := self._inbox.get()) is not None:
             with self._lock:
                 self._backlog -= len(pcm)
-            if self._aborted:
-                continue
-            try:
-                if recogniser is None and not refused:
-                    recogniser = self._service.engine.recogniser(self._service.limits.max_utterance)
-                if recogniser is not None:
-                    self._post(recogniser.accept(pcm))
-            except EngineError as exc:
-                refused = str(exc)
-                _LOGGER.warning("session %s cannot be recognised: %s", self.name, exc)
-            except Exception:
-                _LOGGER.exception("session %s: the recogniser failed; audio dropped", self.name)
-        events: list[RecognitionEvent | None] = []
+            if not self._aborted:
+                self._recognise(pcm)
+        if not self._aborted:
+            self._recognise(b"")  # a grammar that came after the last audio still hears it
+        self._post([*self._finish(), None])  # None: the end of the session for the publisher
+
+    def _recognise(self, pcm: bytes) -> None:
+        """Feed `pcm` to the recogniser, made at the first audio. Before any grammar none
+        can be made: the audio is held (its last `max_utterance` seconds) and heard once
+        the grammar comes, so a session opened while the stack starts is not lost."""
         try:
-            if recogniser is not None:
-                if not self._aborted:
-                    events.extend(recogniser.finish())
-                recogniser.close()
-            elif refused:
-                events.append(Final(0, "", 0.0, f"cannot recognise: {refused}", 0.0, 0.0))
+            if self._recogniser is None:
+                if pcm:
+                    self._held.append(pcm)
+                if not self._held:
+                    return
+                self._recogniser = self._service.engine.recogniser(
+                    self._service.limits.max_utterance
+                )
+                if self._refused:
+                    _LOGGER.info("session %s is recognised from now on", self.name)
+                while self._held:
+                    self._post(self._recogniser.accept(self._held.popleft()))
+            elif pcm:
+                self._post(self._recogniser.accept(pcm))
+        except EngineError as exc:
+            if not self._refused:
+                _LOGGER.warning("session %s cannot be recognised yet: %s", self.name, exc)
+            self._refused = str(exc)
+            if self._recogniser is not None:
+                self._held.clear()
+            limit = self._service.limits.max_utterance * BYTES_PER_SECOND
+            while sum(map(len, self._held)) > limit:  # only until the grammar comes
+                self._held.popleft()
+        except Exception:
+            _LOGGER.exception("session %s: the recogniser failed; audio dropped", self.name)
+
+    def _finish(self) -> list[RecognitionEvent]:
+        """The utterance in progress, or why the session could not be heard at all."""
+        try:
+            if self._recogniser is not None:
+                events = [] if self._aborted else self._recogniser.finish()
+                self._recogniser.close()
+                return events
+            if self._refused:
+                return [Final(0, "", 0.0, f"cannot recognise: {self._refused}", 0.0, 0.0)]
         except Exception:
             _LOGGER.exception("session %s: the recogniser failed at the end", self.name)
-        self._post([*events, None])  # None: the end of the session for the publisher
+        return []
 
     def _post(self, events: list[RecognitionEvent] | list[RecognitionEvent | None]) -> None:
         for event in events:
