@@ -13,7 +13,10 @@ from hypothesis import strategies as st
 from PIL import Image as PilImage
 
 from services.executor.robot import CONTROL_STEP, SAFE_LIMITS, RobotLink, limited
+from services.sim.robot import Bounds
+from services.sim.world import floor_plan
 from shared.bus import Bus, json_decoder
+from shared.geometry import map_cell
 from shared.keys import RobotNames
 from shared.messages import (
     CancelOrder,
@@ -116,6 +119,40 @@ async def test_mbgoal_reports_remaining_distance_and_cancel_stops_the_robot_fast
         assert stopped_at - cancelled_at < 0.2  # time scale 1: wall time is sim time
         result = await harness.finished(order_id)
         assert (result.status, result.message) == (OrderStatus.CANCELLED, "cancelled")
+
+
+async def test_a_goal_navigation_refuses_says_where_it_is_on_the_robots_map(
+    robot: tuple[str, Path],
+) -> None:
+    """Nav2 refuses a goal without a reason; the robot's own map gives the person one."""
+    async with harness_on(robot[0]) as harness:
+        for frame, reason in (
+            ("map", "navigation refused the goal: it is outside the robot's map"),
+            (
+                "base_link",
+                "navigation refused the goal: it is outside the robot's map (by odometry)",
+            ),
+        ):
+            far = Order(
+                order="goal",
+                label="mbgoal",
+                description="reach far away",
+                target_pose=TargetPose(frame=frame, x=30.0, y=0.0),
+            )
+            result = await harness.finished(await harness.execute(far))
+            assert (result.status, result.message) == (OrderStatus.FAILED, reason)
+
+
+def test_a_map_cell_is_read_in_the_grids_own_frame() -> None:
+    grid = floor_plan(Bounds(-10.0, -10.0, 10.0, 10.0))
+    assert map_cell(grid, 0.0, 0.0) == 0
+    assert map_cell(grid, -9.99, 0.0) == 100  # the outer wall
+    assert map_cell(grid, 10.5, 0.0) is None
+    turned = grid._replace(origin=Pose2D(10.0, -10.0, math.pi / 2))  # x along the world's y
+    assert map_cell(turned, 0.0, 0.0) == 0
+    assert map_cell(turned, 10.5, 0.0) is None
+    assert map_cell(turned, -10.5, 0.0) is None
+    assert map_cell(turned, 9.99, 0.0) == 100
 
 
 async def test_halt_stops_a_driving_robot_outside_any_order(robot: tuple[str, Path]) -> None:

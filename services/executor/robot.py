@@ -31,7 +31,7 @@ from PIL import Image as PilImage
 
 from shared.bus import Bus
 from shared.errors import BusError, OrderFailed
-from shared.geometry import compose
+from shared.geometry import compose, map_cell
 from shared.keys import RobotNames
 from shared.messages import RobotMap, RobotPose, TargetPose
 from shared.robot import Interface, RobotTransport, Role
@@ -66,6 +66,11 @@ POSE_EVERY = 0.5
 MAP_EVERY = 2.0
 """Seconds between two maps relayed for panels (a SLAM map changes about once a second)."""
 OCCUPANCY_GRID = "nav_msgs/msg/OccupancyGrid"
+MAP_WAIT = 2.5
+"""Seconds a refused goal waits for the robot's map to say why: a latched map comes at
+once, and a map published periodically (the simulator's) at least every 2 s."""
+OCCUPIED = 65
+"""A cell this occupied or more is an obstacle (map_server's default threshold, 0.65)."""
 SEND_GOAL_TIMEOUT = 10.0
 RESULT_TIMEOUT = 24 * 3600.0
 """get_result answers when navigation ends, which can take as long as the robot needs."""
@@ -504,8 +509,11 @@ class RobotLink:
                 except BusError as exc:
                     raise OrderFailed(f"navigation unavailable: {exc}") from exc
                 if not accepted:
+                    _LOGGER.info(
+                        "navigation rejected the goal (%s %g, %g)", target.frame, target.x, target.y
+                    )
                     raise OrderFailed(
-                        f"navigation rejected the goal ({target.frame} {target.x:g}, {target.y:g})"
+                        f"navigation refused the goal{await self._why_refused(target)}"
                     )
                 result = await self._result(goal_id)
             except asyncio.CancelledError:
@@ -517,6 +525,50 @@ class RobotLink:
                     on_problem(problem)
                 raise
         _raise_unless_succeeded(result, distro)
+
+    async def _why_refused(self, target: TargetPose) -> str:
+        """What the robot's own map says of a goal navigation refused (Nav2 says nothing):
+        ': it is outside the robot's map', or '' when the map cannot tell. A goal relative
+        to the robot is placed by odometry, and said to be, unless the map is odometry's."""
+        grid = await self.map_once(MAP_WAIT)
+        if grid is None:
+            return ""
+        if target.frame == grid.frame:
+            point, basis = Pose2D(x=target.x, y=target.y, yaw=0.0), ""
+        elif target.frame == ROBOT_FRAME and self.pose is not None:
+            point = compose(self.pose, Pose2D(x=target.x, y=target.y, yaw=0.0))
+            basis = "" if grid.frame == ODOM_FRAME else " (by odometry)"
+        else:
+            return ""
+        match map_cell(grid, point.x, point.y):
+            case None:
+                where = "outside the robot's map"
+            case cell if cell < 0:
+                where = "in a part of the robot's map it has not seen"
+            case cell if cell >= OCCUPIED:
+                where = "on an obstacle of the robot's map"
+            case _:
+                return ""
+        return f": it is {where}{basis}"
+
+    async def map_once(self, timeout: float) -> OccupancyGrid | None:
+        """The robot's map, if one comes within `timeout` seconds (a latched map: at once);
+        subscribed only for this call, as a map is large."""
+        grids: asyncio.Queue[OccupancyGrid] = asyncio.Queue()
+        unsubscribe = self.transport.subscribe(
+            self.names.map,
+            OCCUPANCY_GRID,
+            self.codec.read_occupancy_grid,
+            grids.put_nowait,
+            latched=True,
+        )
+        try:
+            async with asyncio.timeout(timeout):
+                return await grids.get()
+        except TimeoutError:
+            return None
+        finally:
+            unsubscribe()
 
     async def _result(self, goal_id: bytes) -> NavigateResult:
         """get_result, asked again while it fails (it is safe to repeat). If it cannot be

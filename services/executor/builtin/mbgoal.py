@@ -50,7 +50,7 @@ class NavigateToPose(Executor):
 
         ctx.progress(f"on the way: {motion_words(order, target)}")
         await ctx.robot.navigate(target, on_feedback)
-        return f"{done_words(order, target)} ({_numbers(target)})"
+        return done_words(order, target)
 
 
 def motion_words(order: Order, target: TargetPose) -> str:
@@ -84,7 +84,3 @@ def _relative_words(target: TargetPose) -> tuple[str, str]:
 
 def _side(yaw: float) -> str:
     return "left" if yaw > 0 else "right"
-
-
-def _numbers(target: TargetPose) -> str:
-    return f"{target.frame} {target.x:g}, {target.y:g}, yaw {target.yaw:g}"
