@@ -27,12 +27,15 @@ from .messages import (
     ExecutorInfo,
     ExecutorReply,
     Failed,
+    GetPhoto,
     Latch,
     Message,
     Order,
     ParseReply,
     ParseRequest,
     ParseResult,
+    Photo,
+    PhotoReply,
     Stopped,
     Submit,
     Submitted,
@@ -87,6 +90,7 @@ class VoicectlClient:
         self._parse_decode = json_decoder(ParseReply | Failed)
         self._supervisor_decode = json_decoder(SupervisorReply)
         self._executor_decode = json_decoder(ExecutorReply)
+        self._photo_decode = json_decoder(PhotoReply)
         self._robots: dict[str, ExecutorInfo] = {}
         """What each robot's executor last said about reaching it: how to stop it
         without any other voicectl process."""
@@ -238,6 +242,22 @@ class VoicectlClient:
         if not isinstance(reply, Submitted):
             raise Refused("supervisor", f"answered {type(reply).__name__} to a submit")
         return reply.order_ids
+
+    async def photo(self, robot: str, order_id: str) -> Photo:
+        """The photo order `order_id` took on `robot`, from its executor; Refused when
+        there is none."""
+        try:
+            reply: PhotoReply = await self.bus.request(
+                RobotKeys(robot).executor_photo,
+                GetPhoto(order_id=order_id),
+                self._photo_decode,
+                self.timeout,
+            )
+        except BusError as exc:
+            raise Unreachable("executor", exc) from exc
+        if isinstance(reply, Failed):
+            raise Refused("executor", reply.reason)
+        return reply
 
     async def say(self, robot: str, text: str, partial: bool = False) -> Said:
         """Parse `text` and submit its orders: only when every part of it made an order,

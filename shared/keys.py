@@ -139,6 +139,11 @@ class RobotKeys:
         return f"{self.prefix}/executor/release"
 
     @property
+    def executor_photo(self) -> str:
+        """The photos the robot's orders took, served by its executor (`GetPhoto`)."""
+        return f"{self.prefix}/executor/photo"
+
+    @property
     def executor_info(self) -> str:
         """How the executor reaches the robot (namespace, distro), kept for late subscribers."""
         return f"{self.prefix}/executor/info"

@@ -596,6 +596,22 @@ class GetResult(Message):
     order_id: str
 
 
+class GetPhoto(Message):
+    """The photo an order took (the `pic` executor's), asked on the executor's photo key."""
+
+    order_id: str
+
+
+class Photo(Message):
+    order_id: str
+    media_type: str
+    """'image/png', 'image/jpeg': as the camera gave it."""
+    data: bytes
+
+
+PhotoReply = Photo | Failed
+
+
 ControlRequest = CancelOrder | Halt | GetRunning | GetResult
 """What the executor's control key takes; its execute key takes `Execute` alone, so a
 message sent to the wrong key is a decode error, not a surprise."""

@@ -3,6 +3,7 @@ commands typed through `voicectl say` and the HTTP API, the simulated robot movi
 
 from __future__ import annotations
 
+import io
 import json
 import signal
 import sqlite3
@@ -14,6 +15,7 @@ import httpx
 import msgspec
 import pytest
 import zenoh
+from PIL import Image as PilImage
 
 from harness.speech_set import in_pink_noise
 from services.stt.audio import frames, read_wav
@@ -298,3 +300,35 @@ def test_supervisor_commands_from_the_cli(stack: Stack) -> None:
     page = json.loads(stack.voicectl("history", "--connect", stack.router, "--limit", "1").stdout)
     assert page["total"] >= 2
     assert len(page["records"]) == 1
+
+
+def test_a_photo_an_order_took_is_served_to_the_panel(stack: Stack) -> None:
+    """A photo is a file on the robot: the panel gets it through the executor, by order."""
+    token = Path(stack.env["VOICECTL_DATA"], "token").read_text().strip()
+    auth = {"Authorization": f"Bearer {token}"}
+    with httpx.Client(base_url=f"http://127.0.0.1:{stack.port}", timeout=30) as http:
+        said = http.post("/api/say", json={"text": "take a picture"}, headers=auth)
+        assert said.status_code == 200, said.text
+        (order_id,) = said.json()["order_ids"]
+
+        def finished() -> dict[str, object] | None:
+            history = http.get("/api/state", headers=auth).json()["history"]
+            return next((h for h in history if h["id"] == order_id), None)
+
+        wait_until(finished, 30.0, "the photo to be taken")
+        assert (finished() or {})["status"] == "succeeded"
+        photo = http.get("/api/photo", params={"order": order_id}, headers=auth)
+        assert photo.status_code == 200, photo.text
+        assert photo.headers["content-type"] == "image/png"
+        with PilImage.open(io.BytesIO(photo.content)) as picture:
+            assert picture.size == (64, 48)
+        assert http.get("/api/photo", params={"order": order_id}).status_code == 401
+        missing = http.get("/api/photo", params={"order": "0123abcd"}, headers=auth)
+        assert (missing.status_code, missing.json()) == (
+            404,
+            {"error": "order 0123abcd took no photo kept on this robot"},
+        )
+        odd = http.get("/api/photo", params={"order": "../../etc/*"}, headers=auth)
+        assert odd.status_code == 404
+        assert "an order id is letters and digits" in odd.json()["error"]
+        assert http.get("/api/photo", headers=auth).status_code == 400

@@ -25,6 +25,7 @@ from shared.robot_options import add_robot_arguments, robot_options
 
 from .builtin import builtin_executors
 from .framework import BindingError, Bindings, load_binding, load_bindings_file
+from .photos import PhotoShelf
 from .robot import RESULT_GRACE, SAFE_LIMITS, MapRelay, PoseRelay, RobotLink, SpeedLimits
 from .runner import STALL_LIMIT, ExecutorService
 
@@ -118,11 +119,15 @@ def speed_limits(args: argparse.Namespace) -> SpeedLimits:
     )
 
 
+def photo_directory(args: argparse.Namespace) -> Path:
+    return Path(args.photo_dir or data_dir() / "photos").expanduser()
+
+
 def load_bindings(args: argparse.Namespace) -> Bindings:
     """The built-in executors and those `args` bind; BindingError when one cannot be
     loaded. Before the bus opens: a mistake is told at once, router or not."""
     bindings = Bindings()
-    for executor in builtin_executors(args.photo_dir or data_dir() / "photos"):
+    for executor in builtin_executors(photo_directory(args)):
         bindings.bind(executor, executor.labels)
     for path in args.executors:
         for executor, labels in load_bindings_file(path):
@@ -147,6 +152,7 @@ def executor_service(
         result_grace=args.result_grace,
         limits=speed_limits(args),
     )
+    PhotoShelf(photo_directory(args)).serve(bus, RobotKeys(args.robot))
     PoseRelay(bus, RobotKeys(args.robot).pose, robot)
     MapRelay(bus, RobotKeys(args.robot).map, robot)
     service = ExecutorService(

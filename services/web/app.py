@@ -213,6 +213,7 @@ class Panel:
             Route("/api/speech", api(self._speech), methods=["POST"]),
             Route("/api/state", api(self._state)),
             Route("/api/history", api(self._history)),
+            Route("/api/photo", api(self._photo)),
             Route("/api/events", api(self._events)),
             WebSocketRoute("/api/audio", audio.serve),
         ]
@@ -362,6 +363,20 @@ class Panel:
             raise ApiError(400, "offset must be 0 or more, limit 1 to 500")
         return await self._ask_supervisor(keys, GetHistory(offset=offset, limit=limit))
 
+    async def _photo(self, request: Request) -> Response:
+        """The photo an order took, as the image file: a phone cannot open the robot's path."""
+        keys = self._robot(request)
+        order_id = request.query_params.get("order", "")
+        if not order_id:
+            raise ApiError(400, "which photo? give ?order=ORDER_ID")
+        try:
+            photo = await self.client.photo(keys.robot, order_id)
+        except Refused as exc:
+            raise ApiError(404, exc.reason) from exc
+        except Unreachable as exc:
+            raise ApiError(503, f"the robot's executor is unavailable: {exc}") from exc
+        return Response(photo.data, media_type=photo.media_type)
+
     async def _state(self, request: Request) -> object:
         reply = await self._ask_supervisor(self._robot(request), GetState())
         assert isinstance(reply, StateReply)
@@ -396,7 +411,7 @@ class Panel:
 SECURITY_HEADERS = [
     (
         b"content-security-policy",
-        b"default-src 'self'; script-src 'self'; style-src 'self'; img-src 'self' data:; "
+        b"default-src 'self'; script-src 'self'; style-src 'self'; img-src 'self' data: blob:; "
         b"connect-src 'self'; object-src 'none'; base-uri 'none'; form-action 'none'; "
         b"frame-ancestors 'none'",
     ),
