@@ -10,7 +10,7 @@ from typing import Any
 import json5
 import pytest
 
-from services.executor.__main__ import parse_args
+from services.executor.config import parse_args
 from shared.keys import RobotNames
 from shared.robot_options import robot_options
 

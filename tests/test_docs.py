@@ -287,7 +287,7 @@ def test_speech_doc_transcribe_example_prints_what_it_shows(tmp_path: Path) -> N
 
 
 def test_speech_doc_voice_command_and_table_are_what_the_panel_takes() -> None:
-    from services.web.__main__ import parse_args
+    from services.web.config import parse_args
     from shared.tts import VOICES
 
     doc = DOCS / "speech.md"

@@ -101,7 +101,8 @@ def test_the_hook_refuses_the_hosts_packages() -> None:
 def test_what_a_robot_runs_imports_without_the_extras() -> None:
     done = on_robot(
         """
-        import services.executor.__main__ as executor
+        import services.executor.__main__
+        import services.executor.config as executor
         import services.router.__main__
         import services.sim.__main__
         import services.supervisor.__main__

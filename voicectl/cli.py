@@ -12,7 +12,7 @@ from pathlib import Path
 import msgspec
 
 from services.converter.shipped import shipped_orders
-from services.stt.__main__ import add_engine_arguments, engine_options
+from services.stt.config import add_engine_arguments, engine_options
 from services.web.tls import add_tls_arguments, tls_problem
 from shared.bus import DEFAULT_ROUTER, Bus
 from shared.client import Refused, VoicectlClient

@@ -54,7 +54,7 @@ from PIL import Image as PilImage
 from shared.geometry import compose
 from shared.keys import RobotNames
 from shared.process import Service
-from shared.robot import Interface, RobotTransport, Role
+from shared.robot import Interface, RobotTransport, Role, TransportKind
 from shared.ros2 import (
     CANCEL_ALL,
     CANCEL_GOAL,
@@ -128,6 +128,12 @@ class SimConfig:
     """Simulated seconds per wall second."""
     bounds: Bounds = field(default_factory=Bounds)
     limits: SpeedLimits = field(default_factory=SpeedLimits)
+    transport: TransportKind = TransportKind.BRIDGE
+    """How it shows its ROS graph: as the bridge exposes a robot, or on rmw_zenoh."""
+    distro: RosDistro = RosDistro.JAZZY
+    """The ROS 2 distribution it plays (its message layouts, its navigator's ways)."""
+    domain_id: int = 0
+    """Its ROS domain, on rmw_zenoh."""
 
     def __post_init__(self) -> None:
         if not self.time_scale > 0:

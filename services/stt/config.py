@@ -1,0 +1,105 @@
+"""The recogniser's command line, and the `SttConfig` it becomes; the engine flags are
+shared with `voicectl transcribe` and bench/stt.py."""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass, field
+
+from shared.process import add_bus_arguments, robot_name
+
+from .engine import ENGINES, EngineOptions
+from .service import SessionLimits
+
+
+@dataclass(frozen=True)
+class SttConfig:
+    """One robot's recogniser: which engine, and how much audio it takes."""
+
+    robot: str = "robot"
+    engine: EngineOptions = field(default_factory=EngineOptions)
+    limits: SessionLimits = field(default_factory=SessionLimits)
+
+    @classmethod
+    def of(cls, args: argparse.Namespace) -> SttConfig:
+        """The config the command line (`parse_args`) gives."""
+        return cls(
+            robot=args.robot,
+            engine=engine_options(args),
+            limits=SessionLimits(
+                max_utterance=args.max_utterance,
+                max_sessions=args.max_sessions,
+                idle_seconds=args.idle,
+            ),
+        )
+
+
+def add_engine_arguments(parser: argparse.ArgumentParser) -> None:
+    """The engine flags of every command that loads an engine, each engine's own among them."""
+    parser.add_argument(
+        "--engine",
+        choices=list(ENGINES),
+        default=EngineOptions.name,
+        help="speech engine (default %(default)s)",
+    )
+    for kind in ENGINES.values():
+        for flag in kind.flags:
+            parser.add_argument(
+                f"--{flag.name}",
+                type=flag.type,
+                metavar=flag.metavar,
+                help=f"{flag.help}, with --engine {kind.name}",
+            )
+    parser.add_argument(
+        "--min-confidence",
+        type=float,
+        default=0.5,
+        metavar="C",
+        help="reject utterances recognised with less confidence, 0 to 1 (default %(default)s)",
+    )
+    parser.add_argument(
+        "--workers",
+        type=_count,
+        default=0,
+        metavar="N",
+        help="decode in N worker processes, one engine each, for several people speaking "
+        "at once on several cores (default 0: in this process)",
+    )
+
+
+def _count(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if value < 0:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number of 0 or more")
+    return value
+
+
+def engine_options(args: argparse.Namespace) -> EngineOptions:
+    return EngineOptions(
+        name=args.engine,
+        min_confidence=args.min_confidence,
+        workers=args.workers,
+        settings={flag.dest: getattr(args, flag.dest) for flag in ENGINES[args.engine].flags},
+    )
+
+
+def parse_args(argv: list[str] | None) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(
+        prog="voicectl stt",
+        description="Speech to text for one robot, listening only for the orders' commands.",
+    )
+    parser.add_argument("--robot", type=robot_name, default="robot")
+    add_engine_arguments(parser)
+    limits = SessionLimits()
+    for flag, kind, default, metavar, text in (
+        ("--max-utterance", float, limits.max_utterance, "SECONDS", "cut longer utterances"),
+        ("--max-sessions", int, limits.max_sessions, "N", "audio sessions open at once"),
+        ("--idle", float, limits.idle_seconds, "SECONDS", "end a session silent this long"),
+    ):
+        help_text = f"{text} (default %(default)s)"
+        parser.add_argument(flag, type=kind, default=default, metavar=metavar, help=help_text)
+    add_bus_arguments(parser)
+    return parser.parse_args(argv)
