@@ -69,7 +69,7 @@ def test_the_deploy_doc_s_ros2_commands_parse_as_written() -> None:
     """docs/deploy.md's commands for a robot on DDS, with HOST filled in: their flags are
     the ones the executor and the relay take."""
     from services.executor.config import parse_args as executor_args
-    from services.relay.__main__ import parse_args as relay_args
+    from services.relay.config import parse_args as relay_args
 
     doc = (REPO / "docs" / "deploy.md").read_text()
     section = doc[doc.index("## A robot on DDS") : doc.index("## Containers")]

@@ -1,0 +1,133 @@
+"""`voicectl relay`: the STOP relay of a robot on DDS, beside its executor.
+
+A robot whose ROS 2 graph is on DDS (`voicectl executor --transport ros2`) is out of reach
+of the processes that have Zenoh alone: the supervisor, the panel, `voicectl stop`. Their
+stops go to the relay, a ROS 2 node of its own beside the executor, which serves the
+robot's cmd_vel and its navigation's cancel_goal in zenoh-bridge-ros2dds' layout and
+forwards to DDS what stops the robot and nothing else: a zero velocity (in every type the
+robot's cmd_vel subscribers take), a cancel. A velocity that is not zero is dropped, so
+the relay never becomes a way to drive the robot. It shares nothing with the executor:
+the robot can be stopped while the executor is dead or its loop blocked.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import time
+
+from shared.bus import Bus
+from shared.errors import BusError
+from shared.keys import RobotNames
+from shared.process import Service, forever
+from shared.robot import TransportKind, open_transport
+from shared.robot.action import CANCEL_TIMEOUT
+from shared.robot.dds import Ros2Transport
+from shared.ros2 import CANCEL_GOAL, CdrError, CmdVelType, Ros2Codec
+from shared.throttle import Throttled
+
+_LOGGER = logging.getLogger(__name__)
+
+NODE = "voicectl_stop_relay"
+"""The ROS node the relay appears as on the robot's graph."""
+READY_WAIT = 30.0
+"""Seconds the relay waits for the robot before it says it reaches none."""
+_TWIST_SIZE = 52
+"""Bytes of a Twist's CDR: anything longer on cmd_vel is a TwistStamped."""
+
+
+class StopRelay(Service):
+    """Zero velocity and cancels from Zenoh (the bridge's keys) to the robot's DDS graph."""
+
+    def __init__(self, bus: Bus, names: RobotNames, domain_id: int) -> None:
+        self._bus = bus
+        self._names = names
+        self._domain_id = domain_id
+        self._codec = Ros2Codec()
+        self._noise = Throttled(_LOGGER)
+        self._dds: Ros2Transport | None = None
+
+    async def start(self) -> None:
+        names = self._names
+        dds = open_transport(self._bus, TransportKind.ROS2, NODE, names.namespace, self._domain_id)
+        assert isinstance(dds, Ros2Transport)
+        self._dds = dds
+        # Made now, not at the first STOP: DDS delivers only once it has matched them.
+        dds.client(names.navigate("cancel_goal"), CANCEL_GOAL)
+        dds.discover(self._on_interface)
+        zenoh = open_transport(self._bus, TransportKind.BRIDGE, NODE)
+        zenoh.subscribe(names.cmd_vel, CmdVelType.TWIST.ros_type, bytes, self._on_velocity)
+        zenoh.serve(names.navigate("cancel_goal"), CANCEL_GOAL, self._on_cancel)
+
+    async def run(self) -> None:
+        """Say the relay is ready once DDS has matched it with the robot's cmd_vel
+        subscribers and navigation's cancel service (stops relayed before go out all the
+        same, but may reach no one)."""
+        dds, names = self._dds, self._names
+        assert dds is not None
+        cancel = dds.client(names.navigate("cancel_goal"), CANCEL_GOAL)
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + READY_WAIT
+        while not self._matched() or not cancel.service_is_ready():
+            if loop.time() > deadline:
+                _LOGGER.warning(
+                    "after %g s the robot has no cmd_vel subscriber or cancel service that "
+                    "this relay reaches on DDS: is it up, in domain %d?",
+                    READY_WAIT,
+                    self._domain_id,
+                )
+                break
+            await asyncio.sleep(0.05)
+        else:
+            _LOGGER.info(
+                "STOP relay ready: zero velocity to '%s', cancels to '%s'",
+                names.cmd_vel,
+                names.navigate("cancel_goal"),
+            )
+        await forever()
+
+    def _matched(self) -> bool:
+        dds = self._dds
+        assert dds is not None
+        taken = [t for t in dds.subscriber_types(self._names.cmd_vel) if CmdVelType.of(t)]
+        return bool(taken) and all(dds.matched(self._names.cmd_vel, t) for t in taken)
+
+    async def stop(self) -> None:
+        pass  # the transports close with the bus
+
+    def _on_interface(self, interface: object, present: bool) -> None:
+        """A cmd_vel subscriber of the robot: its publisher made before any STOP needs it."""
+        dds = self._dds
+        assert dds is not None
+        for ros_type in dds.subscriber_types(self._names.cmd_vel):
+            if CmdVelType.of(ros_type) is not None:
+                dds.publisher(self._names.cmd_vel, ros_type)
+
+    def _on_velocity(self, raw: bytes) -> None:
+        kind = CmdVelType.TWIST if len(raw) == _TWIST_SIZE else CmdVelType.STAMPED
+        try:
+            velocity = self._codec.read_velocity(kind, raw)
+        except CdrError as exc:
+            self._noise.warning("unreadable", "dropped a velocity that does not decode: %s", exc)
+            return
+        if velocity != (0.0, 0.0):
+            self._noise.warning("moving", "dropped a velocity that is not a stop: %s", velocity)
+            return
+        dds = self._dds
+        assert dds is not None
+        taken = [CmdVelType.of(t) for t in dds.subscriber_types(self._names.cmd_vel)]
+        for wanted in [t for t in taken if t is not None] or [kind]:
+            payload = self._codec.velocity(wanted, 0.0, 0.0)
+            dds.publish(self._names.cmd_vel, wanted.ros_type, payload, urgent=True)
+        _LOGGER.debug("zero velocity relayed at %.6f (monotonic)", time.monotonic())
+
+    async def _on_cancel(self, raw: bytes) -> bytes | None:
+        dds = self._dds
+        assert dds is not None
+        name = self._names.navigate("cancel_goal")
+        _LOGGER.debug("cancel relayed at %.6f (monotonic)", time.monotonic())
+        try:
+            return await dds.call(name, CANCEL_GOAL, raw, CANCEL_TIMEOUT, urgent=True)
+        except BusError as exc:
+            _LOGGER.warning("the robot did not answer a cancel: %s", exc)
+            return None
