@@ -14,7 +14,7 @@ from typing import Annotated, Literal
 
 import msgspec
 
-from .robot.kinds import CmdVelType, RosDistro, TransportKind
+from .kinds import CmdVelType, RosDistro, TransportKind
 
 ParamValue = str | int | float | bool
 LOGGED_TEXT = 120

@@ -16,7 +16,7 @@ from dataclasses import dataclass, field
 from typing import TypeVar
 
 from .keys import RmwZenohKeys, RobotNames, check_ros_name
-from .robot.kinds import ON_ZENOH, CameraType, CmdVelType, RosDistro, TransportKind
+from .kinds import ON_ZENOH, CameraType, CmdVelType, RosDistro, TransportKind
 
 AUTO = "auto"
 _Kind = TypeVar("_Kind", RosDistro, CmdVelType, CameraType, TransportKind)

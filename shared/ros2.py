@@ -27,9 +27,9 @@ from rosbags.typesys.store import Typestore
 from .errors import VoicectlError
 
 # Re-exported: every module that speaks ROS 2 messages names these.
-from .robot.kinds import CameraType as CameraType
-from .robot.kinds import CmdVelType as CmdVelType
-from .robot.kinds import RosDistro as RosDistro
+from .kinds import CameraType as CameraType
+from .kinds import CmdVelType as CmdVelType
+from .kinds import RosDistro as RosDistro
 
 GOAL_ID_SIZE = 16
 CANCEL_ALL = bytes(GOAL_ID_SIZE)

@@ -22,6 +22,7 @@ from services.stt.audio import frames, read_wav
 from shared.bus import Bus, BusOptions, json_decoder
 from shared.client import VoicectlClient
 from shared.keys import RobotKeys, RobotNames
+from shared.kinds import ON_ZENOH
 from shared.messages import (
     AudioChunk,
     AudioStart,
@@ -33,7 +34,6 @@ from shared.messages import (
     SttStatus,
 )
 from shared.robot import TransportKind
-from shared.robot.kinds import ON_ZENOH
 from shared.ros2 import Pose2D, Ros2Codec, RosDistro
 
 from .conftest import Stack, async_wait_until, wait_until

@@ -22,6 +22,7 @@ from PIL import Image as PilImage
 
 from shared.bus import json_decoder
 from shared.keys import RobotKeys, RobotNames
+from shared.kinds import ON_ZENOH
 from shared.messages import (
     CancelOrder,
     Done,
@@ -34,7 +35,6 @@ from shared.messages import (
     TargetPose,
 )
 from shared.robot import TransportKind, open_transport
-from shared.robot.kinds import ON_ZENOH
 from shared.ros2 import Ros2Codec, RosDistro
 
 from .conftest import Processes, async_wait_until, voicectl

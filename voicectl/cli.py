@@ -19,6 +19,7 @@ from shared.client import Refused, VoicectlClient
 from shared.config import data_dir, default_token_file, load_or_create_token
 from shared.errors import BusError, OrdersFileError
 from shared.keys import ConverterKeys, RobotKeys, RobotNames, check_ros_name
+from shared.kinds import ON_ZENOH, TransportKind
 from shared.messages import (
     Cancel,
     CancelAll,
@@ -31,7 +32,6 @@ from shared.messages import (
     StateReply,
 )
 from shared.process import add_bus_arguments, bus_options, robot_name
-from shared.robot.kinds import ON_ZENOH, TransportKind
 
 from .health import add_health_arguments, check
 from .stack import Child, PanelAddress, port_in_use, run_stack

@@ -25,7 +25,7 @@ import weakref
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
-from .kinds import TransportKind
+from ..kinds import TransportKind
 from .transport import Interface, RobotTransport, Role
 
 if TYPE_CHECKING:  # the messages import this package's kinds; the bus imports the messages

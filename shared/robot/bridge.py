@@ -14,7 +14,7 @@ from typing import Self, TypeVar
 
 from ..bus import Bus
 from ..keys import BRIDGE_TOKENS, BridgeKind, BridgeToken
-from .kinds import RosDistro, TransportKind
+from ..kinds import RosDistro, TransportKind
 from .transport import (
     Announcements,
     Decode,

@@ -39,7 +39,7 @@ from typing import Any, Self, TypeVar
 
 from ..bus import Bus
 from ..errors import BusError, ServiceError
-from .kinds import RosDistro, TransportKind
+from ..kinds import RosDistro, TransportKind
 from .transport import (
     Announcements,
     Decode,

@@ -49,6 +49,7 @@ from ..keys import (
     RmwToken,
     RmwZenohKeys,
 )
+from ..kinds import CmdVelType, TransportKind
 from ..ros2 import (
     NO_TYPE_HASH,
     RosDistro,
@@ -57,7 +58,6 @@ from ..ros2 import (
     ros_type_of,
     type_hash,
 )
-from .kinds import CmdVelType, TransportKind
 from .transport import (
     Announcements,
     Decode,
