@@ -63,7 +63,7 @@ from services.converter.grammar import build_grammar  # noqa: E402
 from services.converter.orders import OrderSet  # noqa: E402
 from services.converter.parser import Parser  # noqa: E402
 from services.stt import sphinx  # noqa: E402
-from services.stt.__main__ import add_engine_arguments, engine_options  # noqa: E402
+from services.stt.config import add_engine_arguments, engine_options  # noqa: E402
 from services.stt.audio import NoiseFloor, Suppressor, frames, read_wav  # noqa: E402
 from services.stt.engine import Engine, EngineOptions, Final, finals, load_engine  # noqa: E402
 from services.stt.judge import OFF  # noqa: E402

@@ -353,7 +353,7 @@ def test_vosk_without_a_model_is_a_one_line_error_that_says_where_to_get_one(
 def test_an_engines_own_options_are_flags_that_voicectl_up_forwards() -> None:
     """The registry is the one place an engine's options are named: `voicectl stt` takes
     them, and the options give back the flags that `voicectl up` starts the service with."""
-    stt = importlib.import_module("services.stt.__main__")
+    stt = importlib.import_module("services.stt.config")
     given = ["--engine", "vosk", "--vosk-model", "/models/en", "--workers", "2"]
     options = stt.engine_options(stt.parse_args(given))
     assert options.settings == {"vosk_model": Path("/models/en")}
