@@ -227,3 +227,13 @@ def test_confirm_must_be_true_or_false(tmp_path: Path) -> None:
     assert done.stderr.strip() == (
         f"voicectl parse: {orders}: order 'x': 'confirm' must be true or false"
     )
+
+
+def test_transcribe_of_a_missing_file_says_which_in_one_line(tmp_path: Path) -> None:
+    there = tmp_path / "there.wav"
+    there.write_text("not audio, but present")
+    gone = tmp_path / "missing.wav"
+    done = voicectl("transcribe", str(there), str(gone))
+    assert done.returncode == 2
+    assert done.stdout == ""
+    assert done.stderr == f"voicectl transcribe: no such file: {gone}\n"

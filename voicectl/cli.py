@@ -112,7 +112,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     transcribe = sub.add_parser(
         "transcribe",
-        help="recognise WAV files offline with a grammar from orders; one JSON line per file",
+        help="recognise WAV files offline with a grammar from orders; one JSON line per file "
+        "(exit 1 if any file was rejected or unreadable, 2 if one does not exist)",
     )
     transcribe.add_argument(
         "--orders",
@@ -431,24 +432,30 @@ def _transcribe(args: argparse.Namespace) -> int:
 
     from .transcribe import Unreadable, transcribe
 
+    # A file that is not there is a mistake in the command line, said before the engine
+    # loads; a file that is there but is no audio gets its own line among the others.
+    missing = [str(path) for path in args.audio if not path.is_file()]
+    if missing:
+        print(f"voicectl transcribe: no such file: {', '.join(missing)}", file=sys.stderr)
+        return 2
     try:
         orders = OrderSet.load(args.orders)
         engine = load_engine(engine_options(args))
     except (OrdersFileError, EngineError) as exc:
         print(f"voicectl transcribe: {exc}", file=sys.stderr)
         return 2
-    unreadable = 0
+    failed = 0
     try:
         engine.use_grammar(build_grammar(orders))
         for line in transcribe(engine, Parser(orders), args.audio):
-            unreadable += isinstance(line, Unreadable)
+            failed += isinstance(line, Unreadable) or line.rejected
             print(_ENCODER.encode(line).decode(), flush=True)
     except EngineError as exc:
         print(f"voicectl transcribe: {exc}", file=sys.stderr)
         return 2
     finally:
         engine.close()
-    return 1 if unreadable else 0
+    return 1 if failed else 0
 
 
 async def _say(args: argparse.Namespace) -> int:
