@@ -237,3 +237,53 @@ def test_transcribe_of_a_missing_file_says_which_in_one_line(tmp_path: Path) -> 
     assert done.returncode == 2
     assert done.stdout == ""
     assert done.stderr == f"voicectl transcribe: no such file: {gone}\n"
+
+
+def test_a_negative_reorder_position_is_refused_in_one_line() -> None:
+    done = voicectl("reorder", "some-id", "-1", "--connect", "tcp/127.0.0.1:1")
+    assert done.returncode == 2
+    assert done.stdout == ""
+    assert done.stderr == (
+        "voicectl reorder: argument position: position must be 0 or more, not -1 "
+        "(see voicectl reorder --help)\n"
+    )
+
+
+async def test_cancel_all_says_what_it_cancelled_and_partial_say_exits_0(
+    router: str, processes: Processes
+) -> None:
+    """`cancel-all` names what there was to cancel (nothing, the queue, the running
+    order); `say --partial` that submitted something exits 0."""
+    processes.start("services.sim", "--connect", router)
+    processes.start("services.converter", "--connect", router)
+    processes.start("services.supervisor", "--connect", router, "--robot", "r1")
+    processes.start("services.executor", "--connect", router, "--robot", "r1")
+    bus = ("--robot", "r1", "--connect", router)
+
+    def state() -> dict[str, Any]:
+        done = voicectl("state", *bus, timeout=30.0)
+        return json.loads(done.stdout) if done.returncode == 0 else {}
+
+    await asyncio.to_thread(wait_until, lambda: state().get("executor_online"), 60.0, "executor")
+
+    def cancel_all() -> str:
+        done = voicectl("cancel-all", *bus, timeout=30.0)
+        assert done.returncode == 0, done.stderr
+        detail: str = json.loads(done.stdout)["detail"]
+        return detail
+
+    nothing = await asyncio.to_thread(cancel_all)
+    assert nothing == "nothing to cancel: the queue was empty and no order was running"
+
+    partial = await asyncio.to_thread(
+        voicectl, "say", *bus, "--partial", "move forward 5 meters then dance", timeout=30.0
+    )
+    assert partial.returncode == 0, partial.stderr
+    assert json.loads(partial.stdout)["submitted"] is True
+    assert "'dance': no order matches" in partial.stderr  # what was not understood is said
+    await asyncio.to_thread(wait_until, lambda: state().get("current"), 30.0, "the drive to run")
+    queued = await asyncio.to_thread(voicectl, "say", *bus, "turn left", timeout=30.0)
+    assert queued.returncode == 0, queued.stderr
+
+    both = await asyncio.to_thread(cancel_all)
+    assert both == "cancelled 1 queued order and the running order (move forward 5 m)"

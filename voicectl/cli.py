@@ -8,6 +8,7 @@ import datetime
 import importlib
 import sys
 from pathlib import Path
+from typing import NoReturn
 
 import msgspec
 
@@ -22,6 +23,7 @@ from shared.keys import ConverterKeys, RobotKeys, RobotNames, check_ros_name
 from shared.messages import (
     Cancel,
     CancelAll,
+    Done,
     GetHistory,
     GetState,
     Message,
@@ -46,8 +48,15 @@ def _print_json(value: object) -> None:
     print(msgspec.json.format(_ENCODER.encode(value), indent=2).decode())
 
 
+class _OneLineParser(argparse.ArgumentParser):
+    """Usage errors in one line, as every other error of voicectl: what, and where help is."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _OneLineParser(
         prog="voicectl",
         description="Voice control for robots. Services: "
         + ", ".join(SERVICES)
@@ -157,7 +166,7 @@ def build_parser() -> argparse.ArgumentParser:
     supervisor_command("resume", "run orders that wait since a restart")
     reorder = supervisor_command("reorder", "move a queued order (position 0 is next)")
     reorder.add_argument("order_id")
-    reorder.add_argument("position", type=int)
+    reorder.add_argument("position", type=_position, help="0 or more; 0 is next")
 
     cert = sub.add_parser(
         "cert", help="write a self-signed TLS certificate for the panel's LAN names and addresses"
@@ -260,7 +269,7 @@ def _main(argv: list[str]) -> int:
         case "cancel":
             return asyncio.run(_ask_supervisor(args, Cancel(order_id=args.order_id)))
         case "cancel-all":
-            return asyncio.run(_ask_supervisor(args, CancelAll()))
+            return asyncio.run(_cancel_all(args))
         case "stop":
             return asyncio.run(_stop(args))
         case "release":
@@ -334,6 +343,17 @@ def _up(args: argparse.Namespace) -> int:
         RobotNames().simulator,
     ] + ([] if args.no_stt else [keys.alive("stt")])
     return run_stack(children, web, args.router, ready)
+
+
+def _position(text: str) -> int:
+    """argparse type for a queue position: said here, not as the supervisor's schema error."""
+    try:
+        position = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"position must be a whole number, not {text!r}") from None
+    if position < 0:
+        raise argparse.ArgumentTypeError(f"position must be 0 or more, not {position}")
+    return position
 
 
 def _robot_namespace(text: str) -> tuple[str, str]:
@@ -494,7 +514,9 @@ async def _say(args: argparse.Namespace) -> int:
         )
     elif not sent:
         print("voicectl say: nothing submitted", file=sys.stderr)
-    return 0 if result.orders and not result.errors else 1
+    # Exit status follows what happened: 0 when orders went to the robot (with --partial,
+    # even though some words made none), 1 when nothing did.
+    return 0 if sent else 1
 
 
 async def _ask_supervisor(args: argparse.Namespace, request: Message) -> int:
@@ -538,6 +560,38 @@ def _with_times(message: object) -> object:
         return value
 
     return add(msgspec.to_builtins(message))
+
+
+async def _cancel_all(args: argparse.Namespace) -> int:
+    """Cancel the queue and the running order, saying what there was to cancel.
+
+    The supervisor's answer says "and the current one" whether or not an order ran, so
+    the wording comes from its state just before the cancel."""
+    try:
+        with Bus.open(bus_options(args, wait=False), asyncio.get_running_loop()) as bus:
+            client = VoicectlClient(bus)
+            before = await client.ask(args.robot, GetState())
+            await client.ask(args.robot, CancelAll())
+    except Refused as exc:
+        print(f"voicectl cancel-all: {exc.reason}", file=sys.stderr)
+        return 1
+    except BusError as exc:  # no router, or no supervisor answering
+        print(f"voicectl cancel-all: {exc}", file=sys.stderr)
+        return 3
+    if not isinstance(before, StateReply):
+        print(
+            f"voicectl cancel-all: the supervisor answered {before!r} to get-state", file=sys.stderr
+        )
+        return 1
+    queued, current = before.state.queue_length, before.state.current
+    if current is None and not queued:
+        detail = "nothing to cancel: the queue was empty and no order was running"
+    else:
+        running = f"the running order ({current.order.description})" if current else ""
+        waiting = f"{queued} queued order{'s' if queued != 1 else ''}" if queued else ""
+        detail = "cancelled " + " and ".join(part for part in (waiting, running) if part)
+    _print_json(Done(detail=detail))
+    return 0
 
 
 async def _stop(args: argparse.Namespace) -> int:
