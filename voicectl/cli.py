@@ -219,10 +219,11 @@ def build_parser() -> argparse.ArgumentParser:
 
     health = sub.add_parser(
         "health",
-        help="exit 0 if a service is up, 1 if not, saying so in one line (healthchecks)",
+        help="exit 0 if a service (or, with no name, every one) is up, 1 if not, a line each",
         description="Whether a service is up: its liveliness token is on the bus (the "
         "router: a session to it opens; the panel: its health address answers). Exit "
-        "status 0 if it is, 1 if not.",
+        "status 0 if it is, 1 if not. With no SERVICE, every service, one line each on "
+        "stdout, and exit status 1 if any is down.",
     )
     add_health_arguments(health)
     return parser
