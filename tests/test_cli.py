@@ -156,8 +156,9 @@ async def test_a_stop_navigation_refuses_is_said_to_be_unconfirmed(
 
 
 async def test_say_tells_a_person_what_was_sent_and_when(router: str, processes: Processes) -> None:
-    """`voicectl say` suggests on stderr, once; what it did not submit is not printed as
-    sent; `state` and `history` give every time as an epoch and in ISO 8601."""
+    """`voicectl say` says in one stderr line what it did not understand, suggesting
+    once; what it did not submit is not printed as sent; `state` and `history` give
+    every time as an epoch and in ISO 8601."""
     processes.start("services.sim", "--connect", router, "--time-scale", "10")
     processes.start("services.converter", "--connect", router)
     processes.start("services.supervisor", "--connect", router, "--robot", "r1")
@@ -180,13 +181,14 @@ async def test_say_tells_a_person_what_was_sent_and_when(router: str, processes:
     assert said["submitted"] is False
     assert said["orders"] == said["not_sent"] == []
     assert stderr.count("did you mean: move forward 2 meters?") == 1, stderr
-    assert stderr.splitlines()[-1] == "voicectl say: nothing submitted"
+    (line,) = stderr.splitlines()
+    assert line.startswith("voicectl say: nothing submitted: 'move forwad 2 meters': "), line
 
     # A misspelling with no reason of its own gets the suggestion from the candidates.
     code, said, stderr = await asyncio.to_thread(say, "trun left")
     assert code == 1
-    assert stderr.splitlines()[0] == (
-        "voicectl say: 'trun left': no order matches; did you mean: turn left?"
+    assert stderr == (
+        "voicectl say: nothing submitted: 'trun left': no order matches, did you mean: turn left?\n"
     )
 
     # Understood in part: what was understood is held back, and not printed as sent.
@@ -196,7 +198,10 @@ async def test_say_tells_a_person_what_was_sent_and_when(router: str, processes:
     assert said["orders"] == []
     assert said["order_ids"] == []
     assert [order["description"] for order in said["not_sent"]] == ["turn left"]
-    assert "nothing submitted (--partial submits what was understood)" in stderr
+    assert stderr == (
+        "voicectl say: nothing submitted (--partial submits what was understood): "
+        "'dance': no order matches\n"
+    )
 
     code, said, stderr = await asyncio.to_thread(say, "turn left")
     assert code == 0, stderr
@@ -280,7 +285,9 @@ async def test_cancel_all_says_what_it_cancelled_and_partial_say_exits_0(
     )
     assert partial.returncode == 0, partial.stderr
     assert json.loads(partial.stdout)["submitted"] is True
-    assert "'dance': no order matches" in partial.stderr  # what was not understood is said
+    assert partial.stderr == (
+        "voicectl say: submitted the rest; not understood: 'dance': no order matches\n"
+    )
     await asyncio.to_thread(wait_until, lambda: state().get("current"), 30.0, "the drive to run")
     queued = await asyncio.to_thread(voicectl, "say", *bus, "turn left", timeout=30.0)
     assert queued.returncode == 0, queued.stderr

@@ -27,6 +27,7 @@ from shared.messages import (
     GetHistory,
     GetState,
     Message,
+    ParseProblem,
     Release,
     Reorder,
     Resume,
@@ -502,22 +503,26 @@ async def _say(args: argparse.Namespace) -> int:
             "order_ids": said.order_ids,
         }
     )
-    for error in result.errors:
-        maybe = [c for c in error.candidates if "/" not in c]  # phrases, not order names
-        # The converter's reason may already end with the suggestion: say it once.
-        unsaid = [phrase for phrase in maybe if phrase not in error.reason]
-        hint = f"; did you mean: {' or '.join(unsaid)}?" if unsaid else ""
-        print(f"voicectl say: {error.text!r}: {error.reason}{hint}", file=sys.stderr)
-    if result.errors and not args.partial and result.orders:
-        print(
-            "voicectl say: nothing submitted (--partial submits what was understood)",
-            file=sys.stderr,
-        )
+    # One line on stderr, for a person: what happened, then each part not understood.
+    problems = "; ".join(_unsaid(error) for error in result.errors)
+    if sent and problems:
+        print(f"voicectl say: submitted the rest; not understood: {problems}", file=sys.stderr)
     elif not sent:
-        print("voicectl say: nothing submitted", file=sys.stderr)
+        held = " (--partial submits what was understood)" if result.orders else ""
+        why = f": {problems}" if problems else ""
+        print(f"voicectl say: nothing submitted{held}{why}", file=sys.stderr)
     # Exit status follows what happened: 0 when orders went to the robot (with --partial,
     # even though some words made none), 1 when nothing did.
     return 0 if sent else 1
+
+
+def _unsaid(error: ParseProblem) -> str:
+    """A part of a text that made no order, why, and what it may have meant."""
+    maybe = [c for c in error.candidates if "/" not in c]  # phrases, not order names
+    # The converter's reason may already end with the suggestion: say it once.
+    unsaid = [phrase for phrase in maybe if phrase not in error.reason]
+    hint = f", did you mean: {' or '.join(unsaid)}?" if unsaid else ""
+    return f"{error.text!r}: {error.reason}{hint}"
 
 
 async def _ask_supervisor(args: argparse.Namespace, request: Message) -> int:
