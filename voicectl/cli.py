@@ -336,7 +336,8 @@ def _up(args: argparse.Namespace) -> int:
         shown = "127.0.0.1" if args.host in ("0.0.0.0", "::") else args.host
         # The token rides in the fragment: one click logs in, and a browser never sends a
         # fragment to the server, so no access log can keep it.
-        web = PanelAddress(args.host, args.port, f"{scheme}://{shown}:{args.port}/#token={token}")
+        address = f"{scheme}://{shown}:{args.port}/"
+        web = PanelAddress(args.host, args.port, address, f"{address}#token={token}")
     keys = RobotKeys(args.robot)
     ready = [
         ConverterKeys().alive(),
