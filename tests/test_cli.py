@@ -156,8 +156,9 @@ async def test_a_stop_navigation_refuses_is_said_to_be_unconfirmed(
 
 
 async def test_say_tells_a_person_what_was_sent_and_when(router: str, processes: Processes) -> None:
-    """`voicectl say` suggests on stderr, once; what it did not submit is not printed as
-    sent; `state` and `history` give every time as an epoch and in ISO 8601."""
+    """`voicectl say` says in one stderr line what it did not understand, suggesting
+    once; what it did not submit is not printed as sent; `state` and `history` give
+    every time as an epoch and in ISO 8601."""
     processes.start("services.sim", "--connect", router, "--time-scale", "10")
     processes.start("services.converter", "--connect", router)
     processes.start("services.supervisor", "--connect", router, "--robot", "r1")
@@ -180,13 +181,14 @@ async def test_say_tells_a_person_what_was_sent_and_when(router: str, processes:
     assert said["submitted"] is False
     assert said["orders"] == said["not_sent"] == []
     assert stderr.count("did you mean: move forward 2 meters?") == 1, stderr
-    assert stderr.splitlines()[-1] == "voicectl say: nothing submitted"
+    (line,) = stderr.splitlines()
+    assert line.startswith("voicectl say: nothing submitted: 'move forwad 2 meters': "), line
 
     # A misspelling with no reason of its own gets the suggestion from the candidates.
     code, said, stderr = await asyncio.to_thread(say, "trun left")
     assert code == 1
-    assert stderr.splitlines()[0] == (
-        "voicectl say: 'trun left': no order matches; did you mean: turn left?"
+    assert stderr == (
+        "voicectl say: nothing submitted: 'trun left': no order matches, did you mean: turn left?\n"
     )
 
     # Understood in part: what was understood is held back, and not printed as sent.
@@ -196,7 +198,10 @@ async def test_say_tells_a_person_what_was_sent_and_when(router: str, processes:
     assert said["orders"] == []
     assert said["order_ids"] == []
     assert [order["description"] for order in said["not_sent"]] == ["turn left"]
-    assert "nothing submitted (--partial submits what was understood)" in stderr
+    assert stderr == (
+        "voicectl say: nothing submitted (--partial submits what was understood): "
+        "'dance': no order matches\n"
+    )
 
     code, said, stderr = await asyncio.to_thread(say, "turn left")
     assert code == 0, stderr
@@ -227,3 +232,65 @@ def test_confirm_must_be_true_or_false(tmp_path: Path) -> None:
     assert done.stderr.strip() == (
         f"voicectl parse: {orders}: order 'x': 'confirm' must be true or false"
     )
+
+
+def test_transcribe_of_a_missing_file_says_which_in_one_line(tmp_path: Path) -> None:
+    there = tmp_path / "there.wav"
+    there.write_text("not audio, but present")
+    gone = tmp_path / "missing.wav"
+    done = voicectl("transcribe", str(there), str(gone))
+    assert done.returncode == 2
+    assert done.stdout == ""
+    assert done.stderr == f"voicectl transcribe: no such file: {gone}\n"
+
+
+def test_a_negative_reorder_position_is_refused_in_one_line() -> None:
+    done = voicectl("reorder", "some-id", "-1", "--connect", "tcp/127.0.0.1:1")
+    assert done.returncode == 2
+    assert done.stdout == ""
+    assert done.stderr == (
+        "voicectl reorder: argument position: position must be 0 or more, not -1 "
+        "(see voicectl reorder --help)\n"
+    )
+
+
+async def test_cancel_all_says_what_it_cancelled_and_partial_say_exits_0(
+    router: str, processes: Processes
+) -> None:
+    """`cancel-all` names what there was to cancel (nothing, the queue, the running
+    order); `say --partial` that submitted something exits 0."""
+    processes.start("services.sim", "--connect", router)
+    processes.start("services.converter", "--connect", router)
+    processes.start("services.supervisor", "--connect", router, "--robot", "r1")
+    processes.start("services.executor", "--connect", router, "--robot", "r1")
+    bus = ("--robot", "r1", "--connect", router)
+
+    def state() -> dict[str, Any]:
+        done = voicectl("state", *bus, timeout=30.0)
+        return json.loads(done.stdout) if done.returncode == 0 else {}
+
+    await asyncio.to_thread(wait_until, lambda: state().get("executor_online"), 60.0, "executor")
+
+    def cancel_all() -> str:
+        done = voicectl("cancel-all", *bus, timeout=30.0)
+        assert done.returncode == 0, done.stderr
+        detail: str = json.loads(done.stdout)["detail"]
+        return detail
+
+    nothing = await asyncio.to_thread(cancel_all)
+    assert nothing == "nothing to cancel: the queue was empty and no order was running"
+
+    partial = await asyncio.to_thread(
+        voicectl, "say", *bus, "--partial", "move forward 5 meters then dance", timeout=30.0
+    )
+    assert partial.returncode == 0, partial.stderr
+    assert json.loads(partial.stdout)["submitted"] is True
+    assert partial.stderr == (
+        "voicectl say: submitted the rest; not understood: 'dance': no order matches\n"
+    )
+    await asyncio.to_thread(wait_until, lambda: state().get("current"), 30.0, "the drive to run")
+    queued = await asyncio.to_thread(voicectl, "say", *bus, "turn left", timeout=30.0)
+    assert queued.returncode == 0, queued.stderr
+
+    both = await asyncio.to_thread(cancel_all)
+    assert both == "cancelled 1 queued order and the running order (move forward 5 m)"

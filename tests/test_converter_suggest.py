@@ -34,6 +34,9 @@ NEAR_MISSES = [
     ("move forwad 2 meters", "move forward 2 meters"),
     ("go forwards two point five meters", "go forward two point five meters"),
     ("rotate left 45 degreez", "rotate left 45 degree"),
+    # Two misspelt words and the skip words the parser ignores anyway.
+    ("raech the kichen", "reach kitchen"),
+    ("please raech the kichen now", "reach kitchen"),
 ]
 
 UNRELATED = [
@@ -61,6 +64,16 @@ UNRELATED = [
     "turn",
     "kitchen",
     "the",
+    # With the skip words ("the", "a", "to", "please", "now") that suggestions look past.
+    "put the kettle on now",
+    "the dog wants to go out",
+    "reach the top shelf",
+    "the kitchen smells nice",
+    "wait for the bus",
+    "take a break now",
+    "the dumpster is full",
+    "go back to the start",
+    "reach out to the team",
 ]
 
 
@@ -77,7 +90,7 @@ def test_a_near_miss_is_an_error_whose_first_candidate_is_the_command(
     )
 
 
-@pytest.mark.parametrize("heard", UNRELATED)
+@pytest.mark.parametrize("heard", [*UNRELATED, *(f"please {text} now" for text in UNRELATED)])
 def test_unrelated_speech_gets_no_suggestion(heard: str) -> None:
     result = ALL.parse(heard)
     assert result.orders == []

@@ -118,6 +118,27 @@ def test_executors_doc_user_executor_runs_as_written(tmp_path: Path) -> None:
             return any(h["message"] == "waited 3 s" for h in history)
 
         wait_until(waited, 30.0, "the documented Wait executor to finish")
+        # The history names it in words, not by its alias' regex.
+        [record] = json.loads(voicectl("state").stdout)["history"]
+        assert record["order"]["description"] == "pause"
+
+
+def test_executors_doc_tutorial_orders_show_a_name_not_a_regex(tmp_path: Path) -> None:
+    """What the state, history and panel show for the tutorial's order is its description:
+    the same words whichever alias was said."""
+    orders = tmp_path / "my_orders.yaml"
+    orders.write_text(block_after(DOCS / "executors.md", "this as `my_orders.yaml`", "yaml"))
+    for said in ("pause", "wait"):
+        done = subprocess.run(
+            [sys.executable, "-m", "voicectl", "parse", "--orders", str(orders), said],
+            capture_output=True,
+            text=True,
+            check=False,
+            cwd=REPO,
+        )
+        assert done.returncode == 0, done.stderr
+        [order] = json.loads(done.stdout)["orders"]
+        assert (order["order"], order["description"]) == ("pause", "pause")
 
 
 @pytest.mark.e2e

@@ -119,3 +119,41 @@ def test_a_web_address_must_be_http() -> None:
     done = voicectl("health", "web", "--url", "file:///etc/passwd")
     assert done.returncode == 2
     assert "'file:///etc/passwd' is not an http:// or https:// address" in done.stderr
+
+
+def test_without_a_name_every_service_is_checked_a_line_each(
+    router: str, client: zenoh.Session, panel: str
+) -> None:
+    """`voicectl health` alone: one line per service on stdout, in SERVICES' order, and
+    exit status 1 until every one is up."""
+    url = ("--url", f"{panel}/api/health")
+    tokens = [
+        client.liveliness().declare_token(key)
+        for key in (ConverterKeys().alive(), RobotKeys("r1").alive("supervisor"))
+    ]
+    some = voicectl("health", "--robot", "r1", "--connect", router, *url)
+    assert some.returncode == 1
+    assert some.stderr == ""
+    lines = some.stdout.splitlines()
+    assert lines == [
+        f"up    router at {router} is up",
+        "up    converter is up (voice/converter/alive)",
+        "DOWN  stt of robot 'r1' is not up: no liveliness token on voice/r1/alive/stt",
+        "up    supervisor of robot 'r1' is up (voice/r1/alive/supervisor)",
+        "DOWN  executor of robot 'r1' is not up: no liveliness token on voice/r1/alive/executor",
+        "DOWN  sim is not up: no liveliness token on voicectl_sim/alive",
+        f"up    panel at {panel}/api/health is up",
+    ]
+    tokens += [
+        client.liveliness().declare_token(key)
+        for key in (
+            RobotKeys("r1").alive("stt"),
+            RobotKeys("r1").alive("executor"),
+            RobotNames().simulator,
+        )
+    ]
+    every = voicectl("health", "--robot", "r1", "--connect", router, *url)
+    assert every.returncode == 0, every.stdout
+    assert [line.split()[0] for line in every.stdout.splitlines()] == ["up"] * len(SERVICES)
+    for token in tokens:
+        token.undeclare()

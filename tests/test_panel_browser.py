@@ -78,12 +78,14 @@ def panel(
 
 
 def login(page: Any, stack: Stack) -> None:
-    """Open the address `voicectl up` printed: the token in its fragment logs in."""
+    """Open the address `voicectl up` prints on a terminal: the token in its fragment logs
+    in. (Into the fixture's pipe it prints the address without the token.)"""
     from playwright.sync_api import expect
 
     prefix = "voicectl up: panel on "
     [address] = [line.removeprefix(prefix) for line in stack.output if line.startswith(prefix)]
-    page.goto(address)
+    token = Path(stack.env["VOICECTL_DATA"], "token").read_text().strip()
+    page.goto(f"{address}#token={token}")
     expect(page.locator("#panel")).to_be_visible()
     assert "token" not in page.url  # the page took the token and dropped the fragment
     for part in ("converter", "stt", "supervisor", "executor", "robot"):

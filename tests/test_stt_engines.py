@@ -238,12 +238,14 @@ def test_transcribe_prints_one_json_line_per_file_in_the_parse_contract(
         out.setsampwidth(2)
         out.setframerate(8000)
         out.writeframes(b"\x00\x00" * 8000)
-    done = voicectl("transcribe", str(command), str(tmp_path / "gone.wav"), str(chat), str(silence))
-    assert done.returncode == 1, done.stderr  # one file could not be read
+    no_audio = tmp_path / "notes.wav"
+    no_audio.write_text("not a recording")
+    done = voicectl("transcribe", str(command), str(no_audio), str(chat), str(silence))
+    assert done.returncode == 1, done.stderr  # one file could not be read, two were rejected
     lines = [json.loads(line) for line in done.stdout.splitlines()]
     assert [line["file"] for line in lines] == [
         str(command),
-        str(tmp_path / "gone.wav"),
+        str(no_audio),
         str(chat),
         str(silence),
     ]
@@ -279,8 +281,10 @@ def test_transcribe_prints_one_json_line_per_file_in_the_parse_contract(
     assert other["reason"]
     assert quiet["transcript"] == ""
     assert quiet["rejected"] is True
-    only_good = voicectl("transcribe", str(chat))
-    assert only_good.returncode == 0  # nothing recognised is not an error
+    rejected = voicectl("transcribe", str(chat))
+    assert rejected.returncode == 1, rejected.stderr  # no command: nothing would be sent
+    assert json.loads(rejected.stdout)["orders"] == []
+    assert voicectl("transcribe", str(command)).returncode == 0
 
 
 def test_the_recogniser_switches_grammars_between_utterances(speech: Speak) -> None:

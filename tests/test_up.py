@@ -233,3 +233,65 @@ def test_a_forged_owner_token_does_not_stop_the_stack(stack: Stack) -> None:
     assert stack.process.poll() is None
     assert not any("stopping the stack" in line for line in stack.output)
     assert any("Zenoh id 0-forged, which does not answer" in line for line in stack.output)
+
+
+@pytest.mark.parametrize("output", ["pipe", "terminal"])
+def test_the_login_address_goes_to_a_terminal_never_to_a_log(tmp_path: Path, output: str) -> None:
+    """The token in the panel's address logs a person in with one click; where the
+    output may be kept (a pipe, a file, a journal) the address comes without it."""
+    router_port, port = free_ports(2)
+    data = tmp_path / "data"
+    env = {**os.environ, "VOICECTL_DATA": str(data), "PYTHONUNBUFFERED": "1"}
+    env.pop("VOICECTL_TOKEN", None)
+    command = ["up", "--router", f"tcp/127.0.0.1:{router_port}", "--port", str(port), "--no-stt"]
+    reading, writing = os.openpty() if output == "terminal" else os.pipe()
+    said: list[str] = []
+
+    def read() -> None:
+        while True:
+            try:
+                chunk = os.read(reading, 4096)
+            except OSError:  # a terminal whose other side closed
+                return
+            if not chunk:
+                return
+            said.append(chunk.decode("utf-8", "replace"))
+
+    process = subprocess.Popen(
+        [sys.executable, "-m", "voicectl", *command],
+        cwd=REPO,
+        env=env,
+        stdout=writing,
+        stderr=writing,
+        start_new_session=True,
+    )
+    os.close(writing)
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    try:
+        wait_until(
+            lambda: "voicectl up: ready" in "".join(said) or process.poll() is not None,
+            60.0,
+            "the stack to start",
+        )
+        process.send_signal(signal.SIGINT)
+        process.wait(timeout=30)
+        reader.join(timeout=10)
+    finally:
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGKILL)
+            process.wait()
+        os.close(reading)
+    lines = "".join(said).replace("\r\n", "\n").splitlines()
+    assert process.returncode == 0, lines
+    token = (data / "token").read_text().strip()
+    address = f"http://127.0.0.1:{port}/"
+    if output == "terminal":
+        assert f"voicectl up: panel on {address}#token={token}" in lines
+    else:
+        assert f"voicectl up: panel on {address}" in lines
+        assert (
+            "`voicectl token` prints it"
+            in lines[lines.index(f"voicectl up: panel on {address}") + 1]
+        )
+        assert not [line for line in lines if token in line]

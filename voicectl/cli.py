@@ -8,6 +8,7 @@ import datetime
 import importlib
 import sys
 from pathlib import Path
+from typing import NoReturn
 
 import msgspec
 
@@ -23,9 +24,11 @@ from shared.kinds import ON_ZENOH, TransportKind
 from shared.messages import (
     Cancel,
     CancelAll,
+    Done,
     GetHistory,
     GetState,
     Message,
+    ParseProblem,
     Release,
     Reorder,
     Resume,
@@ -46,8 +49,15 @@ def _print_json(value: object) -> None:
     print(msgspec.json.format(_ENCODER.encode(value), indent=2).decode())
 
 
+class _OneLineParser(argparse.ArgumentParser):
+    """Usage errors in one line, as every other error of voicectl: what, and where help is."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(
+    parser = _OneLineParser(
         prog="voicectl",
         description="Voice control for robots. Services: "
         + ", ".join(SERVICES)
@@ -112,7 +122,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     transcribe = sub.add_parser(
         "transcribe",
-        help="recognise WAV files offline with a grammar from orders; one JSON line per file",
+        help="recognise WAV files offline with a grammar from orders; one JSON line per file "
+        "(exit 1 if any file was rejected or unreadable, 2 if one does not exist)",
     )
     transcribe.add_argument(
         "--orders",
@@ -156,7 +167,7 @@ def build_parser() -> argparse.ArgumentParser:
     supervisor_command("resume", "run orders that wait since a restart")
     reorder = supervisor_command("reorder", "move a queued order (position 0 is next)")
     reorder.add_argument("order_id")
-    reorder.add_argument("position", type=int)
+    reorder.add_argument("position", type=_position, help="0 or more; 0 is next")
 
     cert = sub.add_parser(
         "cert", help="write a self-signed TLS certificate for the panel's LAN names and addresses"
@@ -209,10 +220,11 @@ def build_parser() -> argparse.ArgumentParser:
 
     health = sub.add_parser(
         "health",
-        help="exit 0 if a service is up, 1 if not, saying so in one line (healthchecks)",
+        help="exit 0 if a service (or, with no name, every one) is up, 1 if not, a line each",
         description="Whether a service is up: its liveliness token is on the bus (the "
         "router: a session to it opens; the panel: its health address answers). Exit "
-        "status 0 if it is, 1 if not.",
+        "status 0 if it is, 1 if not. With no SERVICE, every service, one line each on "
+        "stdout, and exit status 1 if any is down.",
     )
     add_health_arguments(health)
     return parser
@@ -259,7 +271,7 @@ def _main(argv: list[str]) -> int:
         case "cancel":
             return asyncio.run(_ask_supervisor(args, Cancel(order_id=args.order_id)))
         case "cancel-all":
-            return asyncio.run(_ask_supervisor(args, CancelAll()))
+            return asyncio.run(_cancel_all(args))
         case "stop":
             return asyncio.run(_stop(args))
         case "release":
@@ -324,7 +336,8 @@ def _up(args: argparse.Namespace) -> int:
         shown = "127.0.0.1" if args.host in ("0.0.0.0", "::") else args.host
         # The token rides in the fragment: one click logs in, and a browser never sends a
         # fragment to the server, so no access log can keep it.
-        web = PanelAddress(args.host, args.port, f"{scheme}://{shown}:{args.port}/#token={token}")
+        address = f"{scheme}://{shown}:{args.port}/"
+        web = PanelAddress(args.host, args.port, address, f"{address}#token={token}")
     keys = RobotKeys(args.robot)
     ready = [
         ConverterKeys().alive(),
@@ -333,6 +346,17 @@ def _up(args: argparse.Namespace) -> int:
         RobotNames().simulator,
     ] + ([] if args.no_stt else [keys.alive("stt")])
     return run_stack(children, web, args.router, ready)
+
+
+def _position(text: str) -> int:
+    """argparse type for a queue position: said here, not as the supervisor's schema error."""
+    try:
+        position = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"position must be a whole number, not {text!r}") from None
+    if position < 0:
+        raise argparse.ArgumentTypeError(f"position must be 0 or more, not {position}")
+    return position
 
 
 def _robot_namespace(text: str) -> tuple[str, str]:
@@ -431,24 +455,30 @@ def _transcribe(args: argparse.Namespace) -> int:
 
     from .transcribe import Unreadable, transcribe
 
+    # A file that is not there is a mistake in the command line, said before the engine
+    # loads; a file that is there but is no audio gets its own line among the others.
+    missing = [str(path) for path in args.audio if not path.is_file()]
+    if missing:
+        print(f"voicectl transcribe: no such file: {', '.join(missing)}", file=sys.stderr)
+        return 2
     try:
         orders = OrderSet.load(args.orders)
         engine = load_engine(engine_options(args))
     except (OrdersFileError, EngineError) as exc:
         print(f"voicectl transcribe: {exc}", file=sys.stderr)
         return 2
-    unreadable = 0
+    failed = 0
     try:
         engine.use_grammar(build_grammar(orders))
         for line in transcribe(engine, Parser(orders), args.audio):
-            unreadable += isinstance(line, Unreadable)
+            failed += isinstance(line, Unreadable) or line.rejected
             print(_ENCODER.encode(line).decode(), flush=True)
     except EngineError as exc:
         print(f"voicectl transcribe: {exc}", file=sys.stderr)
         return 2
     finally:
         engine.close()
-    return 1 if unreadable else 0
+    return 1 if failed else 0
 
 
 async def _say(args: argparse.Namespace) -> int:
@@ -474,20 +504,26 @@ async def _say(args: argparse.Namespace) -> int:
             "order_ids": said.order_ids,
         }
     )
-    for error in result.errors:
-        maybe = [c for c in error.candidates if "/" not in c]  # phrases, not order names
-        # The converter's reason may already end with the suggestion: say it once.
-        unsaid = [phrase for phrase in maybe if phrase not in error.reason]
-        hint = f"; did you mean: {' or '.join(unsaid)}?" if unsaid else ""
-        print(f"voicectl say: {error.text!r}: {error.reason}{hint}", file=sys.stderr)
-    if result.errors and not args.partial and result.orders:
-        print(
-            "voicectl say: nothing submitted (--partial submits what was understood)",
-            file=sys.stderr,
-        )
+    # One line on stderr, for a person: what happened, then each part not understood.
+    problems = "; ".join(_unsaid(error) for error in result.errors)
+    if sent and problems:
+        print(f"voicectl say: submitted the rest; not understood: {problems}", file=sys.stderr)
     elif not sent:
-        print("voicectl say: nothing submitted", file=sys.stderr)
-    return 0 if result.orders and not result.errors else 1
+        held = " (--partial submits what was understood)" if result.orders else ""
+        why = f": {problems}" if problems else ""
+        print(f"voicectl say: nothing submitted{held}{why}", file=sys.stderr)
+    # Exit status follows what happened: 0 when orders went to the robot (with --partial,
+    # even though some words made none), 1 when nothing did.
+    return 0 if sent else 1
+
+
+def _unsaid(error: ParseProblem) -> str:
+    """A part of a text that made no order, why, and what it may have meant."""
+    maybe = [c for c in error.candidates if "/" not in c]  # phrases, not order names
+    # The converter's reason may already end with the suggestion: say it once.
+    unsaid = [phrase for phrase in maybe if phrase not in error.reason]
+    hint = f", did you mean: {' or '.join(unsaid)}?" if unsaid else ""
+    return f"{error.text!r}: {error.reason}{hint}"
 
 
 async def _ask_supervisor(args: argparse.Namespace, request: Message) -> int:
@@ -531,6 +567,38 @@ def _with_times(message: object) -> object:
         return value
 
     return add(msgspec.to_builtins(message))
+
+
+async def _cancel_all(args: argparse.Namespace) -> int:
+    """Cancel the queue and the running order, saying what there was to cancel.
+
+    The supervisor's answer says "and the current one" whether or not an order ran, so
+    the wording comes from its state just before the cancel."""
+    try:
+        with Bus.open(bus_options(args, wait=False), asyncio.get_running_loop()) as bus:
+            client = VoicectlClient(bus)
+            before = await client.ask(args.robot, GetState())
+            await client.ask(args.robot, CancelAll())
+    except Refused as exc:
+        print(f"voicectl cancel-all: {exc.reason}", file=sys.stderr)
+        return 1
+    except BusError as exc:  # no router, or no supervisor answering
+        print(f"voicectl cancel-all: {exc}", file=sys.stderr)
+        return 3
+    if not isinstance(before, StateReply):
+        print(
+            f"voicectl cancel-all: the supervisor answered {before!r} to get-state", file=sys.stderr
+        )
+        return 1
+    queued, current = before.state.queue_length, before.state.current
+    if current is None and not queued:
+        detail = "nothing to cancel: the queue was empty and no order was running"
+    else:
+        running = f"the running order ({current.order.description})" if current else ""
+        waiting = f"{queued} queued order{'s' if queued != 1 else ''}" if queued else ""
+        detail = "cancelled " + " and ".join(part for part in (waiting, running) if part)
+    _print_json(Done(detail=detail))
+    return 0
 
 
 async def _stop(args: argparse.Namespace) -> int:

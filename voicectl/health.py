@@ -1,9 +1,11 @@
-"""`voicectl health SERVICE`: whether one voicectl service is up, said in one line.
+"""`voicectl health [SERVICE]`: whether a voicectl service is up, said in one line, or
+every service of the stack, a line each.
 
-Exit status 0 when it is and 1 when it is not, for container healthchecks (Docker
-reserves every other status) and scripts. A service is up when its liveliness token is
-on the bus (converter, stt, supervisor, executor, sim), the router when a session to it
-opens, and the panel when its health address answers. Needs only what a robot installs.
+Exit status 0 when it is (all are) and 1 when it is not (one is not), for container
+healthchecks (Docker reserves every other status) and scripts. A service is up when its
+liveliness token is on the bus (converter, stt, supervisor, executor, sim), the router
+when a session to it opens, and the panel when its health address answers. Needs only
+what a robot installs.
 """
 
 from __future__ import annotations
@@ -44,7 +46,12 @@ def _web_url(text: str) -> str:
 
 
 def add_health_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("service", choices=SERVICES, help="the service to check")
+    parser.add_argument(
+        "service",
+        nargs="?",
+        choices=SERVICES,
+        help="the service to check (default: every one, a line each on stdout)",
+    )
     parser.add_argument(
         "--robot",
         type=robot_name,
@@ -88,11 +95,14 @@ def token_key(service: str, robot: str, namespace: str = "") -> str | None:
 
 
 def check(args: argparse.Namespace) -> int:
-    """Check the service the parsed `args` name; print one line; return the exit status."""
+    """Check the service the parsed `args` name, or every one; print a line each; return
+    the exit status."""
+    if args.service is None:
+        return _check_all(args)
     if args.service == "web":
         up, said = _check_web(args.url, args.timeout)
     else:
-        up, said = asyncio.run(_check_bus(args))
+        [(up, said)] = asyncio.run(_check_bus(args, [args.service]))
     if up:
         print(said)
         return UP
@@ -100,27 +110,53 @@ def check(args: argparse.Namespace) -> int:
     return DOWN
 
 
-def _subject(args: argparse.Namespace) -> str:
-    if args.service in PER_ROBOT:
-        return f"{args.service} of robot {args.robot!r}"
-    if args.service == "sim" and args.namespace:
+def _check_all(args: argparse.Namespace) -> int:
+    """Every service, one line each on stdout ("up" or "DOWN" first, so a person sees the
+    odd one out); exit status 1 when any is down."""
+    bus_services = [service for service in SERVICES if service != "web"]
+    results = [*asyncio.run(_check_bus(args, bus_services)), _check_web(args.url, args.timeout)]
+    for up, said in results:
+        print(f"{'up' if up else 'DOWN':<4}  {said}")
+    return UP if all(up for up, _ in results) else DOWN
+
+
+def _subject(args: argparse.Namespace, service: str) -> str:
+    if service in PER_ROBOT:
+        return f"{service} of robot {args.robot!r}"
+    if service == "sim" and args.namespace:
         return f"sim in namespace {args.namespace!r}"
-    return str(args.service)
+    return service
 
 
-async def _check_bus(args: argparse.Namespace) -> tuple[bool, str]:
+async def _check_bus(args: argparse.Namespace, services: list[str]) -> list[tuple[bool, str]]:
+    """Whether each of `services` is up, over one session to the router."""
     options = bus_options(args, wait=False)
-    key = token_key(args.service, args.robot, args.namespace)
+    keys = [token_key(service, args.robot, args.namespace) for service in services]
     try:
         with Bus.open(options, asyncio.get_running_loop()) as bus:
-            if key is None:
-                return True, f"router at {options.where} is up"
-            present = await asyncio.to_thread(_token_present, bus.session, key, args.timeout)
+            present = await asyncio.gather(
+                *(
+                    asyncio.to_thread(_token_present, bus.session, key, args.timeout)
+                    for key in keys
+                    if key is not None
+                )
+            )
     except BusError as exc:  # no router: nothing behind it can be up either
-        return False, f"{_subject(args)} is not reachable: {exc}"
-    if present:
-        return True, f"{_subject(args)} is up ({key})"
-    return False, f"{_subject(args)} is not up: no liveliness token on {key}"
+        return [
+            (False, f"{_subject(args, service)} is not reachable: {exc}") for service in services
+        ]
+    answers = iter(present)
+    results = []
+    for service, key in zip(services, keys, strict=True):
+        if key is None:
+            results.append((True, f"router at {options.where} is up"))
+        elif next(answers):
+            results.append((True, f"{_subject(args, service)} is up ({key})"))
+        else:
+            results.append(
+                (False, f"{_subject(args, service)} is not up: no liveliness token on {key}")
+            )
+    return results
 
 
 def _token_present(session: zenoh.Session, key: str, timeout: float) -> bool:

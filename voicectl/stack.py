@@ -29,11 +29,13 @@ RESTART_WINDOW = 60.0
 
 @dataclass(frozen=True)
 class PanelAddress:
-    """Where the panel listens, and the address that logs a browser in."""
+    """Where the panel listens, its address, and the address that logs a browser in."""
 
     host: str
     port: int
     address: str
+    login: str
+    """`address` with the token in its fragment: shown to a person only, never logged."""
 
 
 @dataclass
@@ -184,6 +186,20 @@ def _restart(child: Child, stop: threading.Event) -> bool:
     return True
 
 
+def _print_panel(web: PanelAddress) -> None:
+    """The panel's address: with the token that logs in when a person reads it on a
+    terminal; without it when the output may be kept (a pipe, a file, a journal)."""
+    if sys.stdout.isatty():
+        print(f"voicectl up: panel on {web.login}", flush=True)
+        return
+    print(f"voicectl up: panel on {web.address}", flush=True)
+    print(
+        "voicectl up: its token is not printed where it could be logged: "
+        "`voicectl token` prints it",
+        flush=True,
+    )
+
+
 def run_stack(
     children: list[Child],
     web: PanelAddress | None,
@@ -223,7 +239,7 @@ def run_stack(
             if missing:
                 print(f"voicectl up: not up after {START_TIMEOUT:g} s: {', '.join(missing)}")
             if web is not None:
-                print(f"voicectl up: panel on {web.address}", flush=True)
+                _print_panel(web)
             print("voicectl up: ready; Ctrl-C stops everything", flush=True)
             while not stop.wait(0.2):
                 if not all(_restart(child, stop) for child in dead()):

@@ -176,7 +176,7 @@ class Parser:
         self._skip_words = frozenset(orders.skip_words)
         self._commands = _Index(orders.commands, orders.skip_words, use_index)
         self._prefixes = _Index(orders.prefixes, orders.skip_words, use_index)
-        self._suggester = Suggester(orders.commands, self._parse_alone)
+        self._suggester = Suggester(orders.commands, self._parse_alone, orders.skip_words)
         alias_words = {
             word.casefold()
             for command in orders.commands

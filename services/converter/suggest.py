@@ -9,6 +9,12 @@ Scoring every phrase of a 200-order file costs milliseconds, so only phrases tha
 word with the segment are scored, where a word one letter off counts as shared ("kitchn",
 "lift" for "left"): each word is indexed under itself and its one-letter deletions, and two
 words one edit apart have one of those in common.
+
+A segment is also scored without its skip words ("the", "please", which the parser
+ignores), and the better score counts: each one a person adds would otherwise cost a
+sentence with two misspelt words its suggestion ("raech the kichen" scored 76 against
+"reach kitchen", "raech kichen" 88). The phrases keep theirs: a phrase shortened to its
+distinctive words ("go kitchen") would be close to anything that names a place.
 """
 
 from __future__ import annotations
@@ -72,8 +78,15 @@ class Suggester:
     """Scores a segment against the phrases that share a word with it; keeps the close ones
     that parse to one order."""
 
-    def __init__(self, commands: Iterable[Command], parse: Callable[[str], Order | None]) -> None:
-        """`parse` turns a phrase into its order, or None; it is called here only."""
+    def __init__(
+        self,
+        commands: Iterable[Command],
+        parse: Callable[[str], Order | None],
+        skip_words: Iterable[str] = (),
+    ) -> None:
+        """`parse` turns a phrase into its order, or None; it is called here only.
+        `skip_words` are the words the parser ignores."""
+        self._skip = frozenset(skip_words)
         self._phrases: list[_Phrase] = []
         seen: set[str] = set()
         for command in commands:
@@ -161,23 +174,24 @@ class Suggester:
         if not pool:
             return []
         positions = sorted(pool, key=closer)[:MAX_SCORED]
-        found = process.extract(
-            query,
-            [self._phrases[p].text for p in positions],
-            scorer=fuzz.token_set_ratio,
-            score_cutoff=THRESHOLD,
-            limit=None,
-        )
-        heard = frozenset(words)
-        closest = []
-        for text, score, index in found:
-            phrase = self._phrases[positions[index]]
-            if heard < phrase.words:
-                # token_set_ratio gives 100 to any part of a phrase ("turn" for "turn
-                # left"); a fragment must be close as a whole instead.
-                score = fuzz.ratio(query, text, score_cutoff=THRESHOLD)
-            if score:
-                closest.append((phrase, score))
+        texts = [self._phrases[p].text for p in positions]
+        core = " ".join(word for word in words if word not in self._skip)
+        best: dict[int, float] = {}
+        for said in dict.fromkeys((query, core)):
+            if not said:
+                continue
+            heard = frozenset(said.split())
+            found = process.extract(
+                said, texts, scorer=fuzz.token_set_ratio, score_cutoff=THRESHOLD, limit=None
+            )
+            for text, score, index in found:
+                if heard < self._phrases[positions[index]].words:
+                    # token_set_ratio gives 100 to any part of a phrase ("turn" for "turn
+                    # left"); a fragment must be close as a whole instead.
+                    score = fuzz.ratio(said, text, score_cutoff=THRESHOLD)
+                if score:
+                    best[index] = max(score, best.get(index, 0.0))
+        closest = [(self._phrases[positions[index]], score) for index, score in best.items()]
         closest.sort(key=lambda item: -item[1])
         return closest
 
