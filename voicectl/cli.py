@@ -24,7 +24,6 @@ from shared.kinds import ON_ZENOH, TransportKind
 from shared.messages import (
     Cancel,
     CancelAll,
-    Done,
     GetHistory,
     GetState,
     Message,
@@ -271,7 +270,7 @@ def _main(argv: list[str]) -> int:
         case "cancel":
             return asyncio.run(_ask_supervisor(args, Cancel(order_id=args.order_id)))
         case "cancel-all":
-            return asyncio.run(_cancel_all(args))
+            return asyncio.run(_ask_supervisor(args, CancelAll()))
         case "stop":
             return asyncio.run(_stop(args))
         case "release":
@@ -567,38 +566,6 @@ def _with_times(message: object) -> object:
         return value
 
     return add(msgspec.to_builtins(message))
-
-
-async def _cancel_all(args: argparse.Namespace) -> int:
-    """Cancel the queue and the running order, saying what there was to cancel.
-
-    The supervisor's answer says "and the current one" whether or not an order ran, so
-    the wording comes from its state just before the cancel."""
-    try:
-        with Bus.open(bus_options(args, wait=False), asyncio.get_running_loop()) as bus:
-            client = VoicectlClient(bus)
-            before = await client.ask(args.robot, GetState())
-            await client.ask(args.robot, CancelAll())
-    except Refused as exc:
-        print(f"voicectl cancel-all: {exc.reason}", file=sys.stderr)
-        return 1
-    except BusError as exc:  # no router, or no supervisor answering
-        print(f"voicectl cancel-all: {exc}", file=sys.stderr)
-        return 3
-    if not isinstance(before, StateReply):
-        print(
-            f"voicectl cancel-all: the supervisor answered {before!r} to get-state", file=sys.stderr
-        )
-        return 1
-    queued, current = before.state.queue_length, before.state.current
-    if current is None and not queued:
-        detail = "nothing to cancel: the queue was empty and no order was running"
-    else:
-        running = f"the running order ({current.order.description})" if current else ""
-        waiting = f"{queued} queued order{'s' if queued != 1 else ''}" if queued else ""
-        detail = "cancelled " + " and ".join(part for part in (waiting, running) if part)
-    _print_json(Done(detail=detail))
-    return 0
 
 
 async def _stop(args: argparse.Namespace) -> int:

@@ -206,7 +206,7 @@ class RobotSupervisor:
                 current = self._queue.current
                 if current is not None:
                     await self._cancel(current.id, "cancelled by user")
-                return Done(detail=f"cancelled {cleared} queued order(s) and the current one")
+                return Done(detail=cancelled_words(cleared, current))
             case EmergencyStop():
                 return await self._emergency_stop()
             case Release():
@@ -1053,3 +1053,13 @@ def _taken(robot: str, zid: str) -> str:
         f"robot '{robot}' already has a supervisor (Zenoh id {zid}, which answers for it); "
         "a robot has one supervisor: stop the other one, or give this one a router of its own"
     )
+
+
+def cancelled_words(queued: int, running: OrderRecord | None) -> str:
+    """What a cancel-all cancelled, for a person: 'cancelled 2 queued orders and the
+    running order (move forward 5 m)', or that there was nothing."""
+    if running is None and not queued:
+        return "nothing to cancel: the queue was empty and no order was running"
+    waiting = f"{queued} queued order{'s' if queued != 1 else ''}" if queued else ""
+    current = f"the running order ({running.order.description})" if running else ""
+    return "cancelled " + " and ".join(part for part in (waiting, current) if part)
