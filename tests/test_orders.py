@@ -57,6 +57,23 @@ def test_orders_without_wrapper_load() -> None:
     assert orders.orders[0].description == "halt"
 
 
+def test_an_alias_that_is_a_regex_is_not_what_a_person_reads() -> None:
+    """Without a description, an order or case reads as its alias when that is words, and
+    as its name when the alias is a regex ('wait|pause' is shown as 'pause')."""
+    orders = OrderSet.from_yaml(
+        "orders:\n"
+        "  pause: {voice_alias: 'wait|pause', label: wait}\n"
+        "  ahead: {voice_alias: 'ahead {d} m', label: drive, slots: {d: {min: 1, max: 3}}}\n"
+        "  take_photo:\n"
+        "    voice_alias: '(take|snap)'\n"
+        "    label: pic\n"
+        "    cases: {a_picture: {voice_alias: '(a )?(picture|photo)'}}\n"
+    )
+    pause, ahead, photo = orders.orders
+    assert (pause.description, ahead.description) == ("pause", "ahead {d} m")
+    assert photo.full_description(photo.cases[0]) == "take photo a picture"
+
+
 @pytest.mark.parametrize(
     ("text", "message"),
     [

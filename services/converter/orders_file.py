@@ -33,6 +33,9 @@ DEFAULT_SKIP_WORDS = ("a", "the", "to", "please", "now")
 """Words people add around and inside commands ("please reach the kitchen now"): the
 parser ignores them there and the recogniser's grammar makes them optional there."""
 
+_WORDS = re.compile(r"[\w\s'.,{}°-]*")
+"""An alias that is words and slots, read as it is; any other regex syntax is not."""
+
 Problem = tuple[str, int | None]
 """One thing wrong, as 'FILE: order NAME: what' and its YAML line when known."""
 
@@ -134,7 +137,7 @@ def _order_from_dict(name: str, spec: Any, source: str) -> OrderSpec:
         raise _Problem(f"expected a mapping, got {type(spec).__name__}")
     alias = _required_str(spec, "voice_alias")
     label = _required_str(spec, "label")
-    description = spec.get("description", alias)
+    description = spec.get("description", _plain(alias, name))
     if not isinstance(description, str):
         raise _Problem("'description' must be a string", _line(spec, "description"))
     slots = _slots(spec)
@@ -176,6 +179,12 @@ def _order_from_dict(name: str, spec: Any, source: str) -> OrderSpec:
     return order
 
 
+def _plain(alias: str, name: str) -> str:
+    """What a person reads for an order or case without a description: its alias when
+    that is words ('reach', 'forward {d} m'), else its name ('pause' for 'wait|pause')."""
+    return alias if _WORDS.fullmatch(alias) else name.replace("_", " ")
+
+
 def _case_from_dict(name: str, spec: Any) -> CaseSpec:
     if not isinstance(spec, dict):
         raise _Problem(f"expected a mapping, got {type(spec).__name__}")
@@ -184,7 +193,7 @@ def _case_from_dict(name: str, spec: Any) -> CaseSpec:
     if "label" in spec:
         raise _Problem("'label' belongs to the order, not to a case", _line(spec, "label"))
     alias = _required_str(spec, "voice_alias")
-    description = spec.get("description", alias)
+    description = spec.get("description", _plain(alias, name))
     if not isinstance(description, str):
         raise _Problem("'description' must be a string", _line(spec, "description"))
     return CaseSpec(
