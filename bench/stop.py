@@ -3,7 +3,7 @@
     .venv/bin/python bench/stop.py [--rounds N]
 
 A simulated robot with its supervisor and executor, as processes on a router on
-loopback; each case of tests/stop_rig.py (healthy navigation, an executor blocking its
+loopback; each case of harness/stop_rig.py (healthy navigation, an executor blocking its
 loop, one commanding from a blocked loop, one swallowing its cancel, the executor killed,
 supervisor and executor killed, 50 orders queued) is run `--rounds` times. STOP is sent
 the way the panel and `voicectl stop` send it (VoicectlClient.stop on a warm session).
@@ -31,10 +31,11 @@ import zenoh
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
+from harness.ports import free_port  # noqa: E402
+from harness.processes import Processes  # noqa: E402
+from harness.stop_rig import CASES, Outcome, StopRig  # noqa: E402
 from shared.bus import Bus, BusOptions  # noqa: E402
 from shared.client import VoicectlClient  # noqa: E402
-from tests.conftest import Processes, free_port  # noqa: E402
-from tests.stop_rig import CASES, Outcome, StopRig  # noqa: E402
 
 
 def percentile(values: list[float], share: float) -> float:

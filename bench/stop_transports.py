@@ -4,11 +4,11 @@ with it blocked.
 
     .venv/bin/python bench/stop_transports.py [--rounds N] [--blocked-rounds N]
 
-- bridge and rmw-zenoh: the simulator and its executor (tests/stop_rig.py), timed at a
+- bridge and rmw-zenoh: the simulator and its executor (harness/stop_rig.py), timed at a
   separate Zenoh session as the robot's side of the bus;
 - ros2 on Jazzy and on Kilted (needs root and scripts/ros2-env): a robot of real rclpy in
   a network namespace with only loopback up, the executor on `--transport ros2` and the
-  STOP relay beside it (tests/ros2_rig.py), timed by the robot itself as the messages
+  STOP relay beside it (harness/ros2_rig.py), timed by the robot itself as the messages
   arrive (CLOCK_MONOTONIC, shared by every process).
 
 STOP is sent the way the panel and `voicectl stop` send it (VoicectlClient.stop, on a warm
@@ -35,18 +35,20 @@ REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
 from harness import ros2_env  # noqa: E402
+from harness.client import Client  # noqa: E402
+from harness.ports import free_port  # noqa: E402
+from harness.processes import Processes  # noqa: E402
+from harness.ros2_rig import ROBOT, DdsRobot, dds_robot  # noqa: E402
+from harness.stop_rig import StopRig, order  # noqa: E402
+from harness.wait import async_wait_until  # noqa: E402
 from shared.bus import Bus, BusOptions, json_decoder  # noqa: E402
 from shared.client import VoicectlClient  # noqa: E402
 from shared.keys import RobotKeys  # noqa: E402
 from shared.messages import Order, Release, RobotPose, TargetPose  # noqa: E402
 from shared.robot import TransportKind  # noqa: E402
-from tests.conftest import Processes, async_wait_until, free_port  # noqa: E402
-from tests.ros2_rig import ROBOT, DdsRobot, dds_robot  # noqa: E402
-from tests.stop_rig import StopRig, order  # noqa: E402
-from tests.support import Client  # noqa: E402
 
 CASES = {"navigating": "healthy", "blocked-loop": "blocked-loop"}
-"""This bench's cases, by the name tests/stop_rig.py gives them."""
+"""This bench's cases, by the name harness/stop_rig.py gives them."""
 Timings = dict[str, list[tuple[float, float]]]
 """Case -> (seconds to zero velocity, seconds to the cancel) per round."""
 
