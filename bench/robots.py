@@ -1,6 +1,6 @@
 """Several simulated robots in one process, for bench/fleet.py --per-process.
 
-    .venv/bin/python bench/robots.py --connect ENDPOINT NAME [NAME ...]
+    .venv/bin/python -m bench.robots --connect ENDPOINT NAME [NAME ...]
 
 Per robot a simulator and an executor, built as `voicectl sim --namespace NAME` and
 `voicectl executor --robot NAME --namespace NAME` build them, on one event loop and one
@@ -14,18 +14,13 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import sys
-from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
-
-from services.executor.__main__ import executor_service, load_bindings  # noqa: E402
-from services.executor.__main__ import parse_args as executor_args  # noqa: E402
-from services.sim.__main__ import parse_args as sim_args  # noqa: E402
-from services.sim.__main__ import sim_node  # noqa: E402
-from shared.process import Service, open_bus, serve, setup_logging  # noqa: E402
-from shared.robot import TransportKind  # noqa: E402
+from services.executor.__main__ import executor_service, load_bindings
+from services.executor.__main__ import parse_args as executor_args
+from services.sim.__main__ import parse_args as sim_args
+from services.sim.__main__ import sim_node
+from shared.process import Service, open_bus, serve, setup_logging
+from shared.robot import TransportKind
 
 
 async def main() -> None:

@@ -1,6 +1,6 @@
 """STOP under every fault: time from STOP to the robot told to stop, and motion after it.
 
-    .venv/bin/python bench/stop.py [--rounds N]
+    .venv/bin/python -m bench.stop [--rounds N]
 
 A simulated robot with its supervisor and executor, as processes on a router on
 loopback; each case of harness/stop_rig.py (healthy navigation, an executor blocking its
@@ -28,14 +28,11 @@ from pathlib import Path
 
 import zenoh
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
-
-from harness.ports import free_port  # noqa: E402
-from harness.processes import Processes  # noqa: E402
-from harness.stop_rig import CASES, Outcome, StopRig  # noqa: E402
-from shared.bus import Bus, BusOptions  # noqa: E402
-from shared.client import VoicectlClient  # noqa: E402
+from harness.ports import free_port
+from harness.processes import Processes
+from harness.stop_rig import CASES, Outcome, StopRig
+from shared.bus import Bus, BusOptions
+from shared.client import VoicectlClient
 
 
 def percentile(values: list[float], share: float) -> float:

@@ -2,7 +2,7 @@
 goal's cancel at the robot, for a robot navigating, with its executor's loop running and
 with it blocked.
 
-    .venv/bin/python bench/stop_transports.py [--rounds N] [--blocked-rounds N]
+    .venv/bin/python -m bench.stop_transports [--rounds N] [--blocked-rounds N]
 
 - bridge and rmw-zenoh: the simulator and its executor (harness/stop_rig.py), timed at a
   separate Zenoh session as the robot's side of the bus;
@@ -31,21 +31,18 @@ from pathlib import Path
 
 import zenoh
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
-
-from harness import ros2_env  # noqa: E402
-from harness.client import Client  # noqa: E402
-from harness.ports import free_port  # noqa: E402
-from harness.processes import Processes  # noqa: E402
-from harness.ros2_rig import ROBOT, DdsRobot, dds_robot  # noqa: E402
-from harness.stop_rig import StopRig, order  # noqa: E402
-from harness.wait import async_wait_until  # noqa: E402
-from shared.bus import Bus, BusOptions, json_decoder  # noqa: E402
-from shared.client import VoicectlClient  # noqa: E402
-from shared.keys import RobotKeys  # noqa: E402
-from shared.messages import Order, Release, RobotPose, TargetPose  # noqa: E402
-from shared.robot import TransportKind  # noqa: E402
+from harness import ros2_env
+from harness.client import Client
+from harness.ports import free_port
+from harness.processes import Processes
+from harness.ros2_rig import ROBOT, DdsRobot, dds_robot
+from harness.stop_rig import StopRig, order
+from harness.wait import async_wait_until
+from shared.bus import Bus, BusOptions, json_decoder
+from shared.client import VoicectlClient
+from shared.keys import RobotKeys
+from shared.messages import Order, Release, RobotPose, TargetPose
+from shared.robot import TransportKind
 
 CASES = {"navigating": "healthy", "blocked-loop": "blocked-loop"}
 """This bench's cases, by the name harness/stop_rig.py gives them."""
