@@ -28,16 +28,12 @@ from pathlib import Path
 
 import zenoh
 
+from harness.measure import percentile
 from harness.ports import free_port
 from harness.processes import Processes
 from harness.stop_rig import CASES, Outcome, StopRig
 from shared.bus import Bus, BusOptions
 from shared.client import VoicectlClient
-
-
-def percentile(values: list[float], share: float) -> float:
-    ordered = sorted(values)
-    return ordered[min(len(ordered) - 1, round(share * (len(ordered) - 1)))]
 
 
 def raw_put(router: str, rounds: int) -> list[float]:

@@ -33,6 +33,7 @@ import zenoh
 
 from harness import ros2_env
 from harness.client import Client
+from harness.measure import percentile
 from harness.ports import free_port
 from harness.processes import Processes
 from harness.ros2_rig import ROBOT, DdsRobot, dds_robot
@@ -48,11 +49,6 @@ CASES = {"navigating": "healthy", "blocked-loop": "blocked-loop"}
 """This bench's cases, by the name harness/stop_rig.py gives them."""
 Timings = dict[str, list[tuple[float, float]]]
 """Case -> (seconds to zero velocity, seconds to the cancel) per round."""
-
-
-def percentile(values: list[float], share: float) -> float:
-    ordered = sorted(values)
-    return ordered[min(len(ordered) - 1, round(share * (len(ordered) - 1)))]
 
 
 async def on_zenoh(kind: TransportKind, rounds: dict[str, int], tmp: Path) -> Timings:

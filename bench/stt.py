@@ -45,7 +45,7 @@ from pathlib import Path
 import msgspec
 import pocketsphinx
 
-from harness.measure import cpu_seconds, raw_latency
+from harness.measure import cpu_seconds, percentile, raw_latency
 from harness.ports import free_port
 from harness.processes import REPO, rss_mb
 from harness.speech_set import LEAD_SILENCE, Utterance, generate
@@ -108,11 +108,6 @@ class Outcome:
 
 LENGTHS = [("up to 3 s", 0.0, 3.0), ("3 to 6 s", 3.0, 6.0), ("over 6 s", 6.0, math.inf)]
 """Commands by how long their speech lasts: the latency targets are per length."""
-
-
-def percentile(values: list[float], q: float) -> float:
-    ordered = sorted(values)
-    return ordered[min(len(ordered) - 1, math.ceil(q * len(ordered)) - 1)]
 
 
 OUTCOMES = ("right", "doubt", "wrong", "rejected")

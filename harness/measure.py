@@ -19,6 +19,8 @@ MOTION_WAIT = 5.0
 
 
 def percentile(values: list[float], share: float) -> float:
+    """The sample `share` of the way up `values` (index int(share * n) of the sorted, the
+    same in every benchmark); NaN when there are none."""
     ordered = sorted(values)
     return ordered[min(len(ordered) - 1, int(share * len(ordered)))] if ordered else float("nan")
 
