@@ -13,7 +13,7 @@ import threading
 from collections.abc import Iterator
 from pathlib import Path
 
-from harness.ports import free_port
+from harness.ports import free_ports
 from harness.processes import REPO
 
 
@@ -46,7 +46,8 @@ def stack_up(
     leaving, the stack is stopped with SIGINT, as a person would, and its data directory
     removed, however the benchmark ended."""
     with tempfile.TemporaryDirectory(prefix=prefix, ignore_cleanup_errors=True) as data:
-        port, router = free_port(), f"tcp/127.0.0.1:{free_port()}"
+        port, router_port = free_ports(2)
+        router = f"tcp/127.0.0.1:{router_port}"
         env = {**os.environ, "VOICECTL_DATA": data, "PYTHONUNBUFFERED": "1"}
         env.pop("VOICECTL_TOKEN", None)
         up_command = ["voicectl", "up", "--router", router, "--port", str(port), *flags]
