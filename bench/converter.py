@@ -1,6 +1,6 @@
 """Benchmark the converter's parser against Home Assistant's hassil on the same sentences.
 
-    python bench/converter.py [--orders-count 200] [--rounds 5]
+    .venv/bin/python -m bench.converter [--orders-count 200] [--rounds 5]
 
 Prints parses per second and p50/p99 latency per utterance for a generated orders file and
 for orders/demo.yaml, each with hassil on an equivalent template set, and the ratio.
@@ -21,8 +21,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from hassil import Intents, recognize
-from orders_gen import UNRELATED, generate, near_misses
 
+from bench.orders_gen import UNRELATED, generate, near_misses
 from services.converter.grammar import build_grammar
 from services.converter.orders import OrderSet
 from services.converter.parser import Parser

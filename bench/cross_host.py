@@ -1,6 +1,6 @@
 """Emergency stop across a slow, lossy link, beside a raw Zenoh round trip on the same link.
 
-    sudo .venv/bin/python bench/cross_host.py [--stops 20] [--pings 200] [--delay-ms 100] [--loss 5]
+    sudo .venv/bin/python -m bench.cross_host [--stops 20] [--pings 200] [--delay-ms 100] [--loss 5]
 
 Two network namespaces joined by a veth pair (harness/netns.py): on the host, a router and
 the supervisor; on the robot, a router connected to the host's, the executor, the
@@ -31,16 +31,12 @@ from pathlib import Path
 
 import zenoh
 
-REPO = Path(__file__).resolve().parents[1]
-if str(REPO) not in sys.path:
-    sys.path.insert(0, str(REPO))
-
-from harness.cross_host import ROBOT, RobotWatch, observer, start_stack  # noqa: E402
-from harness.netns import LEASE_MS, TwoHosts, impairment_unavailable, unavailable  # noqa: E402
-from shared.bus import Bus, BusOptions, json_decoder  # noqa: E402
-from shared.errors import BusError  # noqa: E402
-from shared.keys import RobotKeys  # noqa: E402
-from shared.messages import (  # noqa: E402
+from harness.cross_host import ROBOT, RobotWatch, observer, start_stack
+from harness.netns import LEASE_MS, TwoHosts, impairment_unavailable, unavailable
+from shared.bus import Bus, BusOptions, json_decoder
+from shared.errors import BusError
+from shared.keys import RobotKeys
+from shared.messages import (
     Done,
     EmergencyStop,
     GetHistory,

@@ -1,6 +1,6 @@
 """From a voice to motion, on the whole local stack, through the paths the panel uses.
 
-    .venv/bin/python bench/e2e.py [--utterances 200] [--clients 20] [--requests 50] [--quick]
+    .venv/bin/python -m bench.e2e [--utterances 200] [--clients 20] [--requests 50] [--quick]
 
 Starts `voicectl up` (the simulator at real speed, a data directory of its own, free
 ports) and measures what a person waits for:
@@ -42,19 +42,14 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
+import httpx
+import websockets
 
-import httpx  # noqa: E402
-import websockets  # noqa: E402
-from soak import children, stack_up  # noqa: E402
-from stt import cpu_seconds, raw_latency  # noqa: E402
-
-from harness.speech_set import Utterance, Voice, speak  # noqa: E402
-from services.stt.audio import frames, read_wav  # noqa: E402
-from shared.bus import Bus, BusOptions  # noqa: E402
-from shared.keys import RobotNames  # noqa: E402
-from shared.ros2 import Ros2Codec  # noqa: E402
+from harness.measure import MOTION_WAIT, Robot, cpu_seconds, line, percentile, raw_latency
+from harness.speech_set import Utterance, Voice, speak
+from harness.stack import children, stack_up
+from services.stt.audio import frames, read_wav
+from shared.bus import Bus, BusOptions
 
 COMMANDS = (
     "turn left",
@@ -70,57 +65,6 @@ COMMANDS = (
 where it started (each is stopped as soon as it moves)."""
 VOICES = (Voice("flite", "slt"), Voice("flite", "kal16"), Voice("espeak", "en-us", 150))
 FRAME = 0.02
-MOTION_WAIT = 5.0
-"""Seconds an order may take to reach the simulator before it counts as lost."""
-
-
-def percentile(values: list[float], share: float) -> float:
-    ordered = sorted(values)
-    return ordered[min(len(ordered) - 1, int(share * len(ordered)))] if ordered else float("nan")
-
-
-def line(name: str, seconds: list[float], target: str = "") -> str:
-    ms = [1e3 * s for s in seconds]
-    return (
-        f"{name:<44} p50 {percentile(ms, 0.5):7.1f}  p95 {percentile(ms, 0.95):7.1f}  "
-        f"p99 {percentile(ms, 0.99):7.1f} ms  (n={len(ms)}){'  target ' + target if target else ''}"
-    )
-
-
-@dataclass
-class Robot:
-    """What the simulator was told, with the monotonic time it arrived (Zenoh's thread)."""
-
-    moved: list[float] = field(default_factory=list)
-    """Non-zero cmd_vel, and navigation status publications (a goal accepted or ended)."""
-    zero: list[float] = field(default_factory=list)
-    """Zero cmd_vel."""
-
-    def listen(self, bus: Bus, keys: RobotNames | None = None) -> None:
-        """Watch the robot of `keys` (the bridge's default namespace when none)."""
-        codec, keys = Ros2Codec(), keys or RobotNames()
-
-        def on_twist(_key: str, twist: tuple[float, float]) -> None:
-            (self.zero if twist == (0.0, 0.0) else self.moved).append(time.monotonic())
-
-        bus.subscribe(keys.cmd_vel, codec.read_twist, on_twist, on_loop=False)
-        bus.subscribe(
-            keys.navigate("status"),
-            bytes,
-            lambda _key, _raw: self.moved.append(time.monotonic()),
-            on_loop=False,
-        )
-
-    @staticmethod
-    async def first(times: list[float], after: float, timeout: float = MOTION_WAIT) -> float | None:
-        """The first of `times` after `after`, waiting up to `timeout` for one."""
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            found = [t for t in times if t > after]
-            if found:
-                return min(found)
-            await asyncio.sleep(0.001)
-        return None
 
 
 class Events:

@@ -2,7 +2,7 @@
 each with its own simulator and executor as processes, every robot given an order every
 few seconds while one person presses STOP on one of them.
 
-    .venv/bin/python bench/fleet.py [--robots 50] [--seconds 60] [--period 3] [--per-process K]
+    .venv/bin/python -m bench.fleet [--robots 50] [--seconds 60] [--period 3] [--per-process K]
                                     [--quick]
 
 Each robot's cycle: submit a turn (as the panel's Send does) and time it to the first
@@ -32,18 +32,14 @@ from collections import defaultdict
 from dataclasses import dataclass, field
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
-
-from e2e import MOTION_WAIT, Robot, line, percentile  # noqa: E402
-from soak import free_port, rss_mb  # noqa: E402
-from stt import cpu_seconds, raw_latency  # noqa: E402
-
-from shared.bus import Bus, BusOptions  # noqa: E402
-from shared.client import VoicectlClient  # noqa: E402
-from shared.errors import BusError  # noqa: E402
-from shared.keys import RobotNames  # noqa: E402
-from shared.messages import (  # noqa: E402
+from harness.measure import MOTION_WAIT, Robot, cpu_seconds, line, percentile, raw_latency
+from harness.ports import free_port
+from harness.processes import REPO, rss_mb
+from shared.bus import Bus, BusOptions
+from shared.client import VoicectlClient
+from shared.errors import BusError
+from shared.keys import RobotNames
+from shared.messages import (
     CancelAll,
     GetState,
     Order,
@@ -92,7 +88,7 @@ class Fleet:
         if self.per_process:
             for first in range(0, len(self.names), self.per_process):
                 group = self.names[first : first + self.per_process]
-                robots = ("bench/robots.py",)
+                robots = ("-m", "bench.robots")
                 self.start(f"robots-{first}", *connect, *group, program=robots)
             return
         for name in self.names:

@@ -1,6 +1,6 @@
 """Hands-free latency on the whole local stack: `voicectl listen -` fed at real time.
 
-    .venv/bin/python bench/listen.py [--rounds 10]
+    .venv/bin/python -m bench.listen [--rounds 10]
 
 Starts `voicectl up` (the simulator at real speed) and a listener with the wake phrase
 "hey robot" and a voice (espeak-ng, into a WAV file), and feeds its standard input at
@@ -32,20 +32,16 @@ import threading
 import time
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
-sys.path.insert(0, str(REPO / "bench"))
-
-from e2e import Robot, line  # noqa: E402
-from soak import stack_up  # noqa: E402
-
-from harness.speech_set import Voice, pink_noise, speak  # noqa: E402
-from services.stt.audio import read_wav  # noqa: E402
-from shared.bus import Bus, BusOptions  # noqa: E402
-from shared.client import VoicectlClient  # noqa: E402
-from shared.config import cache_dir  # noqa: E402
-from shared.messages import GetState, Release, StateReply  # noqa: E402
-from shared.tts import load_voice  # noqa: E402
+from harness.measure import Robot, line
+from harness.processes import REPO
+from harness.speech_set import Voice, pink_noise, speak
+from harness.stack import stack_up
+from services.stt.audio import read_wav
+from shared.bus import Bus, BusOptions
+from shared.client import VoicectlClient
+from shared.config import cache_dir
+from shared.messages import GetState, Release, StateReply
+from shared.tts import load_voice
 
 VOICES = [Voice("flite", "slt"), Voice("festival", "cmu_us_slt_arctic_hts")]
 CHUNK = 640

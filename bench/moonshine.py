@@ -1,6 +1,6 @@
 """Moonshine's model as shipped against as prepared, and onnxruntime's settings.
 
-    .venv/bin/python bench/moonshine.py [--set DIR] [--files 60]
+    .venv/bin/python -m bench.moonshine [--set DIR] [--files 60]
 
 Each variant runs in a process of its own (so that its memory is its own): the ORT-format
 files as `moonshine-cpp` ships them, run as they are (the baseline), and the prepared model
@@ -25,15 +25,13 @@ import tempfile
 import time
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
-
-from harness.speech_set import Voice, generate, speak  # noqa: E402
-from services.converter.orders import OrderSet  # noqa: E402
-from services.converter.parser import Parser  # noqa: E402
-from services.stt.audio import read_wav  # noqa: E402
-from services.stt.moonshine import Moonshine, prepare, weights_dir  # noqa: E402
-from shared.config import cache_dir  # noqa: E402
+from harness.processes import REPO, rss_mb
+from harness.speech_set import Voice, generate, speak
+from services.converter.orders import OrderSet
+from services.converter.parser import Parser
+from services.stt.audio import read_wav
+from services.stt.moonshine import Moonshine, prepare, weights_dir
+from shared.config import cache_dir
 
 VARIANTS = {
     "shipped (.ort), 1 thread": ("shipped", 1, True),
@@ -61,19 +59,12 @@ def model(kind: str, threads: int, arena: bool) -> Moonshine:
     return Moonshine(encoder, decoder, source / "tokenizer.bin", threads, arena, prepared)
 
 
-def rss_mb() -> float:
-    for line in Path("/proc/self/status").read_text().splitlines():
-        if line.startswith("VmRSS:"):
-            return int(line.split()[1]) / 1024
-    return float("nan")
-
-
 def one_variant(name: str, audio: dict[float, str]) -> dict[str, object]:
     """Runs in a child process: the figures of one variant."""
     began = time.perf_counter()
     built = model(*VARIANTS[name])
     loaded = time.perf_counter() - began
-    after_load = rss_mb()
+    after_load = rss_mb(os.getpid())
     timings = {}
     for seconds, path in audio.items():
         pcm = read_wav(Path(path))
@@ -128,7 +119,16 @@ def main() -> None:
     )
     for name in VARIANTS:
         done = subprocess.run(
-            [sys.executable, __file__, "--variant", name, "--audio", json.dumps(audio)],
+            [
+                sys.executable,
+                "-m",
+                "bench.moonshine",
+                "--variant",
+                name,
+                "--audio",
+                json.dumps(audio),
+            ],
+            cwd=REPO,
             capture_output=True,
             text=True,
             check=True,

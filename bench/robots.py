@@ -1,31 +1,30 @@
 """Several simulated robots in one process, for bench/fleet.py --per-process.
 
-    .venv/bin/python bench/robots.py --connect ENDPOINT NAME [NAME ...]
+    .venv/bin/python -m bench.robots --connect ENDPOINT NAME [NAME ...]
 
-Per robot a simulator and an executor, built as `voicectl sim --namespace NAME` and
-`voicectl executor --robot NAME --namespace NAME` build them, on one event loop and one
-Zenoh session: the same keys and messages as the processes of their own that a real site
-has (one per robot, on the robot), at a fraction of the cost on a machine with fewer cores
-than robots. What it does not reproduce: a robot's own process and Zenoh session, so the
-router serves fewer sessions than a real fleet would give it.
+Per robot a simulator and an executor, built from the configs `voicectl sim --namespace
+NAME` and `voicectl executor --robot NAME --namespace NAME` build them from, on one event
+loop and one Zenoh session: the same keys and messages as the processes of their own that
+a real site has (one per robot, on the robot), at a fraction of the cost on a machine with
+fewer cores than robots. What it does not reproduce: a robot's own process and Zenoh
+session, so the router serves fewer sessions than a real fleet would give it.
 """
 
 from __future__ import annotations
 
 import argparse
 import asyncio
-import sys
-from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
-
-from services.executor.__main__ import executor_service, load_bindings  # noqa: E402
-from services.executor.__main__ import parse_args as executor_args  # noqa: E402
-from services.sim.__main__ import parse_args as sim_args  # noqa: E402
-from services.sim.__main__ import sim_node  # noqa: E402
-from shared.process import Service, open_bus, serve, setup_logging  # noqa: E402
-from shared.robot import TransportKind  # noqa: E402
+from services.executor.build import build as build_executor
+from services.executor.build import load_bindings
+from services.executor.config import ExecutorConfig
+from services.sim.build import build as build_sim
+from services.sim.node import SimConfig
+from shared.bus import Bus, BusOptions
+from shared.keys import RobotNames
+from shared.process import Service, serve, setup_logging
+from shared.robot import TransportKind
+from shared.robot_options import RobotOptions
 
 
 async def main() -> None:
@@ -34,14 +33,16 @@ async def main() -> None:
     parser.add_argument("names", nargs="+")
     args = parser.parse_args()
     setup_logging(False)
-    connect = ["--connect", args.connect]
-    with open_bus(sim_args(connect)) as bus:
+    options = BusOptions(connect=[args.connect])
+    with Bus.open(options, asyncio.get_running_loop()) as bus:
         services: list[Service] = []
         for name in args.names:
-            services.append(sim_node(bus, sim_args(["--namespace", name, *connect])))
-            flags = executor_args(["--robot", name, "--namespace", name, *connect])
-            bindings = load_bindings(flags)
-            services.append(executor_service(bus, flags, bindings, TransportKind.BRIDGE))
+            names = RobotNames(name)
+            services.append(build_sim(bus, SimConfig(names=names)))
+            config = ExecutorConfig(robot=name, reach=RobotOptions(names=names))
+            services.append(
+                build_executor(bus, config, load_bindings(config), TransportKind.BRIDGE)
+            )
         await serve(*services)
 
 

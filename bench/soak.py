@@ -1,6 +1,6 @@
 """A soak: the whole stack under a steady stream of orders, with every service's memory.
 
-    .venv/bin/python bench/soak.py [--minutes 10] [--rate 3]
+    .venv/bin/python -m bench.soak [--minutes 10] [--rate 3]
 
 Starts `voicectl up` (simulator at x10, a data directory of its own, free ports) and, for
 `--minutes`, sends `--rate` requests a second through the panel's HTTP API the way a
@@ -15,26 +15,14 @@ from __future__ import annotations
 
 import argparse
 import collections
-import contextlib
 import json
-import os
 import random
-import signal
-import socket
-import subprocess
-import sys
-import tempfile
-import threading
 import time
 import urllib.error
 import urllib.request
-from collections.abc import Iterator
-from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
-
-from harness.processes import rss_mb  # noqa: E402  (fleet.py takes it from here too)
+from harness.processes import rss_mb
+from harness.stack import children, stack_up
 
 SAYINGS = (
     "turn left",
@@ -46,74 +34,6 @@ SAYINGS = (
     "reach kitchen",
     "turn back",
 )
-
-
-def free_port() -> int:
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        port: int = sock.getsockname()[1]
-        return port
-
-
-def children(pid: int) -> dict[str, int]:
-    """The stack's services by name (from their command lines), with their pids."""
-    found = {}
-    for entry in Path("/proc").iterdir():
-        if not entry.name.isdigit():
-            continue
-        try:
-            status = (entry / "status").read_text()
-            argv = (entry / "cmdline").read_bytes().split(b"\0")
-        except OSError:
-            continue
-        parent = next(
-            int(line.split()[1]) for line in status.splitlines() if line.startswith("PPid")
-        )
-        if parent == pid and len(argv) > 2 and argv[1] == b"-m":
-            found[argv[2].decode().rsplit(".", 1)[-1]] = int(entry.name)
-    return found
-
-
-@contextlib.contextmanager
-def stack_up(
-    prefix: str, *flags: str
-) -> Iterator[tuple[subprocess.Popen[str], list[str], Path, int, str]]:
-    """`voicectl up` with a data directory and free ports of its own, once it says it is
-    ready: the process, its output lines (kept as they come), the data directory, the
-    panel's port and the router's endpoint. Exits saying why when it does not come up. On
-    leaving, the stack is stopped with SIGINT, as a person would, and its data directory
-    removed, however the benchmark ended."""
-    with tempfile.TemporaryDirectory(prefix=prefix, ignore_cleanup_errors=True) as data:
-        port, router = free_port(), f"tcp/127.0.0.1:{free_port()}"
-        env = {**os.environ, "VOICECTL_DATA": data, "PYTHONUNBUFFERED": "1"}
-        env.pop("VOICECTL_TOKEN", None)
-        up_command = ["voicectl", "up", "--router", router, "--port", str(port), *flags]
-        up = subprocess.Popen(
-            [sys.executable, "-m", *up_command],
-            stdout=subprocess.PIPE,
-            stderr=subprocess.STDOUT,
-            text=True,
-            env=env,
-            cwd=REPO,
-        )
-        lines: list[str] = []
-        ready = threading.Event()
-
-        def pump() -> None:
-            assert up.stdout is not None
-            for line in up.stdout:
-                lines.append(line.rstrip())
-                if "voicectl up: ready" in line:
-                    ready.set()
-
-        threading.Thread(target=pump, daemon=True).start()
-        try:
-            if not ready.wait(120):
-                sys.exit("the stack did not come up:\n" + "\n".join(lines[-30:]))
-            yield up, lines, Path(data), port, router
-        finally:
-            up.send_signal(signal.SIGINT)
-            up.wait(60)
 
 
 def main() -> None:

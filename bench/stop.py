@@ -1,9 +1,9 @@
 """STOP under every fault: time from STOP to the robot told to stop, and motion after it.
 
-    .venv/bin/python bench/stop.py [--rounds N]
+    .venv/bin/python -m bench.stop [--rounds N]
 
 A simulated robot with its supervisor and executor, as processes on a router on
-loopback; each case of tests/stop_rig.py (healthy navigation, an executor blocking its
+loopback; each case of harness/stop_rig.py (healthy navigation, an executor blocking its
 loop, one commanding from a blocked loop, one swallowing its cancel, the executor killed,
 supervisor and executor killed, 50 orders queued) is run `--rounds` times. STOP is sent
 the way the panel and `voicectl stop` send it (VoicectlClient.stop on a warm session).
@@ -28,18 +28,12 @@ from pathlib import Path
 
 import zenoh
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
-
-from shared.bus import Bus, BusOptions  # noqa: E402
-from shared.client import VoicectlClient  # noqa: E402
-from tests.conftest import Processes, free_port  # noqa: E402
-from tests.stop_rig import CASES, Outcome, StopRig  # noqa: E402
-
-
-def percentile(values: list[float], share: float) -> float:
-    ordered = sorted(values)
-    return ordered[min(len(ordered) - 1, round(share * (len(ordered) - 1)))]
+from harness.measure import percentile
+from harness.ports import free_port
+from harness.processes import Processes
+from harness.stop_rig import CASES, Outcome, StopRig
+from shared.bus import Bus, BusOptions
+from shared.client import VoicectlClient
 
 
 def raw_put(router: str, rounds: int) -> list[float]:

@@ -2,13 +2,13 @@
 goal's cancel at the robot, for a robot navigating, with its executor's loop running and
 with it blocked.
 
-    .venv/bin/python bench/stop_transports.py [--rounds N] [--blocked-rounds N]
+    .venv/bin/python -m bench.stop_transports [--rounds N] [--blocked-rounds N]
 
-- bridge and rmw-zenoh: the simulator and its executor (tests/stop_rig.py), timed at a
+- bridge and rmw-zenoh: the simulator and its executor (harness/stop_rig.py), timed at a
   separate Zenoh session as the robot's side of the bus;
 - ros2 on Jazzy and on Kilted (needs root and scripts/ros2-env): a robot of real rclpy in
   a network namespace with only loopback up, the executor on `--transport ros2` and the
-  STOP relay beside it (tests/ros2_rig.py), timed by the robot itself as the messages
+  STOP relay beside it (harness/ros2_rig.py), timed by the robot itself as the messages
   arrive (CLOCK_MONOTONIC, shared by every process).
 
 STOP is sent the way the panel and `voicectl stop` send it (VoicectlClient.stop, on a warm
@@ -31,29 +31,24 @@ from pathlib import Path
 
 import zenoh
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
-
-from harness import ros2_env  # noqa: E402
-from shared.bus import Bus, BusOptions, json_decoder  # noqa: E402
-from shared.client import VoicectlClient  # noqa: E402
-from shared.keys import RobotKeys  # noqa: E402
-from shared.messages import Order, Release, RobotPose, TargetPose  # noqa: E402
-from shared.robot import TransportKind  # noqa: E402
-from tests.conftest import Processes, async_wait_until, free_port  # noqa: E402
-from tests.ros2_rig import ROBOT, DdsRobot, dds_robot  # noqa: E402
-from tests.stop_rig import StopRig, order  # noqa: E402
-from tests.support import Client  # noqa: E402
+from harness import ros2_env
+from harness.client import Client
+from harness.measure import percentile
+from harness.ports import free_port
+from harness.processes import Processes
+from harness.ros2_rig import ROBOT, DdsRobot, dds_robot
+from harness.stop_rig import StopRig, order
+from harness.wait import async_wait_until
+from shared.bus import Bus, BusOptions, json_decoder
+from shared.client import VoicectlClient
+from shared.keys import RobotKeys
+from shared.messages import Order, Release, RobotPose, TargetPose
+from shared.robot import TransportKind
 
 CASES = {"navigating": "healthy", "blocked-loop": "blocked-loop"}
-"""This bench's cases, by the name tests/stop_rig.py gives them."""
+"""This bench's cases, by the name harness/stop_rig.py gives them."""
 Timings = dict[str, list[tuple[float, float]]]
 """Case -> (seconds to zero velocity, seconds to the cancel) per round."""
-
-
-def percentile(values: list[float], share: float) -> float:
-    ordered = sorted(values)
-    return ordered[min(len(ordered) - 1, round(share * (len(ordered) - 1)))]
 
 
 async def on_zenoh(kind: TransportKind, rounds: dict[str, int], tmp: Path) -> Timings:

@@ -1,6 +1,6 @@
 """Speech to text on speech it was not tuned on: wrong orders, rejection, speed, memory.
 
-    .venv/bin/python bench/stt.py [--split test|dev] [--set DIR] [--every N]
+    .venv/bin/python -m bench.stt [--split test|dev] [--set DIR] [--every N]
 
 The set is harness/speech_set.py's: people (pocketsphinx's own test recordings), espeak-ng,
 Festival and Flite voices, clean, in noise, in babble and in a reverberant room; generated
@@ -43,14 +43,13 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import msgspec
+import pocketsphinx
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
-
-import pocketsphinx  # noqa: E402
-
-from harness.speech_set import LEAD_SILENCE, Utterance, generate  # noqa: E402
-from services.converter.decide import (  # noqa: E402
+from harness.measure import cpu_seconds, percentile, raw_latency
+from harness.ports import free_port
+from harness.processes import REPO, rss_mb
+from harness.speech_set import LEAD_SILENCE, Utterance, generate
+from services.converter.decide import (
     SHIPPED,
     Decision,
     Rule,
@@ -59,19 +58,19 @@ from services.converter.decide import (  # noqa: E402
     grammar_reading,
     readings,
 )
-from services.converter.grammar import build_grammar  # noqa: E402
-from services.converter.orders import OrderSet  # noqa: E402
-from services.converter.parser import Parser  # noqa: E402
-from services.stt import sphinx  # noqa: E402
-from services.stt.config import add_engine_arguments, engine_options  # noqa: E402
-from services.stt.audio import NoiseFloor, Suppressor, frames, read_wav  # noqa: E402
-from services.stt.engine import Engine, EngineOptions, Final, finals, load_engine  # noqa: E402
-from services.stt.judge import OFF  # noqa: E402
-from services.stt.service import transcript_of  # noqa: E402
-from services.stt.sphinx import SUPPRESSION, PocketsphinxEngine  # noqa: E402
-from shared.bus import Bus, BusOptions, json_decoder  # noqa: E402
-from shared.keys import RobotKeys  # noqa: E402
-from shared.messages import (  # noqa: E402
+from services.converter.grammar import build_grammar
+from services.converter.orders import OrderSet
+from services.converter.parser import Parser
+from services.stt import sphinx
+from services.stt.audio import NoiseFloor, Suppressor, frames, read_wav
+from services.stt.config import add_engine_arguments, engine_options
+from services.stt.engine import Engine, EngineOptions, Final, finals, load_engine
+from services.stt.judge import OFF
+from services.stt.service import transcript_of
+from services.stt.sphinx import SUPPRESSION, PocketsphinxEngine
+from shared.bus import Bus, BusOptions, json_decoder
+from shared.keys import RobotKeys
+from shared.messages import (
     AudioChunk,
     AudioStart,
     AudioStop,
@@ -109,11 +108,6 @@ class Outcome:
 
 LENGTHS = [("up to 3 s", 0.0, 3.0), ("3 to 6 s", 3.0, 6.0), ("over 6 s", 6.0, math.inf)]
 """Commands by how long their speech lasts: the latency targets are per length."""
-
-
-def percentile(values: list[float], q: float) -> float:
-    ordered = sorted(values)
-    return ordered[min(len(ordered) - 1, math.ceil(q * len(ordered)) - 1)]
 
 
 OUTCOMES = ("right", "doubt", "wrong", "rejected")
@@ -438,21 +432,6 @@ def baseline(jsgf: str, parser: Parser, utterances: list[Utterance], directory: 
 # --- through the service -------------------------------------------------------------------------
 
 
-def free_port() -> int:
-    import socket
-
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        port: int = sock.getsockname()[1]
-        return port
-
-
-def cpu_seconds(pid: int) -> float:
-    """CPU time (user and system) a process has used so far, from /proc (Linux)."""
-    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
-
-
 def print_threads(pid: int) -> None:
     """CPU of each live thread of `pid` (threads that ended are not listed)."""
     for task in sorted(Path(f"/proc/{pid}/task").iterdir()):
@@ -460,13 +439,6 @@ def print_threads(pid: int) -> None:
         fields = (task / "stat").read_text().rsplit(")", 1)[1].split()
         used = (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
         print(f"    thread {name:<16} {used:6.2f} s CPU")
-
-
-def peak_rss_mb(pid: int) -> float:
-    for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-        if line.startswith("VmHWM:"):
-            return int(line.split()[1]) / 1024
-    return float("nan")
 
 
 async def through_service(
@@ -553,7 +525,7 @@ async def through_service(
                 with contextlib.suppress(TimeoutError):
                     await asyncio.wait_for(idle.wait(), 5)
             cpu = cpu_seconds(stt.pid) - cpu_before
-            rss = peak_rss_mb(stt.pid)
+            rss = rss_mb(stt.pid, "VmHWM")
             if args.threads:
                 print_threads(stt.pid)
     finally:
@@ -639,27 +611,6 @@ async def stream(
     sender.send(AudioStop())
     sender.close()
     return spoken_end
-
-
-async def raw_latency(bus: Bus) -> list[float]:
-    """Plain Zenoh put to subscriber through the same router: the transport's share."""
-    loop = asyncio.get_running_loop()
-    got: asyncio.Queue[float] = asyncio.Queue()
-
-    def on_sample(_sample: object) -> None:  # on Zenoh's thread
-        loop.call_soon_threadsafe(got.put_nowait, time.monotonic())
-
-    subscriber = bus.session.declare_subscriber("bench/raw", on_sample)
-    publisher = bus.session.declare_publisher("bench/raw")
-    await asyncio.sleep(0.5)
-    times = []
-    for _ in range(200):
-        sent = time.monotonic()
-        publisher.put(b"x" * 900)
-        times.append(await got.get() - sent)
-    publisher.undeclare()
-    subscriber.undeclare()
-    return times
 
 
 def main() -> None:

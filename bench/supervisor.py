@@ -4,7 +4,7 @@ and a raw Zenoh relay (a query that sends a query on: the two hops of a submit a
 dispatch, with nothing in between), from Zenoh's thread and from an event loop's. The
 latencies are taken in turn, one of each after the same pause.
 
-    .venv/bin/python bench/supervisor.py [--orders 10000] [--durability process|power] [--quick]
+    .venv/bin/python -m bench.supervisor [--orders 10000] [--durability process|power] [--quick]
 
 Everything runs on loopback: a router and the supervisor as their own processes, a raw
 echo and relay queryable as its own process (the baselines), and this process as client
@@ -20,19 +20,16 @@ import subprocess
 import sys
 import tempfile
 import time
-from pathlib import Path
 
 import zenoh
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
-
-from stt import cpu_seconds  # noqa: E402
-
-from shared.bus import Bus, BusOptions, json_decoder  # noqa: E402
-from shared.errors import BusError  # noqa: E402
-from shared.keys import RobotKeys  # noqa: E402
-from shared.messages import (  # noqa: E402
+from harness.measure import cpu_seconds, percentile
+from harness.ports import free_port
+from harness.processes import REPO
+from shared.bus import Bus, BusOptions, json_decoder
+from shared.errors import BusError
+from shared.keys import RobotKeys
+from shared.messages import (
     Accepted,
     ControlRequest,
     Done,
@@ -86,15 +83,6 @@ PAUSE = 0.001
 """Between two timed requests: an order has finished by then."""
 
 
-def free_port() -> int:
-    import socket
-
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        port: int = sock.getsockname()[1]
-        return port
-
-
 class CpuUse:
     """CPU time per request of the processes taking part in a burst."""
 
@@ -107,11 +95,6 @@ class CpuUse:
         used = {name: cpu_seconds(pid) - self._start[name] for name, pid in self._pids.items()}
         used["this client"] = time.process_time() - self._own
         return ", ".join(f"{name} {seconds / count * 1e6:.0f}" for name, seconds in used.items())
-
-
-def percentile(values: list[float], q: float) -> float:
-    ordered = sorted(values)
-    return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
 
 
 def describe(name: str, seconds: list[float]) -> tuple[float, float]:

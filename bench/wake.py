@@ -1,6 +1,6 @@
 """The listener's ear: wake phrase and "stop" hits, false triggers per hour, delays.
 
-    .venv/bin/python bench/wake.py [--split test] [--wake "hey robot"]
+    .venv/bin/python -m bench.wake [--split test] [--wake "hey robot"]
 
 Hits: the phrase said alone and at the start of a command ("hey robot, turn right"), in
 the split's voices (harness/speech_set.py: espeak-ng, Festival, Flite and Kokoro's
@@ -25,16 +25,11 @@ from __future__ import annotations
 
 import argparse
 import statistics
-import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(REPO))
-
-from harness.speech_set import (  # noqa: E402
+from harness.speech_set import (
     ASTERISK_SOUNDS,
     DEV_CHATTER,
     DEV_KOKORO,
@@ -47,8 +42,8 @@ from harness.speech_set import (  # noqa: E402
     real_recordings,
     speak,
 )
-from services.listen.listener import CHECK_BEFORE  # noqa: E402
-from services.listen.spotter import (  # noqa: E402
+from services.listen.listener import CHECK_BEFORE
+from services.listen.spotter import (
     STOP_LOOP_PENALTY,
     STOP_THRESHOLD,
     WAKE_LOOP_PENALTY,
@@ -57,9 +52,9 @@ from services.listen.spotter import (  # noqa: E402
     Spotted,
     Spotter,
 )
-from services.stt.audio import read_wav  # noqa: E402
-from services.stt.engine import Engine, EngineOptions, load_engine  # noqa: E402
-from shared.config import cache_dir  # noqa: E402
+from services.stt.audio import read_wav
+from services.stt.engine import Engine, EngineOptions, load_engine
+from shared.config import cache_dir
 
 PIECE = 640
 COMMANDS = {

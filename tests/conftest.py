@@ -3,17 +3,12 @@ always stopped, and a Bus on the test's own event loop."""
 
 from __future__ import annotations
 
-import asyncio
-import contextlib
 import errno
-import inspect
 import os
 import signal
-import socket
 import subprocess
 import sys
 import threading
-import time
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -23,8 +18,10 @@ import hypothesis
 import pytest
 import zenoh
 
+from harness.ports import free_port, free_ports
 from harness.processes import Processes
 from harness.speech_set import Voice, real_recordings, speak
+from harness.wait import wait_until
 from shared.bus import BusOptions
 from shared.robot import TransportKind
 
@@ -37,22 +34,6 @@ REPO = Path(__file__).resolve().parents[1]
 # ms per example) failed parses that take 2 ms on a quiet one.
 hypothesis.settings.register_profile("voicectl", deadline=None)
 hypothesis.settings.load_profile("voicectl")
-
-
-def free_ports(count: int) -> list[int]:
-    """`count` different free ports: each socket stays bound until all are chosen, or two
-    calls in a row may be given the same port (a stack's router and panel once were)."""
-    with contextlib.ExitStack() as held:
-        ports = []
-        for _ in range(count):
-            sock = held.enter_context(socket.socket())
-            sock.bind(("127.0.0.1", 0))
-            ports.append(sock.getsockname()[1])
-        return ports
-
-
-def free_port() -> int:
-    return free_ports(1)[0]
 
 
 Speak = Callable[..., Path]
@@ -184,30 +165,6 @@ def voicectl(
     return subprocess.run(
         command, capture_output=True, text=True, cwd=REPO, timeout=timeout, env=env, check=False
     )
-
-
-def wait_until(condition: Callable[[], object], timeout: float, what: str) -> None:
-    """Poll `condition` until truthy; fail naming `what` after `timeout` seconds."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        if condition():
-            return
-        time.sleep(0.05)
-    raise AssertionError(f"timed out after {timeout:g} s waiting for {what}")
-
-
-async def async_wait_until(condition: Callable[[], object], timeout: float, what: str) -> None:
-    """Poll `condition` (a function, or a coroutine function, whose result is truthy once
-    it holds) until it holds; AssertionError naming `what` after `timeout` seconds."""
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        held = condition()
-        if inspect.isawaitable(held):
-            held = await held
-        if held:
-            return
-        await asyncio.sleep(0.02)
-    raise AssertionError(f"timed out after {timeout:g} s waiting for {what}")
 
 
 @dataclass

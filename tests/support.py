@@ -1,4 +1,6 @@
-"""The tests' side of the supervisor protocol, shared by the supervisor test files."""
+"""The tests' side of the supervisor protocol beyond harness/client.py (its `Client`), shared
+by the supervisor test files: buses joined to a router, an executor driven from the
+supervisor's seat, a site of processes, a stand-in executor."""
 
 from __future__ import annotations
 
@@ -11,10 +13,9 @@ from collections.abc import AsyncIterator, Callable, Coroutine
 from pathlib import Path
 from typing import Any, TypeVar
 
+from harness.wait import async_wait_until
 from shared.bus import Bus, BusOptions, json_decoder
-from shared.client import VoicectlClient
-from shared.errors import BusError
-from shared.keys import RmwZenohKeys, RobotKeys, RobotNames
+from shared.keys import RobotKeys, RobotNames
 from shared.messages import (
     Accepted,
     CancelOrder,
@@ -22,26 +23,17 @@ from shared.messages import (
     Execute,
     ExecutorEvent,
     ExecutorReply,
-    GetHistory,
-    GetState,
     Halt,
-    HistoryPage,
     Message,
     Order,
     OrderFinished,
-    OrderRecord,
     Running,
-    State,
-    StateReply,
-    Submit,
-    Submitted,
-    SupervisorReply,
     TargetPose,
 )
 from shared.robot import TransportKind, open_transport
-from shared.ros2 import Odometry, Ros2Codec, RosDistro, dds_type_name, type_hash
+from shared.ros2 import Odometry, Ros2Codec
 
-from .conftest import Processes, async_wait_until
+from .conftest import Processes
 
 T = TypeVar("T")
 
@@ -75,25 +67,6 @@ async def until_heard(bus: Bus, key: str, timeout: float = 10.0) -> None:
         stream.close()
 
 
-def robot_key(transport: TransportKind, name: str, ros_type: str, any_hash: bool = False) -> str:
-    """The key a robot's graph on `transport` uses for topic `name` of `ros_type`, as a
-    Jazzy robot announces it (or, `any_hash`, whatever its type hash): for a test's own
-    publisher or subscriber."""
-    match transport:
-        case TransportKind.BRIDGE:
-            return name
-        case TransportKind.RMW_ZENOH:
-            keys, dds = RmwZenohKeys(0), dds_type_name(ros_type)
-            if any_hash:
-                return keys.data_any_hash(name, dds)
-            return keys.data(name, dds, type_hash(RosDistro.JAZZY, ros_type))
-
-
-STARTING = 45.0
-"""Seconds a service started by a test has to come up: a bound, not a wait (a few on an
-idle machine, twenty and more with two suites on two cores)."""
-
-
 def order(label: str, **params: Any) -> Order:
     return Order(order=label, label=label, description=f"do {label}", params=params)
 
@@ -105,72 +78,6 @@ TURN_LEFT = Order(
     target_pose=TargetPose(frame="base_link", yaw=1.57),
 )
 """A quarter turn on the spot, closed on odometry by the `rotate` executor."""
-
-
-class Client:
-    """The test's side of the supervisor protocol: voicectl's own client, plus waits."""
-
-    def __init__(self, bus: Bus, robot: str) -> None:
-        self.bus = bus
-        self.keys = RobotKeys(robot)
-        self._client = VoicectlClient(bus)
-
-    async def ask(self, request: Message) -> SupervisorReply:
-        """The supervisor's reply as it is, a refusal (`Failed`) too."""
-        return await self._client.request(self.keys.robot, request)
-
-    async def ask_submit(self, *orders: Order) -> SupervisorReply:
-        """Submit and return whatever the supervisor answers (a refusal too)."""
-        return await self.ask(Submit(request_id=uuid.uuid4().hex, orders=list(orders)))
-
-    async def submit(self, *orders: Order, request_id: str | None = None) -> list[str]:
-        reply = await self.ask(
-            Submit(request_id=request_id or uuid.uuid4().hex, orders=list(orders))
-        )
-        assert isinstance(reply, Submitted), reply
-        return reply.order_ids
-
-    async def state(self) -> State:
-        reply = await self.ask(GetState())
-        assert isinstance(reply, StateReply), reply
-        return reply.state
-
-    async def history(self, offset: int = 0, limit: int = 500) -> HistoryPage:
-        reply = await self.ask(GetHistory(offset=offset, limit=limit))
-        assert isinstance(reply, HistoryPage), reply
-        return reply
-
-    async def finished(self, order_id: str, timeout: float = 20.0) -> OrderRecord:
-        found: list[OrderRecord] = []
-
-        async def check() -> bool:
-            found[:] = [r for r in (await self.history()).records if r.id == order_id]
-            return bool(found)
-
-        await async_wait_until(check, timeout, f"order {order_id} to finish")
-        return found[0]
-
-    async def wait_state(self, predicate: Callable[[State], bool], what: str) -> State:
-        states: list[State] = []
-
-        async def check() -> bool:
-            states[:] = [state] if predicate(state := await self.state()) else []
-            return bool(states)
-
-        await async_wait_until(check, STARTING, what)
-        return states[0]
-
-
-async def client_wait_ready(client: Client, executor: bool = True) -> None:
-    """Wait for the supervisor to answer, and (by default) to see its executor."""
-
-    async def ready() -> bool:
-        try:
-            return (await client.state()).executor_online or not executor
-        except BusError:
-            return False  # supervisor not up yet
-
-    await async_wait_until(ready, STARTING, "the supervisor (and its executor)")
 
 
 class ExecutorHarness:

@@ -48,7 +48,7 @@ def test_a_benchmark_runs_quickly(bench: str, tmp_path: Path) -> None:
     temporary = tmp_path / "tmp"
     temporary.mkdir()
     done = subprocess.run(
-        [sys.executable, f"bench/{bench}.py", "--quick", *extra],
+        [sys.executable, "-m", f"bench.{bench}", "--quick", *extra],
         capture_output=True,
         text=True,
         cwd=REPO,

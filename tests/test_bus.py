@@ -12,6 +12,7 @@ import msgspec
 import pytest
 import zenoh
 
+from harness.wait import async_wait_until
 from shared.bus import BusOptions, Pending, json_decoder
 from shared.errors import BusError
 from shared.messages import (
@@ -28,7 +29,6 @@ from shared.messages import (
     Transcript,
 )
 
-from .conftest import async_wait_until
 from .support import joined, until_heard
 
 

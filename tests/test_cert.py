@@ -12,7 +12,10 @@ from pathlib import Path
 import httpx
 from cryptography import x509
 
-from .conftest import Processes, free_port, voicectl, wait_until
+from harness.ports import free_port
+from harness.wait import wait_until
+
+from .conftest import Processes, voicectl
 
 
 def test_cert_names_every_host_and_keeps_the_key_private(tmp_path: Path) -> None:

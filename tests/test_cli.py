@@ -10,13 +10,15 @@ import socket
 from pathlib import Path
 from typing import Any
 
+from harness.client import Client, client_wait_ready
+from harness.wait import async_wait_until, wait_until
 from shared.bus import json_decoder
 from shared.keys import RobotKeys, RobotNames
 from shared.messages import Failed, GetState, StateReply, SupervisorReply
 from shared.ros2 import Pose2D, Ros2Codec, RosDistro, new_goal_id
 
-from .conftest import Processes, async_wait_until, voicectl, wait_until
-from .support import Client, client_wait_ready, joined
+from .conftest import Processes, voicectl
+from .support import joined
 
 
 def test_parse_prints_one_json_object() -> None:

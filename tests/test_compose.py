@@ -28,11 +28,13 @@ import pytest
 import yaml
 import zenoh
 
+from harness.ports import free_port
+from harness.wait import wait_until
 from shared.bus import BusOptions
 from voicectl.bus_secrets import CONTAINER_DIR, DEFAULT_ROBOT, BusRobot, client_files
 from voicectl.cli import SERVICES, build_parser
 
-from .conftest import REPO, free_port, voicectl, wait_until
+from .conftest import REPO, voicectl
 from .containers import base_image, images_unavailable, skip_unless
 
 VARIABLE = re.compile(r"\$\{(\w+)(?:(:?[-?])([^}]*))?\}")

@@ -24,11 +24,13 @@ from pathlib import Path
 
 import pytest
 
+from harness.client import Client, client_wait_ready
+from harness.ports import free_ports
 from shared.messages import OrderStatus
 
-from .conftest import REPO, free_ports
+from .conftest import REPO
 from .containers import base_image, skip_unless, stack_unavailable
-from .support import Client, client_wait_ready, on_bus
+from .support import on_bus
 
 pytestmark = [skip_unless(stack_unavailable()), pytest.mark.timeout(900)]
 """A first build of the images takes minutes on a slow machine."""

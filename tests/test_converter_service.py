@@ -13,6 +13,7 @@ from pathlib import Path
 
 import pytest
 
+from harness.wait import async_wait_until, wait_until
 from shared.bus import Bus, json_decoder
 from shared.errors import BusError
 from shared.keys import ConverterKeys, RobotKeys
@@ -28,7 +29,7 @@ from shared.messages import (
     Transcript,
 )
 
-from .conftest import Processes, async_wait_until, wait_until
+from .conftest import Processes
 from .support import joined, until_heard
 
 ORDERS = Path(__file__).resolve().parents[1] / "orders"

@@ -18,11 +18,12 @@ from pathlib import Path
 
 import pytest
 
+from harness.client import Client, client_wait_ready
 from harness.cross_host import RobotWatch, observer, start_stack
 from harness.netns import LEASE_MS, TwoHosts, impairment_unavailable, unavailable
 from shared.messages import EmergencyStop, Order, OrderStatus, Stopped, TargetPose
 
-from .support import Client, client_wait_ready, joined, order
+from .support import joined, order
 
 WHY_NOT = unavailable()
 pytestmark = pytest.mark.skipif(WHY_NOT is not None, reason=f"two hosts: {WHY_NOT}")

@@ -15,13 +15,15 @@ from pathlib import Path
 import pytest
 import zenoh
 
+from harness.ports import free_port
+from harness.wait import wait_until
 from services.executor.builtin.pic import TakePhoto
 from services.executor.framework import load_bindings_file
 from shared.keys import ConverterKeys, RobotKeys
 from shared.process import bus_options
 from voicectl.cli import build_parser
 
-from .conftest import REPO, free_port, wait_until
+from .conftest import REPO
 
 DOCS = REPO / "docs"
 

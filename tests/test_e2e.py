@@ -17,7 +17,9 @@ import pytest
 import zenoh
 from PIL import Image as PilImage
 
+from harness.client import robot_key
 from harness.speech_set import in_pink_noise
+from harness.wait import async_wait_until, wait_until
 from services.stt.audio import frames, read_wav
 from shared.bus import Bus, BusOptions, json_decoder
 from shared.client import VoicectlClient
@@ -36,8 +38,8 @@ from shared.messages import (
 from shared.robot import TransportKind
 from shared.ros2 import Pose2D, Ros2Codec, RosDistro
 
-from .conftest import Stack, async_wait_until, wait_until
-from .support import on_bus, robot_key
+from .conftest import Stack
+from .support import on_bus
 
 pytestmark = pytest.mark.e2e
 

@@ -12,6 +12,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 from PIL import Image as PilImage
 
+from harness.wait import async_wait_until
 from services.executor.robot import CONTROL_STEP, SAFE_LIMITS, RobotLink, limited
 from services.sim.robot import Bounds
 from services.sim.world import floor_plan
@@ -35,7 +36,7 @@ from shared.robot import TransportKind, open_transport
 from shared.robot_options import RobotOptions
 from shared.ros2 import Pose2D, Ros2Codec, RosDistro
 
-from .conftest import Processes, async_wait_until
+from .conftest import Processes
 from .support import TURN_LEFT, harness_on, joined, order, start_robot, until_heard
 
 

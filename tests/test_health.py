@@ -9,11 +9,12 @@ from collections.abc import Iterator
 import pytest
 import zenoh
 
+from harness.ports import free_port
 from shared.bus import BusOptions
 from shared.keys import ConverterKeys, RobotKeys, RobotNames
 from voicectl.health import SERVICES, token_key
 
-from .conftest import free_port, voicectl
+from .conftest import voicectl
 
 
 def test_each_service_is_checked_by_its_own_token() -> None:

@@ -21,6 +21,7 @@ import pytest
 import soundfile
 
 from harness.pulse import PulseAudio, unavailable
+from harness.wait import wait_until
 from services.listen.audio_io import (
     AudioError,
     AudioSource,
@@ -30,8 +31,6 @@ from services.listen.audio_io import (
     rescan_devices,
 )
 from shared.messages import FRAME_BYTES, SAMPLE_RATE
-
-from .conftest import wait_until
 
 FRAME = FRAME_BYTES // 2
 """Samples in a 20 ms frame at 16 kHz."""

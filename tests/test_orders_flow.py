@@ -13,6 +13,7 @@ from typing import Any
 
 import pytest
 
+from harness.client import Client, client_wait_ready
 from shared.messages import (
     Cancel,
     Done,
@@ -23,7 +24,7 @@ from shared.messages import (
 )
 
 from .conftest import Processes
-from .support import Client, client_wait_ready, joined, order
+from .support import joined, order
 
 USER_EXECUTORS = [
     "--executor",

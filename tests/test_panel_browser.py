@@ -15,13 +15,14 @@ from typing import Any
 
 import pytest
 
+from harness.wait import async_wait_until
 from services.converter.orders import OrderSet
 from services.converter.parser import Parser
 from shared.bus import Bus
 from shared.keys import RobotKeys, last_chunk
 from shared.messages import Doubt, Proposal
 
-from .conftest import REPO, Speak, Stack, async_wait_until
+from .conftest import REPO, Speak, Stack
 from .support import on_bus
 
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"

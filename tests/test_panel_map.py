@@ -14,7 +14,9 @@ import pytest
 if TYPE_CHECKING:
     from playwright.sync_api import Page
 
-from .conftest import REPO, Stack, wait_until
+from harness.wait import wait_until
+
+from .conftest import REPO, Stack
 from .test_panel_browser import ARTIFACTS, CHROMIUM, CHROMIUM_FLAGS, login, panel, pytestmark
 
 __all__ = ["pytestmark"]  # the browser's marks and skip, as in test_panel_browser

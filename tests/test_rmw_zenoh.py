@@ -25,6 +25,7 @@ import pytest
 import zenoh
 from zenoh.ext import Int64, z_serialize
 
+from harness.wait import async_wait_until
 from shared.errors import BusError
 from shared.keys import RMW_QOS_DEFAULT, RmwKind, RmwToken, RmwZenohKeys
 from shared.messages import ExecutorInfo
@@ -49,7 +50,6 @@ from shared.ros2 import (
     type_hash,
 )
 
-from .conftest import async_wait_until
 from .support import joined
 
 ZID = "1f2e3d4c5b6a79880123456789abcdef"

@@ -19,10 +19,11 @@ from typing import Any
 import numpy as np
 import pytest
 
+from harness.wait import async_wait_until
 from shared.robot import TransportKind, open_transport
 from shared.ros2 import CANCEL_GOAL, Ros2Codec
 
-from .conftest import Processes, async_wait_until
+from .conftest import Processes
 from .ros2_support import env_of
 from .support import joined
 

@@ -10,12 +10,13 @@ import time
 
 import pytest
 
+from harness.wait import async_wait_until
 from shared.messages import ExecutorInfo
 from shared.robot import TransportKind, detect_transport, transports
 from shared.robot.stop import RobotStop
 from shared.ros2 import CmdVelType, Ros2Codec
 
-from .conftest import REPO, async_wait_until, voicectl
+from .conftest import REPO, voicectl
 from .support import joined, until_heard
 
 NO_RCLPY = pytest.mark.skipif(

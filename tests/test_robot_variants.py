@@ -20,6 +20,8 @@ from pathlib import Path
 import pytest
 from PIL import Image as PilImage
 
+from harness.client import robot_key
+from harness.wait import async_wait_until
 from shared.bus import json_decoder
 from shared.keys import RobotKeys, RobotNames
 from shared.kinds import ON_ZENOH
@@ -37,14 +39,13 @@ from shared.messages import (
 from shared.robot import TransportKind, open_transport
 from shared.ros2 import Ros2Codec, RosDistro
 
-from .conftest import Processes, async_wait_until, voicectl
+from .conftest import Processes, voicectl
 from .support import (
     TURN_LEFT,
     ExecutorHarness,
     harness_on,
     joined,
     order,
-    robot_key,
     start_robot,
     until_heard,
 )

@@ -23,7 +23,11 @@ from pathlib import Path
 import pytest
 
 from harness import netns
+from harness.client import Client
 from harness.netns import LoopbackOnly
+from harness.ros2_rig import ROBOT, WAIT, DdsRobot, dds_robot
+from harness.stop_rig import order
+from harness.wait import async_wait_until
 from shared.bus import json_decoder
 from shared.client import VoicectlClient
 from shared.keys import RobotKeys
@@ -40,11 +44,9 @@ from shared.messages import (
 )
 from shared.ros2 import Ros2Codec
 
-from .conftest import REPO, Processes, async_wait_until, voicectl
-from .ros2_rig import ROBOT, WAIT, DdsRobot, dds_robot
+from .conftest import REPO, Processes, voicectl
 from .ros2_support import DISTROS, env_of
-from .stop_rig import order
-from .support import Client, joined, until_heard
+from .support import joined, until_heard
 
 pytestmark = pytest.mark.ros2
 

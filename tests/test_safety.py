@@ -14,6 +14,8 @@ from pathlib import Path
 
 import pytest
 
+from harness.client import Client, client_wait_ready
+from harness.wait import async_wait_until
 from shared.bus import Bus, json_decoder
 from shared.keys import RobotKeys, RobotNames
 from shared.messages import (
@@ -36,8 +38,8 @@ from shared.messages import (
 )
 from shared.ros2 import Odometry, Pose2D, Ros2Codec, RosDistro, new_goal_id
 
-from .conftest import Processes, async_wait_until
-from .support import Client, client_wait_ready, joined, order
+from .conftest import Processes
+from .support import joined, order
 
 WAIT = 30.0
 CODEC = Ros2Codec(RosDistro.JAZZY)

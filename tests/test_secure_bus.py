@@ -18,6 +18,9 @@ from pathlib import Path
 import pytest
 import zenoh
 
+from harness.client import Client, client_wait_ready
+from harness.ports import free_port
+from harness.wait import async_wait_until, wait_until
 from shared.bus import Bus, BusOptions, json_decoder
 from shared.errors import BusError
 from shared.keys import BRIDGE_TOKENS, BridgeKind, BridgeToken, RobotKeys, RobotNames
@@ -43,8 +46,8 @@ from voicectl.bus_secrets import (
     write_bus_secrets,
 )
 
-from .conftest import REPO, Processes, async_wait_until, free_port, voicectl, wait_until
-from .support import Client, client_wait_ready, joined, order, until_heard
+from .conftest import REPO, Processes, voicectl
+from .support import joined, order, until_heard
 
 CODEC = Ros2Codec()
 

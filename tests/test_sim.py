@@ -13,6 +13,7 @@ from typing import Any
 import pytest
 import zenoh
 
+from harness.wait import wait_until
 from shared.bus import BusOptions
 from shared.keys import RobotNames
 from shared.ros2 import (
@@ -30,7 +31,7 @@ from shared.ros2 import (
     new_goal_id,
 )
 
-from .conftest import Processes, wait_until
+from .conftest import Processes
 
 ACTION = "navigate_to_pose"
 TIME_SCALE = 10

@@ -1,4 +1,4 @@
-"""STOP first, whatever the executor is doing: each fault of tests/stop_rig.py, once, with
+"""STOP first, whatever the executor is doing: each fault of harness/stop_rig.py, once, with
 real processes on loopback and the simulator. The bounds leave room for a busy machine;
 bench/stop.py measures the same cases many times for the percentiles."""
 
@@ -10,6 +10,8 @@ from pathlib import Path
 
 import pytest
 
+from harness.stop_rig import CASES, ROBOT, StopRig, ended, order
+from harness.wait import async_wait_until
 from shared.client import Unreachable, VoicectlClient
 from shared.errors import BusError
 from shared.messages import (
@@ -26,8 +28,7 @@ from shared.robot import TransportKind
 from shared.robot.stop import RobotStop, prepare, stop_codec
 from shared.ros2 import CmdVelType, RosDistro
 
-from .conftest import Processes, async_wait_until
-from .stop_rig import CASES, ROBOT, StopRig, ended, order
+from .conftest import Processes
 from .support import joined
 
 BOUND = 0.25

@@ -11,11 +11,12 @@ from pathlib import Path
 
 import msgspec
 
+from harness.wait import async_wait_until
 from services.supervisor.latch import LatchFile
 from services.supervisor.store import RETRY_EVERY, OrderStore, StoreFull
 from shared.messages import OrderRecord, OrderStatus
 
-from .conftest import SmallDisk, async_wait_until
+from .conftest import SmallDisk
 from .support import order
 
 Told = tuple[BaseException | None, int, str]

@@ -16,7 +16,9 @@ from pathlib import Path
 
 import pytest
 
+from harness.client import Client
 from harness.speech_set import in_babble
+from harness.wait import async_wait_until
 from services.stt.audio import frames, read_wav
 from shared.bus import Bus, json_decoder
 from shared.keys import ConverterKeys, RobotKeys, RobotNames
@@ -33,8 +35,8 @@ from shared.messages import (
 )
 from shared.ros2 import Pose2D, Ros2Codec, RosDistro
 
-from .conftest import REPO, Processes, Speak, Stack, async_wait_until
-from .support import Client, joined
+from .conftest import REPO, Processes, Speak, Stack
+from .support import joined
 
 ORDERS = REPO / "orders"
 KEYS = RobotKeys("robot")

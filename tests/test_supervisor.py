@@ -10,6 +10,8 @@ import time
 from collections.abc import Iterator
 from pathlib import Path
 
+from harness.client import Client, client_wait_ready
+from harness.wait import async_wait_until
 from services.executor.runner import SUPERVISOR_LOST
 from services.supervisor.service import SETTLE
 from shared.errors import BusError
@@ -32,8 +34,7 @@ from shared.messages import (
 )
 from shared.ros2 import Odometry, Ros2Codec, RosDistro
 
-from .conftest import async_wait_until
-from .support import Client, Site, StandIn, client_wait_ready, order
+from .support import Site, StandIn, order
 
 
 async def test_sigkill_with_orders_in_flight_loses_nothing_and_resumes(site: Site) -> None:

@@ -10,7 +10,9 @@ import sqlite3
 import subprocess
 from pathlib import Path
 
+from harness.client import STARTING, Client, client_wait_ready
 from harness.processes import rss_mb
+from harness.wait import async_wait_until
 from services.supervisor.service import CLAIM_WINDOW, MAX_ROBOTS
 from shared.client import STOP_ANSWER, VoicectlClient
 from shared.errors import BusError
@@ -30,8 +32,8 @@ from shared.messages import (
     SupervisorReply,
 )
 
-from .conftest import SmallDisk, async_wait_until
-from .support import STARTING, Client, Site, StandIn, client_wait_ready, order
+from .conftest import SmallDisk
+from .support import Site, StandIn, order
 
 
 def stored_status(db: Path, order_id: str) -> str | None:

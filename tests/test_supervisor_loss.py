@@ -14,16 +14,16 @@ from pathlib import Path
 
 import pytest
 
+from harness.client import Client, client_wait_ready
+from harness.wait import async_wait_until
 from services.executor.robot import UNSUPERVISED
 from services.executor.runner import SUPERVISOR_LOST
 from shared.keys import RobotKeys, RobotNames
 from shared.messages import Done, Order, OrderStatus, Resume, TargetPose
 from shared.ros2 import Odometry, Pose2D, Ros2Codec
 
-from .conftest import Processes, async_wait_until
+from .conftest import Processes
 from .support import (
-    Client,
-    client_wait_ready,
     harness_on,
     joined,
     order,

@@ -16,11 +16,13 @@ from pathlib import Path
 
 import pytest
 
+from harness.ports import free_port, free_ports
+from harness.wait import wait_until
 from shared.bus import Bus
 from shared.keys import RobotKeys
 from voicectl.stack import Child, port_in_use, wait_for_port
 
-from .conftest import REPO, Stack, free_port, free_ports, voicectl, wait_until
+from .conftest import REPO, Stack, voicectl
 from .support import on_bus
 
 pytestmark = pytest.mark.e2e

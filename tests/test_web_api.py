@@ -19,13 +19,15 @@ from hypothesis import strategies as st
 from starlette.testclient import TestClient
 from starlette.websockets import WebSocketDisconnect
 
+from harness.ports import free_port
 from harness.processes import Process
+from harness.wait import wait_until
 from services.web.app import MAX_BODY, Access, Panel, create_app
 from shared.bus import BusOptions
 from shared.keys import RobotKeys
 from shared.messages import AudioChunk, AudioMessage, AudioStart, AudioStop
 
-from .conftest import Processes, free_port, wait_until
+from .conftest import Processes
 from .support import on_bus, until_heard
 
 TOKEN = "test-token-0123456789"

@@ -22,13 +22,13 @@ from typing import Any
 import zenoh
 
 from harness import netns
+from harness.client import Client, client_wait_ready
 from harness.netns import LoopbackOnly
+from harness.ports import free_port
 from harness.processes import REPO, Processes
 from harness.ros2_env import Ros2Env
+from harness.wait import async_wait_until
 from shared.bus import BusOptions
-
-from .conftest import async_wait_until, free_port
-from .support import Client, client_wait_ready
 
 ROBOT = "r1"
 WAIT = 60.0

@@ -16,7 +16,7 @@ and `voicectl stop` use), and measures, from the moment STOP is asked:
   STOP, and whether any odometry after `SETTLE` shows velocity.
 
 Used by tests/test_stop.py (one round per case, bounds for a busy machine) and by
-bench/stop.py (many rounds, percentiles).
+bench/stop.py and bench/stop_transports.py (many rounds, percentiles).
 """
 
 from __future__ import annotations
@@ -30,6 +30,9 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from harness.client import robot_key
+from harness.processes import Processes
+from harness.wait import async_wait_until
 from shared.bus import Bus
 from shared.client import VoicectlClient
 from shared.errors import BusError
@@ -38,6 +41,7 @@ from shared.messages import (
     GetState,
     Order,
     OrderRecord,
+    ParamValue,
     Release,
     StateReply,
     Stopped,
@@ -46,9 +50,6 @@ from shared.messages import (
 )
 from shared.robot import TransportKind
 from shared.ros2 import CmdVelType, Odometry, Ros2Codec, ros_type_of
-
-from .conftest import Processes, async_wait_until
-from .support import robot_key
 
 ROBOT = "r1"
 CODEC = Ros2Codec()
@@ -115,7 +116,7 @@ async def ended(
     return found[0]
 
 
-def order(label: str, **params: object) -> Order:
+def order(label: str, **params: ParamValue) -> Order:
     return Order(order=label, label=label, description=f"do {label}", params=params)
 
 
