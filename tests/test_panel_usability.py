@@ -7,17 +7,27 @@ under usability/."""
 
 from __future__ import annotations
 
+import concurrent.futures
 import os
+import re
 import signal
+import wave
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import pytest
 
+from services.converter.orders import OrderSet
+from services.converter.parser import Parser
+from shared.bus import Bus
+from shared.keys import RobotKeys, last_chunk
+from shared.messages import Doubt, Proposal
+
 if TYPE_CHECKING:
     from playwright.sync_api import Page
 
-from .conftest import Stack
+from .conftest import REPO, Speak, Stack, async_wait_until
+from .support import on_bus
 from .test_panel_browser import ARTIFACTS, login, panel, pytestmark
 
 __all__ = ["pytestmark"]  # the browser's marks and skip, as in test_panel_browser
@@ -185,3 +195,159 @@ def test_the_first_screen_holds_speak_the_current_order_and_stop(
         shot(page, "3-first-screen-latched", screen)
         # nothing scrolls sideways
         assert page.evaluate("document.documentElement.scrollWidth") <= SCREENS[screen][0]
+
+
+def test_a_suggestion_repairs_the_sentence_and_keeps_the_rest(
+    stack: Stack, tmp_path: Path, screen: str
+) -> None:
+    """Item 4: a sentence with a suggested repair stays in the input, nothing of it staged;
+    a suggestion puts its words in place and keeps the other suggestions; what does not
+    parse at all stays in the input, to fix rather than retype."""
+    from playwright.sync_api import expect
+
+    with panel(stack, tmp_path / "profile") as page:
+        open_panel(page, stack, screen)
+        staged = page.locator("#staged li .what")
+        errors = page.locator("#errors li")
+        type_command(page, "turn lift then reach kitchin")
+        expect(errors).to_have_count(2)
+        expect(page.locator("#text")).to_have_value("turn lift then reach kitchin")
+        expect(staged).to_have_count(0)
+        shot(page, "4-two-suggestions", screen)
+        page.click("#errors button.suggestion:has-text('turn left')")
+        expect(page.locator("#text")).to_have_value("turn left then reach kitchin")
+        expect(errors).to_have_count(1)  # the other suggestion is still offered
+        expect(errors.locator("button.suggestion")).to_have_text(["reach kitchen"])
+        expect(staged).to_have_count(0)
+        page.click("#errors button.suggestion:has-text('reach kitchen')")
+        expect(staged).to_have_text(["turn left", "reach kitchen"])
+        expect(page.locator("#text")).to_have_value("")
+        expect(errors).to_have_count(0)
+        # the sentence once, not on every row
+        expect(page.locator("#staged li .said")).to_have_text(["turn left then reach kitchen"])
+
+        page.click("#clear")
+        type_command(page, "turn lift then reach kitchen then dance")
+        page.click("#errors button.suggestion:has-text('turn left')")
+        expect(staged).to_have_text(["turn left", "reach kitchen"])
+        expect(page.locator("#text")).to_have_value("dance")  # what did not parse
+        expect(errors).to_have_text(["dance no order matches"])
+        shot(page, "4-repaired", screen)
+
+
+def publish_proposal(stack: Stack, said: str, doubt: Doubt) -> None:
+    """A proposal for the panel's open microphone, with `doubt` (a stand-in for a
+    recogniser that doubted, as in test_panel_browser)."""
+    keys = RobotKeys("robot")
+
+    async def propose(bus: Bus) -> None:
+        sessions: list[str] = []
+        bus.subscribe(keys.stt_audio_any, bytes, lambda key, _raw: sessions.append(last_chunk(key)))
+        await async_wait_until(lambda: sessions, 20.0, "the panel's audio session")
+        parsed = Parser(OrderSet.load(REPO / "orders")).parse(said)
+        proposal = Proposal(
+            transcript=said, orders=parsed.orders, session=sessions[-1], doubts=[doubt]
+        )
+        bus.publish(keys.proposal, proposal)
+
+    # Playwright's sync API keeps an event loop in this thread: the bus gets its own.
+    with concurrent.futures.ThreadPoolExecutor(1) as thread:
+        thread.submit(on_bus, stack.router, propose).result(timeout=60)
+
+
+def test_a_doubt_with_one_choice_is_a_yes_or_no(stack: Stack, tmp_path: Path, screen: str) -> None:
+    """Item 4: "Did you say … one? [yes, add it] [say again]", not a list of one."""
+    from playwright.sync_api import expect
+
+    silence = tmp_path / "silence.wav"
+    with wave.open(str(silence), "wb") as out:
+        out.setnchannels(1)
+        out.setsampwidth(2)
+        out.setframerate(16000)
+        out.writeframes(bytes(2 * 16000 * 20))
+    with panel(stack, tmp_path / "doubt", microphone=silence) as page:
+        open_panel(page, stack, screen)
+        page.click("#mic")
+        expect(page.locator("#mic")).to_have_attribute("aria-pressed", "true")
+        publish_proposal(
+            stack,
+            "go forward one meter",
+            Doubt(position=2, words="one", alternatives=[], confidence=0.0),
+        )
+        box_ = page.locator("#doubt")
+        expect(box_).to_be_visible()
+        expect(box_.locator("mark")).to_have_text("one")
+        expect(box_.locator("button")).to_have_text(["yes, add it", "say again"])
+        shot(page, "4-doubt-one-choice", screen)
+        box_.locator("button", has_text="yes").click()
+        expect(box_).to_be_hidden()
+        expect(page.locator("#staged li .what")).to_have_text(["move forward 1 m"])
+
+
+SENTENCE = "go forward two meters then turn left then reach the kitchen then wait two seconds"
+
+
+def stop_mid_sentence(page: Page, then: str = "", after: str = "") -> str:
+    """Listen, and stop listening once the recogniser has shown part of the sentence (with
+    `after` in it, if given) (and
+    click `then` in the same turn of the page's event loop, before any answer can come);
+    what the page says right after the stop."""
+    from playwright.sync_api import expect
+
+    heard = page.locator("#heard")
+    page.click("#mic")
+    expect(page.locator("#stt-summary")).to_have_text("Listening")
+    expect(heard).not_to_have_text("listening…")
+    expect(heard).to_have_class("heard partial")
+    if after:
+        expect(heard).to_contain_text(after)
+    said: str = page.evaluate(
+        """then => {
+            document.querySelector("#mic").click();
+            const said = document.querySelector("#heard").textContent;
+            if (then) document.querySelector(then).click();
+            return said;
+        }""",
+        then,
+    )
+    assert said.startswith("finishing “"), said
+    return said
+
+
+def test_stop_listening_mid_sentence_finishes_it_or_drops_it(
+    stack: Stack, speech: Speak, tmp_path: Path, screen: str
+) -> None:
+    """Item 5: Stop listening mid-sentence says it is finishing the sentence; the finished
+    sentence (what was said before the stop) is decided on and shown, unless Send (or
+    discard) came first: then it is dropped, said so, and never fills "To send" behind the
+    person's back."""
+    from playwright.sync_api import expect
+
+    command = speech(SENTENCE, voice="flite:slt")
+    heard = "#heard"
+    with panel(stack, tmp_path / "drop", microphone=command) as page:
+        open_panel(page, stack, screen)
+        type_command(page, "wait two seconds")
+        expect(page.locator("#staged li")).to_have_count(1)
+        # stopped once the part said is a command of its own: its late answer would stage
+        stop_mid_sentence(page, then="#send", after="kitchen")
+        expect(page.locator(heard)).to_contain_text("dropped: “")
+        expect(page.locator("#discard")).to_be_hidden()
+        # the recogniser's answer comes, and is shown for what it was, not staged
+        expect(page.locator(heard)).to_contain_text("not added", timeout=60_000)
+        expect(page.locator("#staged li")).to_have_count(0)
+        shot(page, "5-dropped", screen)
+
+    with panel(stack, tmp_path / "finish", microphone=command) as page:
+        open_panel(page, stack, screen)
+        stop_mid_sentence(page)
+        shot(page, "5-finishing", screen)
+        # The recogniser decides on what it got before the stop: the part said is too short
+        # to be a command, and the page says so in place of "finishing".
+        expect(page.locator("#heard")).to_have_class(
+            re.compile(r"heard (final|rejected)"), timeout=60_000
+        )
+        expect(page.locator("#heard")).not_to_contain_text("finishing")
+        expect(page.locator("#discard")).to_be_hidden()
+        expect(page.locator("#speak")).not_to_contain_text("microphone(s) open")
+        shot(page, "5-finished", screen)

@@ -32,6 +32,7 @@ const view = {
   startedAt: {}, // order id -> the pose where it started (a relative goal is from there)
   drawing: false,
   finished: null, // ids of the history shown, to tell which orders have just ended
+  dropped: null, // the closed microphone whose unfinished sentence the person dropped
 };
 const voice = { context: null, asked: null, playing: null }; // the spoken answers, see say
 const answers = window.voicectlAnswers;
@@ -344,13 +345,19 @@ function handle(message) {
     case "robotmap": showMap(message); break;
     case "sttstatus": showStt(message); break;
     case "partialtranscript":
-      if (mine) { showHeard(message.text, "partial"); showEars(null); }
+      if (mine && view.mic.socket) { showHeard(message.text, "partial"); showEars(null); }
       break;
     case "transcript":
       // What was heard; whether it is a command is the converter's proposal, next.
       if (mine) showHeard((message.transcription || {}).text || message.text, "final");
       break;
-    case "proposal": if (mine) propose(message); break;
+    case "proposal":
+      if (mine) propose(message);
+      else if (view.dropped && message.session === view.dropped.session) {
+        showHeard(`dropped: “${view.dropped.unfinished}” (it ended “${message.transcript}”; not added)`, "partial");
+        view.dropped = null;
+      }
+      break;
     default: break;
   }
 }
@@ -451,7 +458,10 @@ function discardUnfinished() {
   const mic = view.mic;
   if (!mic || mic.socket) return;
   view.mic = null;
-  if (mic.unfinished && !$("discard").hidden) showHeard(`dropped: “${mic.unfinished}”`, "partial");
+  if (mic.unfinished && !$("discard").hidden) {
+    showHeard(`dropped: “${mic.unfinished}”`, "partial");
+    view.dropped = mic; // its answer, when it comes, is shown for what it was and not staged
+  }
   $("discard").hidden = true;
 }
 
