@@ -351,3 +351,76 @@ def test_stop_listening_mid_sentence_finishes_it_or_drops_it(
         expect(page.locator("#discard")).to_be_hidden()
         expect(page.locator("#speak")).not_to_contain_text("microphone(s) open")
         shot(page, "5-finished", screen)
+
+
+OVERLAPS = """() => {
+  // Every pair of the map's labels, and each label with the robot, that overlap on screen
+  // by more than a pixel each way.
+  const rect = (node) => node.getBoundingClientRect();
+  const labels = [...document.querySelectorAll("#map .place text, #map .step text")];
+  const robot = document.querySelector("#map .robot");
+  const hit = (a, b) => Math.min(a.right, b.right) - Math.max(a.left, b.left) > 1
+    && Math.min(a.bottom, b.bottom) - Math.max(a.top, b.top) > 1;
+  const found = [];
+  labels.forEach((label, index) => {
+    for (const other of labels.slice(index + 1)) {
+      if (hit(rect(label), rect(other))) found.push([label.textContent, other.textContent]);
+    }
+    if (robot && hit(rect(label), rect(robot))) found.push([label.textContent, "robot"]);
+  });
+  return found;
+}"""
+
+
+def test_the_map_warns_of_goals_off_the_map_places_labels_apart_and_breaks_the_trail(
+    stack: Stack, tmp_path: Path, screen: str
+) -> None:
+    """Item 6: a goal outside the robot's map (or on an obstacle, or unseen) is warned of
+    beside Send and on the map before it is sent; labels and step numbers do not cover
+    each other or the robot; the legend's entries never wrap; after the panel's server
+    restarts, the trail breaks instead of joining the old pose with a straight line."""
+    from playwright.sync_api import expect
+
+    with panel(stack, tmp_path / "profile") as page:
+        open_panel(page, stack, screen)
+        expect(page.locator("#map image.grid")).to_have_count(1)
+        warning = page.locator("#goal-warning")
+        type_command(page, "go forward ten meters then go forward ten meters")
+        expect(warning).to_be_visible()
+        expect(warning).to_contain_text("move forward 10 m")
+        expect(warning).to_contain_text("the robot's map")
+        below = box(page, "#goal-warning")["y"] - box(page, "#send")["y"]
+        assert 0 < below < 200, below
+        expect(page.locator("#map .step.warn .goal-warn").first).to_be_attached()
+        page.locator("#map").scroll_into_view_if_needed()
+        shot(page, "6-goal-off-the-map", screen)
+        page.click("#clear")
+        expect(warning).to_be_hidden()
+        type_command(page, "turn left then reach kitchen then reach dumpster then reach bathroom")
+        expect(page.locator("#map .step.staged")).to_have_count(4)
+        expect(warning).to_be_hidden()  # every goal lies on free, known cells
+        assert page.evaluate(OVERLAPS) == []
+        legend = page.locator("#where .legend li")
+        expect(legend).to_have_count(5)
+        heights = [legend.nth(i).bounding_box() for i in range(5)]
+        line = max(h["height"] for h in heights if h)
+        assert all(h and h["height"] == line for h in heights), heights
+        assert line < 30, line  # one line each
+        page.locator("#map").scroll_into_view_if_needed()
+        shot(page, "6-labels", screen)
+
+        page.click("#clear")
+        type_command(page, "go forward one meter")
+        page.click("#send")
+        expect(page.locator("#pose")).to_contain_text("x 1.0 m", timeout=60_000)
+        trail = page.locator("#map polyline.trail")
+        expect(trail).to_have_count(1)
+        kill_the_web_service(stack)
+        expect(page.locator("#connection")).to_have_text("reconnecting")
+        expect(page.locator("#connection")).to_have_text("connected", timeout=60_000)
+        type_command(page, "go forward one meter")
+        page.click("#send")
+        expect(page.locator("#pose")).to_contain_text("x 2.0 m", timeout=60_000)
+        expect(trail).to_have_count(2)  # two pieces, not one line across the restart
+        page.locator("#map").scroll_into_view_if_needed()
+        shot(page, "6-trail-after-restart", screen)

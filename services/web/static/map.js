@@ -127,8 +127,9 @@ function overlap(a, b) {
 }
 
 function placeLabel(taken, x, y, text, size, gap) {
-  const w = text.length * size * 0.62;
-  const h = size;
+  const view = taken.view; // a spot that leaves the view is worse than one that overlaps
+  const w = text.length * size * 0.66; // a generous guess: SVG text is measured once drawn
+  const h = size * 1.25;
   const spots = [ // the box's top-left corner, and the text's anchor point, for each spot
     [x - w / 2, y - gap - h], [x + gap, y - h / 2], [x - w / 2, y + gap], [x - gap - w, y - h / 2],
     [x + gap * 0.7, y - gap * 0.7 - h], [x + gap * 0.7, y + gap * 0.7],
@@ -137,12 +138,13 @@ function placeLabel(taken, x, y, text, size, gap) {
   let best = null;
   for (const [left, top] of spots) {
     const box = { x: left, y: top, w, h };
-    const cost = taken.reduce((sum, other) => sum + overlap(box, other), 0);
+    const inside = view ? overlap(box, view) : box.w * box.h;
+    const cost = taken.reduce((sum, other) => sum + overlap(box, other), 0) + 10 * (box.w * box.h - inside);
     if (!best || cost < best.cost) best = { box, cost };
     if (cost === 0) break;
   }
   taken.push(best.box);
-  return { x: best.box.x, y: best.box.y + h * 0.85 }; // text baseline, anchored at its start
+  return { x: best.box.x, y: best.box.y + size * 0.95 }; // text baseline, anchored at its start
 }
 
 // The view box, in world metres: everything that is drawn (the robot's map where it is
@@ -245,7 +247,8 @@ function draw(svg, scene, onPlace) {
   }
   // What labels must not cover: the robot and the places' circles.
   const taken = [];
-  if (scene.pose) taken.push({ x: scene.pose.x - unit * 3, y: -scene.pose.y - unit * 3, w: unit * 6, h: unit * 6 });
+  taken.view = { x: cx - span / 2, y: -cy - span / 2, w: span, h: span };
+  if (scene.pose) taken.push({ x: scene.pose.x - unit * 3.4, y: -scene.pose.y - unit * 3.4, w: unit * 6.8, h: unit * 6.8 });
   for (const place of scene.places) {
     taken.push({ x: place.pose.x - unit * 2.2, y: -place.pose.y - unit * 2.2, w: unit * 4.4, h: unit * 4.4 });
   }
