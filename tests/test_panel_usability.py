@@ -424,3 +424,41 @@ def test_the_map_warns_of_goals_off_the_map_places_labels_apart_and_breaks_the_t
         expect(trail).to_have_count(2)  # two pieces, not one line across the restart
         page.locator("#map").scroll_into_view_if_needed()
         shot(page, "6-trail-after-restart", screen)
+
+
+def test_words_for_people_with_the_detail_one_click_away(
+    stack: Stack, tmp_path: Path, screen: str
+) -> None:
+    """Item 7: the recogniser's line is a calm "Ready to listen", its engine one click
+    away; the stop's box says what happened in one sentence, each part's report one click
+    away; a staged sentence is shown once, each order on a line of its own."""
+    from playwright.sync_api import expect
+
+    with panel(stack, tmp_path / "profile") as page:
+        open_panel(page, stack, screen)
+        expect(page.locator("#stt-summary")).to_have_text("Ready to listen")
+        engine = page.locator("#stt-status")
+        expect(engine).to_be_hidden()
+        page.click("#stt-summary")
+        expect(engine).to_be_visible()
+        expect(engine).to_contain_text("grammar")
+        expect(engine).to_contain_text("listening for")
+
+        type_command(page, "turn left then reach kitchen then wait two seconds")
+        rows = page.locator("#staged li")
+        expect(rows).to_have_count(3)
+        expect(page.locator("#staged .said")).to_have_count(1)
+        heights = [rows.nth(i).bounding_box() for i in (1, 2)]
+        assert all(h and h["height"] < 45 for h in heights), heights  # one line each
+        shot(page, "7-staged", screen)
+
+        page.click("#stop")
+        expect(page.locator("#held-why")).to_have_text(
+            "Stopped: the robot is halted and its orders cancelled. Release it to send new orders."
+        )
+        detail = page.locator("#held-detail")
+        expect(detail).to_be_hidden()
+        page.click("#held-more summary")
+        expect(detail).to_be_visible()
+        expect(detail).to_contain_text("zero velocity")
+        shot(page, "7-stopped", screen)
