@@ -258,6 +258,13 @@ function draw(svg, scene, onPlace) {
     group.append(node("title", {}, `${place.description}: click to stage "${place.phrase}"`));
     group.append(node("circle", { cx: place.pose.x, cy: -place.pose.y, r: unit * 2.2 }));
     const spot = placeLabel(taken, place.pose.x, -place.pose.y, place.name, unit * 3.2, unit * 2.8);
+    // One target for the mouse: the circle, its label and the gap between them.
+    const label = taken[taken.length - 1];
+    const left = Math.min(label.x, place.pose.x - unit * 2.2);
+    const top = Math.min(label.y, -place.pose.y - unit * 2.2);
+    group.append(node("rect", { class: "hit", x: left, y: top,
+      width: Math.max(label.x + label.w, place.pose.x + unit * 2.2) - left,
+      height: Math.max(label.y + label.h, -place.pose.y + unit * 2.2) - top }));
     group.append(node("text", { x: spot.x, y: spot.y, "font-size": unit * 3.2, class: "label" }, place.name));
     group.onclick = () => onPlace(place);
     group.onkeydown = (event) => {
