@@ -462,3 +462,32 @@ def test_words_for_people_with_the_detail_one_click_away(
         expect(detail).to_be_visible()
         expect(detail).to_contain_text("zero velocity")
         shot(page, "7-stopped", screen)
+
+
+def test_a_stop_not_confirmed_says_so_and_keeps_stop_at_hand(
+    stack: Stack, tmp_path: Path, screen: str
+) -> None:
+    """Item 2's exception: when a part did not confirm the stop, the header keeps STOP
+    beside "Stopped — Release" and the banner says what did not confirm. The stop is the
+    real one; only its answer is rewritten on the way back (as a part that missed it
+    would make it)."""
+    from playwright.sync_api import Route, expect
+
+    def unconfirmed(route: Route) -> None:
+        answer = route.fetch()
+        body = {**answer.json(), "confirmed": False, "detail": "executor: no answer"}
+        route.fulfill(response=answer, json=body)
+
+    with panel(stack, tmp_path / "profile") as page:
+        open_panel(page, stack, screen)
+        page.route("**/api/stop*", unconfirmed)
+        page.click("#stop")
+        expect(page.locator("#latched")).to_be_visible()
+        expect(page.locator("#stop")).to_be_visible()
+        banner = page.locator("#banner")
+        expect(banner).to_contain_text("not confirmed: executor: no answer")
+        shot(page, "2-stop-not-confirmed", screen)
+        page.unroute("**/api/stop*")
+        page.click("#stop")
+        expect(page.locator("#stop")).to_be_hidden()
+        expect(banner).to_be_hidden()  # the stop that worked is news the banner had wrong

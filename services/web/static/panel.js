@@ -33,6 +33,7 @@ const view = {
   drawing: false,
   finished: null, // ids of the history shown, to tell which orders have just ended
   dropped: null, // the closed microphone whose unfinished sentence the person dropped
+  unconfirmed: false, // the last STOP pressed here was not confirmed by every part
 };
 const voice = { context: null, asked: null, playing: null }; // the spoken answers, see say
 const answers = window.voicectlAnswers;
@@ -703,7 +704,7 @@ function showState(state) {
   $("resume").hidden = state.stopped || !state.paused;
   // Latched, the header itself says so on every screen: "Stopped — Release" in STOP's place.
   $("stop").classList.toggle("latched", state.stopped);
-  $("stop").hidden = state.stopped;
+  $("stop").hidden = state.stopped && !view.unconfirmed; // a stop not confirmed stays at hand
   $("latched").hidden = !state.stopped;
   document.body.classList.toggle("latched", state.stopped);
   clearNotes(state.stopped ? "stopped" : "released");
@@ -877,6 +878,8 @@ $("cancel-all").onclick = () => {
 $("stop").onclick = () =>
   api("/api/stop", {})
     .then((stopped) => {
+      view.unconfirmed = !stopped.confirmed;
+      if (view.state) showState(view.state);
       if (!stopped.confirmed) {
         note("banner", `The stop was not confirmed: ${forPerson(stopped.detail)}. Press STOP again.`, "ok");
       }
