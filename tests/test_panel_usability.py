@@ -134,6 +134,7 @@ def test_messages_stand_by_their_control_and_go_when_stale(
         expect(banner).to_contain_text("Connection to the robot lost")
         expect(banner).to_be_in_viewport()
         expect(page.locator("#stt-summary")).to_contain_text("Not connected")
+        expect(page.locator("#stt-status")).to_contain_text("last known, not live")
         expect(page.locator("#queue button").first).to_be_disabled()
         expect(page.locator("#map-stale")).to_be_visible()
         shot(page, "1-connection-lost", screen)
@@ -406,6 +407,9 @@ def test_the_map_warns_of_goals_off_the_map_places_labels_apart_and_breaks_the_t
         line = max(h["height"] for h in heights if h)
         assert all(h and h["height"] == line for h in heights), heights
         assert line < 30, line  # one line each
+        if screen == "desktop":  # and the whole legend on one line where there is room
+            whole = box(page, "#where .legend")
+            assert whole["height"] < 1.5 * line, (whole, line)
         page.locator("#map").scroll_into_view_if_needed()
         shot(page, "6-labels", screen)
 

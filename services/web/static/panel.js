@@ -146,6 +146,7 @@ function showConnected(trouble) {
     $("current").className = "muted";
     $("parts").replaceChildren();
     $("stt-summary").textContent = "Not connected: speech is not being heard";
+    if (view.stt) $("stt-status").textContent = `last known, not live: ${$("stt-status").textContent.replace(/^last known, not live: /, "")}`;
     if (!wasOffline) view.trail.push(null); // whatever comes back, the trail does not join it
   } else {
     clearNotes("connected");
