@@ -129,6 +129,10 @@ def test_messages_stand_by_their_control_and_go_when_stale(
         type_command(page, "wait ten seconds then wait ten seconds")
         page.click("#send")
         expect(page.locator("#queue li")).to_have_count(1)
+        type_command(page, "reach kitchen")  # a dashed route on the map
+        route = page.locator("#map .step.staged line")
+        expect(route).to_have_count(1)
+        live = route.evaluate("e => getComputedStyle(e).stroke")
         kill_the_web_service(stack)  # `voicectl up` starts it again
         banner = page.locator("#banner")
         expect(banner).to_contain_text("Connection to the robot lost")
@@ -137,6 +141,8 @@ def test_messages_stand_by_their_control_and_go_when_stale(
         expect(page.locator("#stt-status")).to_contain_text("last known, not live")
         expect(page.locator("#queue button").first).to_be_disabled()
         expect(page.locator("#map-stale")).to_be_visible()
+        stale = route.evaluate("e => getComputedStyle(e).stroke")
+        assert stale != live, (stale, live)  # greyed, not drawn as if live
         shot(page, "1-connection-lost", screen)
         expect(page.locator("#connection")).to_have_text("connected", timeout=60_000)
         expect(banner).to_be_hidden()
