@@ -162,7 +162,7 @@ def test_a_send_retried_after_a_lost_answer_queues_once(stack: Stack, tmp_path: 
 
         page.route("**/api/submit*", lose_the_first_answer)
         page.click("#send")
-        expect(page.locator("#status")).not_to_be_empty()
+        expect(page.locator("#send-note")).to_contain_text("Not sent")
         expect(page.locator("#staged li")).to_have_count(2)  # still there to send again
         page.click("#send")
         expect(page.locator("#staged li")).to_have_count(0)
@@ -198,11 +198,11 @@ def test_queue_reorder_cancel_and_stop(stack: Stack, tmp_path: Path) -> None:
         expect(page.locator("#current")).to_have_text("idle")
         expect(page.locator("#history tr").nth(0)).to_contain_text("cancelled")
         # the stop latches: new orders are refused until it is released
-        expect(page.locator("#held")).to_contain_text("Emergency stop")
+        expect(page.locator("#held")).to_contain_text("Stopped")
         page.fill("#text", "wait two seconds")
         page.press("#text", "Enter")
         page.click("#send")
-        expect(page.locator("#status")).to_contain_text("the emergency stop is on")
+        expect(page.locator("#send-note")).to_contain_text("the emergency stop is on")
         page.click("#release")
         expect(page.locator("#held")).to_be_hidden()
         page.click("#send")
@@ -216,6 +216,7 @@ def test_speak_a_command_and_a_non_command(stack: Stack, speech: Speak, tmp_path
     with panel(stack, tmp_path / "speak", microphone=command) as page:
         login(page, stack)
         # what the recogniser listens with is shown beside the microphone
+        expect(page.locator("#stt-summary")).to_have_text("Ready to listen")
         expect(page.locator("#stt-status")).to_contain_text("moonshine · grammar ")
         expect(page.locator("#stt-status")).to_contain_text("listening for")
         page.click("#mic")

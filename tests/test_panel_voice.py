@@ -90,7 +90,7 @@ def test_answers_are_spoken_only_once_asked(stack: Stack, tmp_path: Path) -> Non
         # off by default: STOP says nothing aloud
         expect(page.locator("#speak-answers")).not_to_be_checked()
         page.click("#stop")
-        expect(page.locator("#status")).to_have_text("Stopped.")
+        expect(page.locator("#latched")).to_contain_text("Stopped")
         expect(page.locator("#held")).to_be_visible()
         page.wait_for_timeout(500)
         assert asked == []

@@ -199,6 +199,7 @@ class Panel:
         return [
             Route("/", self._index),
             Route("/static/{name}", self._static),
+            Route("/favicon.ico", self._favicon),
             Route("/api/health", self._health),
             Route("/api/robots", api(self._robots)),
             Route("/api/parse", api(self._parse), methods=["POST"]),
@@ -222,6 +223,10 @@ class Panel:
 
     async def _index(self, _request: Request) -> Response:
         return FileResponse(STATIC / "index.html")
+
+    async def _favicon(self, _request: Request) -> Response:
+        """The panel's icon, for browsers that ask before (or without) reading the page."""
+        return FileResponse(STATIC / "icon.svg", media_type="image/svg+xml")
 
     async def _static(self, request: Request) -> Response:
         name = request.path_params["name"]

@@ -78,14 +78,17 @@ function knownExtent(grid) {
       if (!context) { resolve(whole); return; }
       context.drawImage(image, 0, 0);
       const pixels = context.getImageData(0, 0, grid.width, grid.height).data;
+      const cells = new Uint8Array(grid.width * grid.height); // the grey of each, for goalTrouble
       let [left, right, low, high] = [Infinity, -Infinity, Infinity, -Infinity];
       for (let row = 0; row < grid.height; row += 1) {
         for (let column = 0; column < grid.width; column += 1) {
+          cells[row * grid.width + column] = pixels[(row * grid.width + column) * 4];
           if (pixels[(row * grid.width + column) * 4] === 205) continue; // unknown
           left = Math.min(left, column); right = Math.max(right, column);
           low = Math.min(low, row); high = Math.max(high, row);
         }
       }
+      grid.cells = cells;
       if (left > right) { resolve(whole); return; }
       const metres = (cells) => cells * grid.resolution;
       resolve({ // row 0 is at the origin (the image is flipped when drawn)
@@ -95,6 +98,53 @@ function knownExtent(grid) {
     };
     image.src = `data:image/png;base64,${grid.png}`;
   });
+}
+
+// What is wrong with a goal on the robot's own map, in words for the person about to send
+// it ("" when nothing is, or when the map's cells are not read yet): outside the map, on an
+// occupied cell (map_server's grey below 89: more than 65 % sure), or on an unknown one.
+function goalTrouble(grid, pose) {
+  if (!grid || !pose) return "";
+  const column = Math.floor((pose.x - grid.origin.x) / grid.resolution);
+  const row = Math.floor((pose.y - grid.origin.y) / grid.resolution);
+  if (column < 0 || row < 0 || column >= grid.width || row >= grid.height) {
+    return "is outside the robot's map";
+  }
+  if (!grid.cells) return "";
+  const grey = grid.cells[row * grid.width + column];
+  if (grey === 205) return "is in a part of the map the robot has not seen";
+  if (grey < 89) return "is on an obstacle on the robot's map";
+  return "";
+}
+
+// Labels placed greedily: each takes the first of a few spots around its anchor where it
+// overlaps nothing placed before (the robot, the places' circles, earlier labels), or the
+// spot where it overlaps least. Boxes are in SVG coordinates (y down).
+function overlap(a, b) {
+  const w = Math.min(a.x + a.w, b.x + b.w) - Math.max(a.x, b.x);
+  const h = Math.min(a.y + a.h, b.y + b.h) - Math.max(a.y, b.y);
+  return w > 0 && h > 0 ? w * h : 0;
+}
+
+function placeLabel(taken, x, y, text, size, gap) {
+  const view = taken.view; // a spot that leaves the view is worse than one that overlaps
+  const w = text.length * size * 0.66; // a generous guess: SVG text is measured once drawn
+  const h = size * 1.25;
+  const spots = [ // the box's top-left corner, and the text's anchor point, for each spot
+    [x - w / 2, y - gap - h], [x + gap, y - h / 2], [x - w / 2, y + gap], [x - gap - w, y - h / 2],
+    [x + gap * 0.7, y - gap * 0.7 - h], [x + gap * 0.7, y + gap * 0.7],
+    [x - gap * 0.7 - w, y - gap * 0.7 - h], [x - gap * 0.7 - w, y + gap * 0.7],
+  ];
+  let best = null;
+  for (const [left, top] of spots) {
+    const box = { x: left, y: top, w, h };
+    const inside = view ? overlap(box, view) : box.w * box.h;
+    const cost = taken.reduce((sum, other) => sum + overlap(box, other), 0) + 10 * (box.w * box.h - inside);
+    if (!best || cost < best.cost) best = { box, cost };
+    if (cost === 0) break;
+  }
+  taken.push(best.box);
+  return { x: best.box.x, y: best.box.y + size * 0.95 }; // text baseline, anchored at its start
 }
 
 // The view box, in world metres: everything that is drawn (the robot's map where it is
@@ -108,7 +158,7 @@ function frame(scene) {
     if (step.to) seen.push(step.to);
     if (step.from) seen.push(step.from);
   }
-  for (const pose of scene.trail.slice(-50)) seen.push(pose);
+  for (const pose of scene.trail.slice(-50)) if (pose) seen.push(pose);
   if (scene.map) {
     const grid = scene.map;
     const known = grid.extent || {
@@ -135,7 +185,7 @@ function point(pose, radius, angle) {
 // from the heading it starts with to the one it ends with, ending in an arrowhead, and a
 // dashed ghost heading from the robot to the arc's end. `ring` moves each later turn at
 // the same spot one ring further out.
-function turnShapes(step, unit, ring, label) {
+function turnShapes(step, unit, ring, label, taken) {
   const target = step.order.target_pose;
   let turned = target && target.frame === ROBOT_FRAME ? target.yaw || 0
     : normalize(step.to.yaw - step.from.yaw);
@@ -157,9 +207,9 @@ function turnShapes(step, unit, ring, label) {
   ];
   const along = step.from.yaw + turned + (turned > 0 ? Math.PI / 2 : -Math.PI / 2);
   shapes.push(arrow({ x: end[0], y: end[1], yaw: along }, unit * 2.2, "target"));
-  const [lx, ly] = point(step.to, radius + unit * 2.6, step.from.yaw + turned);
-  shapes.push(node("text", { x: lx, y: -ly + unit, "font-size": unit * 2.6,
-    "text-anchor": "middle" }, label));
+  const [lx, ly] = point(step.to, radius + unit * 1.2, step.from.yaw + turned);
+  const spot = placeLabel(taken, lx, -ly, label, unit * 2.6, unit * 1.2);
+  shapes.push(node("text", { x: spot.x, y: spot.y, "font-size": unit * 2.6, class: "number" }, label));
   return shapes;
 }
 
@@ -183,19 +233,39 @@ function draw(svg, scene, onPlace) {
     });
     layers.push(image);
   }
-  if (scene.trail.length > 1) {
-    layers.push(node("polyline", {
-      points: scene.trail.map((p) => `${p.x},${-p.y}`).join(" "),
-      class: "trail", "stroke-width": unit * 0.6,
-    }));
+  // The trail in pieces: a null in it is a break (a restart, a jump), never bridged.
+  let piece = [];
+  for (const pose of [...scene.trail, null]) {
+    if (pose) { piece.push(pose); continue; }
+    if (piece.length > 1) {
+      layers.push(node("polyline", {
+        points: piece.map((p) => `${p.x},${-p.y}`).join(" "),
+        class: "trail", "stroke-width": unit * 0.6,
+      }));
+    }
+    piece = [];
+  }
+  // What labels must not cover: the robot and the places' circles.
+  const taken = [];
+  taken.view = { x: cx - span / 2, y: -cy - span / 2, w: span, h: span };
+  if (scene.pose) taken.push({ x: scene.pose.x - unit * 3.4, y: -scene.pose.y - unit * 3.4, w: unit * 6.8, h: unit * 6.8 });
+  for (const place of scene.places) {
+    taken.push({ x: place.pose.x - unit * 2.2, y: -place.pose.y - unit * 2.2, w: unit * 4.4, h: unit * 4.4 });
   }
   for (const place of scene.places) {
     const group = node("g", { class: "place", tabindex: "0", role: "button",
       "aria-label": `stage "${place.phrase}"` });
     group.append(node("title", {}, `${place.description}: click to stage "${place.phrase}"`));
     group.append(node("circle", { cx: place.pose.x, cy: -place.pose.y, r: unit * 2.2 }));
-    group.append(node("text", { x: place.pose.x, y: -place.pose.y - unit * 3,
-      "font-size": unit * 3.2, "text-anchor": "middle" }, place.name));
+    const spot = placeLabel(taken, place.pose.x, -place.pose.y, place.name, unit * 3.2, unit * 2.8);
+    // One target for the mouse: the circle, its label and the gap between them.
+    const label = taken[taken.length - 1];
+    const left = Math.min(label.x, place.pose.x - unit * 2.2);
+    const top = Math.min(label.y, -place.pose.y - unit * 2.2);
+    group.append(node("rect", { class: "hit", x: left, y: top,
+      width: Math.max(label.x + label.w, place.pose.x + unit * 2.2) - left,
+      height: Math.max(label.y + label.h, -place.pose.y + unit * 2.2) - top }));
+    group.append(node("text", { x: spot.x, y: spot.y, "font-size": unit * 3.2, class: "label" }, place.name));
     group.onclick = () => onPlace(place);
     group.onkeydown = (event) => {
       if (event.key === "Enter" || event.key === " ") { event.preventDefault(); onPlace(place); }
@@ -214,19 +284,25 @@ function draw(svg, scene, onPlace) {
     if (moved < 0.05) {
       const ring = rings.filter((spot) => Math.hypot(spot.x - step.to.x, spot.y - step.to.y) < 0.05).length;
       rings.push(step.to);
-      group.append(...turnShapes(step, unit, ring, label));
+      group.append(...turnShapes(step, unit, ring, label, taken));
     } else {
       group.append(node("line", { x1: step.from.x, y1: -step.from.y, x2: step.to.x, y2: -step.to.y,
         "stroke-width": unit * (step.running ? 0.9 : 0.6), "stroke-dasharray": `${unit * 2} ${unit * 1.5}` }));
       group.append(arrow(step.to, unit * 2.4, "target"));
-      group.append(node("text", { x: step.to.x + unit * 2.5, y: -step.to.y + unit * 1.2,
-        "font-size": unit * 2.6 }, label));
+      const spot = placeLabel(taken, step.to.x, -step.to.y, label, unit * 2.6, unit * 2.5);
+      group.append(node("text", { x: spot.x, y: spot.y, "font-size": unit * 2.6, class: "number" }, label));
     }
-    group.append(node("title", {}, `${index + 1}. ${step.order.description}`));
+    if (step.trouble) {
+      group.classList.add("warn");
+      group.append(node("circle", { cx: step.to.x, cy: -step.to.y, r: unit * 4, class: "goal-warn",
+        "stroke-width": unit * 0.6, "stroke-dasharray": `${unit} ${unit * 0.6}` }));
+    }
+    group.append(node("title", {}, `${index + 1}. ${step.order.description}` +
+      (step.trouble ? `: the goal ${step.trouble}` : "")));
     layers.push(group);
   });
   svg.replaceChildren(...layers);
 }
 
-window.voicectlMap = { plan, compose, draw, knownExtent };
+window.voicectlMap = { plan, compose, draw, knownExtent, goalTrouble };
 window.voicectlPlan = plan; // for the browser tests: the same code the map draws with

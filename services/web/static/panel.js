@@ -32,15 +32,43 @@ const view = {
   startedAt: {}, // order id -> the pose where it started (a relative goal is from there)
   drawing: false,
   finished: null, // ids of the history shown, to tell which orders have just ended
+  dropped: null, // the closed microphone whose unfinished sentence the person dropped
+  unconfirmed: false, // the last STOP pressed here was not confirmed by every part
 };
 const voice = { context: null, asked: null, playing: null }; // the spoken answers, see say
 const answers = window.voicectlAnswers;
 const TRAIL = 300;
+const JUMP = 4; // metres: more than a drive covers between two poses (0.5 s apart; the simulator runs up to 10x)
 const PART_NAMES = { converter: "orders", stt: "speech", supervisor: "queue", executor: "executor", robot: "odometry" };
 
 // --- helpers -----------------------------------------------------------------------------------
 
-function setStatus(text) { $("status").textContent = text || ""; }
+function setStatus(text) { $("status").textContent = text || ""; } // the login's own line
+
+// --- messages: one place for what just happened -----------------------------------------------
+// A message stands next to the control it is about (#add-note under the command line,
+// #send-note under Send) or, when it is about the whole panel (the connection, the stop),
+// in the banner under the header. Each says what makes it stale (`until`): "connected",
+// "released", "staged" (the orders to send changed), "ok" (the next request that worked);
+// it goes as soon as that happens, so nothing stays after it stopped being true.
+const notes = {}; // element id -> the reason it goes
+
+function note(id, text, until) {
+  $(id).textContent = text || "";
+  $(id).hidden = !text;
+  if (text) notes[id] = until; else delete notes[id];
+}
+
+function clearNotes(reason) {
+  for (const [id, until] of Object.entries(notes)) if (until === reason) note(id, "");
+}
+
+function forPerson(text) {
+  // The services' messages serve the command line too: a hint naming a CLI command means
+  // nothing to the person at the panel, and is left out.
+  return String(text).replace(/\s*\((?:run |use )?`?voicectl [^)]*\)/g, "")
+    .replace(/[;,:]?\s*(?:run|use) `?voicectl [^.;]*/g, "");
+}
 
 function el(tag, text, cls) {
   const node = document.createElement(tag);
@@ -69,10 +97,11 @@ async function api(path, body, query) {
   const data = await response.json().catch(() => ({}));
   if (response.status === 401) showLogin("wrong or missing token");
   if (!response.ok) throw new Error(data.error || response.statusText);
+  clearNotes("ok");
   return data;
 }
 
-function report(error) { setStatus(error.message || String(error)); }
+function report(error, where = "banner") { note(where, forPerson(error.message || String(error)), "ok"); }
 
 // --- logging in --------------------------------------------------------------------------------
 
@@ -103,16 +132,26 @@ function showConnected(trouble) {
   badge.className = `badge ${trouble ? "offline" : "online"}`;
   const loggedOut = trouble === "not connected";
   $("stop").disabled = loggedOut;
-  $("stop").title = loggedOut ? "Not connected: this panel cannot stop the robot (use voicectl stop)"
+  $("stop").title = loggedOut ? "Not connected: this panel cannot stop the robot"
     : "Emergency stop: halt now and clear the queue";
   $("mic").disabled = Boolean(trouble);
+  const wasOffline = document.body.classList.contains("offline");
   document.body.classList.toggle("offline", Boolean(trouble));
+  // What was shown while connected is the past: the queue's buttons cannot act, the map
+  // says its route is not live, the recogniser is not listening.
+  for (const control of document.querySelectorAll("#now button")) control.disabled = Boolean(trouble);
+  $("map-stale").hidden = !trouble;
   if (trouble) {
     $("current").textContent = trouble;
     $("current").className = "muted";
     $("parts").replaceChildren();
-  } else if (!view.state) {
-    $("current").textContent = "waiting for the queue's state";
+    $("stt-summary").textContent = "Not connected: speech is not being heard";
+    if (view.stt) $("stt-status").textContent = `last known, not live: ${$("stt-status").textContent.replace(/^last known, not live: /, "")}`;
+    if (!wasOffline) view.trail.push(null); // whatever comes back, the trail does not join it
+  } else {
+    clearNotes("connected");
+    if (view.stt) showStt(view.stt);
+    if (!view.state) $("current").textContent = "waiting for the queue's state";
   }
 }
 
@@ -176,11 +215,15 @@ function showParts(parts) {
 }
 
 function showStt(status) {
-  // What the recogniser listens with, for the person at the microphone to see.
+  // A calm line for the person at the microphone; what the recogniser listens with one
+  // click away, for whoever looks after it.
   view.stt = status;
   const parts = [status.engine, status.grammar_version && `grammar ${status.grammar_version.slice(0, 8)}`,
     status.detail, status.sessions ? `${status.sessions} microphone(s) open` : ""];
   $("stt-status").textContent = parts.filter(Boolean).join(" · ");
+  if (!document.body.classList.contains("offline")) {
+    $("stt-summary").textContent = view.mic && view.mic.socket ? "Listening" : "Ready to listen";
+  }
   const deaf = status.unpronounceable || [];
   $("stt-deaf").hidden = !deaf.length;
   $("stt-deaf").textContent = deaf.length ? `Cannot hear (no pronunciation): ${deaf.join(", ")}` : "";
@@ -191,6 +234,9 @@ function showPose(pose) {
   $("pose").textContent = `x ${pose.x.toFixed(1)} m, y ${pose.y.toFixed(1)} m, facing ${degrees}°`;
   view.pose = { x: pose.x, y: pose.y, yaw: pose.yaw };
   const last = view.trail[view.trail.length - 1];
+  // A jump no drive makes between two poses (a restarted robot, a relocalised one) breaks
+  // the trail: a straight line across it would be a path never taken.
+  if (last && Math.hypot(last.x - pose.x, last.y - pose.y) > JUMP) view.trail.push(null);
   if (!last || Math.hypot(last.x - pose.x, last.y - pose.y) > 0.02) view.trail.push(view.pose);
   if (view.trail.length > TRAIL) view.trail.splice(0, view.trail.length - TRAIL);
   redraw();
@@ -236,7 +282,17 @@ function scene() {
   }
   if (state) chain(state.queue.map((record) => record.order), "queued", at);
   chain(view.staged.map((item) => item.order), "staged", at);
+  for (const step of steps) step.trouble = step.to ? window.voicectlMap.goalTrouble(view.map, step.to) : "";
+  showGoalWarning(steps.filter((step) => step.kind === "staged" && step.trouble));
   return { pose: view.pose, trail: view.trail, places: view.places, steps, map: view.map };
+}
+
+function showGoalWarning(troubled) {
+  // Said before Send, beside it, as on the map: a goal the robot's own map cannot hold.
+  const box = $("goal-warning");
+  box.hidden = !troubled.length;
+  box.replaceChildren(...troubled.map((step) =>
+    el("span", `“${step.order.description}”: its goal ${step.trouble}; the robot may not get there. `)));
 }
 
 // --- the live stream ---------------------------------------------------------------------------
@@ -259,7 +315,6 @@ async function listen() {
       const reader = response.body.getReader();
       const decoder = new TextDecoder();
       let buffer = "";
-      setStatus("");
       for (;;) {
         const { value, done } = await reader.read();
         if (done) break;
@@ -274,7 +329,7 @@ async function listen() {
     } catch (error) {
       if (controller.signal.aborted) return;
       showConnected("reconnecting");
-      setStatus(`connection lost (${error.message}); retrying`);
+      note("banner", "Connection to the robot lost: trying again. What you see is not live.", "connected");
     }
     await new Promise((resolve) => setTimeout(resolve, 1000));
   }
@@ -292,13 +347,19 @@ function handle(message) {
     case "robotmap": showMap(message); break;
     case "sttstatus": showStt(message); break;
     case "partialtranscript":
-      if (mine) { showHeard(message.text, "partial"); showEars(null); }
+      if (mine && view.mic.socket) { showHeard(message.text, "partial"); showEars(null); }
       break;
     case "transcript":
       // What was heard; whether it is a command is the converter's proposal, next.
       if (mine) showHeard((message.transcription || {}).text || message.text, "final");
       break;
-    case "proposal": if (mine) propose(message); break;
+    case "proposal":
+      if (mine) propose(message);
+      else if (view.dropped && message.session === view.dropped.session) {
+        showHeard(`dropped: “${view.dropped.unfinished}” (it ended “${message.transcript}”; not added)`, "partial");
+        view.dropped = null;
+      }
+      break;
     default: break;
   }
 }
@@ -308,7 +369,7 @@ function handle(message) {
 function micUnavailable() {
   if (!window.isSecureContext || !navigator.mediaDevices || !window.AudioWorkletNode) {
     return "The browser gives pages a microphone only over HTTPS or on localhost. Open the " +
-      "panel at https:// (voicectl cert makes a certificate; see docs/deploy.md) or type below.";
+      "panel at its https:// address (ask whoever set up the robot) or type below.";
   }
   return "";
 }
@@ -362,6 +423,8 @@ async function startMic() {
   };
   showMicNote("");
   showHeard("listening…", "partial");
+  $("discard").hidden = true;
+  $("stt-summary").textContent = "Listening";
   $("mic").setAttribute("aria-pressed", "true");
   $("mic").lastChild.textContent = " Stop listening";
   $("mic").classList.add("live");
@@ -369,8 +432,19 @@ async function startMic() {
 
 function stopMic() {
   const mic = view.mic;
-  if (!mic) return;
-  view.mic = { session: mic.session }; // its last transcript may still come
+  if (!mic || !mic.socket) return;
+  // A sentence cut off mid-way is finished by the recogniser: the page says so, and a
+  // "discard" drops it. Whatever the person does next with the orders (Send, Add, Clear,
+  // Listen again) drops it too: a late answer never fills "To send" behind their back.
+  const unfinished = $("heard").classList.contains("partial") && $("heard").textContent !== "listening…"
+    ? $("heard").textContent : "";
+  view.mic = { session: mic.session, unfinished }; // its last transcript may still come
+  if (unfinished) {
+    showHeard(`finishing “${unfinished}”…`, "partial");
+    $("discard").hidden = false;
+  } else if ($("heard").textContent === "listening…") {
+    showHeard("", "partial");
+  }
   if (mic.socket.readyState === WebSocket.OPEN) mic.socket.send(JSON.stringify({ type: "stop" }));
   for (const track of mic.stream.getTracks()) track.stop();
   mic.context.close();
@@ -378,6 +452,19 @@ function stopMic() {
   $("mic").setAttribute("aria-pressed", "false");
   $("mic").lastChild.textContent = " Listen";
   $("mic").classList.remove("live");
+  if (!document.body.classList.contains("offline")) $("stt-summary").textContent = "Ready to listen";
+}
+
+function discardUnfinished() {
+  // The closed microphone's late answer, if any, is dropped (see stopMic).
+  const mic = view.mic;
+  if (!mic || mic.socket) return;
+  view.mic = null;
+  if (mic.unfinished && !$("discard").hidden) {
+    showHeard(`dropped: “${mic.unfinished}”`, "partial");
+    view.dropped = mic; // its answer, when it comes, is shown for what it was and not staged
+  }
+  $("discard").hidden = true;
 }
 
 function showMicNote(text) {
@@ -407,6 +494,8 @@ function showEars(proposal) {
 }
 
 function propose(proposal) {
+  if (view.mic && !view.mic.socket) view.mic = null; // the closed microphone's last answer
+  $("discard").hidden = true;
   showEars(proposal);
   say(answers.proposalWords(proposal));
   if (proposal.rejected) {
@@ -449,6 +538,14 @@ function showDoubt(proposal) {
   shown.append(words.slice(0, doubt.position).join(" "), " ",
     el("mark", doubt.words), " ", words.slice(doubt.position + size).join(" "));
   box.replaceChildren(el("strong", "Did you say"), " ", shown, " ");
+  if (!doubt.alternatives.length) {
+    // Nothing to choose between: a yes or a no, not a list of one.
+    box.append("? ", button("yes, add it", "choice", () => { showDoubt(null); addText(said(doubt.words)); },
+      `stage "${said(doubt.words)}"; nothing is sent until you send`), " ");
+    box.append(button("say again", "choice", () => showDoubt(null), "drop it and speak again"));
+    box.hidden = false;
+    return;
+  }
   for (const choice of [doubt.words, ...doubt.alternatives]) {
     box.append(button(choice, "choice", () => { showDoubt(null); addText(said(choice)); },
       `stage "${said(choice)}"; nothing is sent until you send`), " ");
@@ -462,31 +559,43 @@ function stage(orders, said) {
   showStaged();
 }
 
+function suggestions(error) { return (error.candidates || []).filter((c) => !c.includes("/")); }
+
 function showErrors(said, errors) {
+  // A suggestion repairs the sentence: its words take the place of the ones that did not
+  // parse and the whole sentence is checked again, so the rest of it is kept (and the
+  // other suggestions with it, if they still apply).
   $("errors").replaceChildren(...errors.map((error) => {
     const item = el("li");
     item.append(el("strong", error.text || said || "(nothing)"), ` ${error.reason}`);
-    const phrases = (error.candidates || []).filter((c) => !c.includes("/"));
-    for (const phrase of phrases) {
-      item.append(" ", button(phrase, "suggestion", () => addText(phrase),
-        "add this order to the list; nothing is sent until you send"));
+    for (const phrase of suggestions(error)) {
+      const fixed = error.text && said && said.includes(error.text) ? said.replace(error.text, phrase) : phrase;
+      item.append(" ", button(phrase, "suggestion", () => addText(fixed),
+        `check "${fixed}" again; nothing is sent until you send`));
     }
     return item;
   }));
 }
 
 async function addText(text) {
+  // What parses is staged and what did not stays in the input to be fixed, not retyped. A
+  // sentence with a suggested repair is staged only once repaired, so that its orders keep
+  // the order they were said in.
+  discardUnfinished();
   try {
     const result = await api("/api/parse", { text });
-    stage(result.orders, text);
+    const repairable = result.errors.some((error) => suggestions(error).length);
+    if (!repairable) stage(result.orders, text);
+    const left = result.errors.map((error) => error.text).filter(Boolean);
+    $("text").value = repairable ? text : left.join(" then ");
     showErrors(text, result.errors);
-    setStatus("");
-  } catch (error) { report(error); }
+    note("add-note", "", "ok");
+  } catch (error) { report(error, "add-note"); }
 }
 
 function showStaged() {
   const batch = JSON.stringify(view.staged.map((item) => item.order));
-  if (batch !== view.batch) view.batchId = null; // a different batch: a new request
+  if (batch !== view.batch) { view.batchId = null; clearNotes("staged"); } // a new request
   view.batch = batch;
   const list = $("staged");
   list.replaceChildren(...view.staged.map((item, index) => {
@@ -494,7 +603,10 @@ function showStaged() {
     row.tabIndex = 0;
     row.draggable = true;
     row.dataset.index = String(index);
-    row.append(el("span", item.order.description, "what"), el("span", item.said, "muted said"));
+    // The sentence once, on the first of the orders it gave, not on every row.
+    const first = index === 0 || view.staged[index - 1].said !== item.said;
+    row.append(el("span", item.order.description, "what"));
+    if (first) row.append(el("span", item.said, "muted said"));
     if (view.labels && !view.labels.includes(item.order.label)) {
       // Said before it is sent: the executor would refuse it.
       row.append(el("span", `no executor serves '${item.order.label}'`, "unserved"));
@@ -582,14 +694,21 @@ function reorder(record, position) {
 function showState(state) {
   view.state = state;
   const why = state.stopped
-    ? "Emergency stop: the robot is held and new orders are refused until you release it."
+    ? "Stopped: the robot is halted and its orders cancelled. Release it to send new orders."
     : state.paused;
   $("held").hidden = !why;
   $("held-why").textContent = why || "";
-  $("held-detail").textContent = state.stopped ? state.stop_detail : "";
+  // What each part did is there for whoever asks, one click away.
+  $("held-detail").textContent = state.stopped ? state.stop_detail || "" : "";
+  $("held-more").hidden = !$("held-detail").textContent;
   $("release").hidden = !state.stopped;
   $("resume").hidden = state.stopped || !state.paused;
+  // Latched, the header itself says so on every screen: "Stopped — Release" in STOP's place.
   $("stop").classList.toggle("latched", state.stopped);
+  $("stop").hidden = state.stopped && !view.unconfirmed; // a stop not confirmed stays at hand
+  $("latched").hidden = !state.stopped;
+  document.body.classList.toggle("latched", state.stopped);
+  clearNotes(state.stopped ? "stopped" : "released");
   const current = state.current;
   if (current && !view.startedAt[current.id]) view.startedAt[current.id] = view.pose;
   if (current) {
@@ -665,7 +784,7 @@ async function say(text) {
     const sound = await context.decodeAudioData(await response.arrayBuffer());
     if (voice.asked !== asked) return; // a newer answer came meanwhile
     if (context.state !== "running") {
-      setStatus("Click anywhere on the page once to let it speak answers.");
+      note("banner", "Click anywhere on the page once to let it speak answers.", "ok");
       return;
     }
     const source = context.createBufferSource();
@@ -675,7 +794,7 @@ async function say(text) {
     source.start();
     voice.playing = source;
   } catch (error) {
-    if (error.name !== "AbortError") setStatus(`cannot speak answers: ${error.message}`);
+    if (error.name !== "AbortError") note("banner", `Cannot speak answers: ${forPerson(error.message)}`, "ok");
   }
 }
 
@@ -716,10 +835,10 @@ $("command").onsubmit = (event) => {
   event.preventDefault();
   const text = $("text").value.trim();
   if (!text) return;
-  $("text").value = "";
   addText(text);
 };
 $("send").onclick = async () => {
+  discardUnfinished();
   const items = view.staged.slice();
   $("send").disabled = true;
   view.batchId = view.batchId || newRequestId();
@@ -727,10 +846,21 @@ $("send").onclick = async () => {
     await submit(items, view.batchId);
     view.staged.splice(0, items.length);
     showStaged();
-    setStatus("");
-  } catch (error) { report(error); showStaged(); }
+    note("send-note", "");
+  } catch (error) {
+    showStaged();
+    if (view.state && view.state.stopped) {
+      // Said where the person looks, and gone once the stop is released.
+      note("send-note", "Not sent: the emergency stop is on. Press Release (at the top), then Send " +
+        "again; your orders are kept here.", "released");
+    } else {
+      note("send-note", `Not sent: ${forPerson(error.message)}. Your orders are kept here; Send tries again.`,
+        "staged");
+    }
+  }
 };
-$("clear").onclick = () => { view.staged = []; showStaged(); };
+$("clear").onclick = () => { discardUnfinished(); view.staged = []; showStaged(); };
+$("discard").onclick = () => discardUnfinished();
 $("auto-send").onchange = (event) => { store.autoSend = event.target.checked; };
 $("speak-answers").onchange = (event) => {
   store.speakAnswers = event.target.checked;
@@ -744,15 +874,21 @@ $("cancel-all").onclick = () => {
     api("/api/cancel_all", {}).catch(report);
   }
 };
-// Never asks: it stops now, and says what stopped the robot (or what did not confirm).
+// Never asks: it stops now. A confirmed stop shows in the header ("Stopped — Release"), from
+// the queue's state; one not confirmed is said in the banner until a request works again.
 $("stop").onclick = () =>
   api("/api/stop", {})
     .then((stopped) => {
-      setStatus(stopped.confirmed ? "Stopped." : `STOP NOT CONFIRMED: ${stopped.detail}`);
+      view.unconfirmed = !stopped.confirmed;
+      if (view.state) showState(view.state);
+      if (!stopped.confirmed) {
+        note("banner", `The stop was not confirmed: ${forPerson(stopped.detail)}. Press STOP again.`, "ok");
+      }
       say(answers.stoppedWords(stopped));
     })
     .catch(report);
 $("release").onclick = () => api("/api/release", {}).catch(report);
+$("head-release").onclick = () => api("/api/release", {}).catch(report);
 $("resume").onclick = () => api("/api/resume", {}).catch(report);
 $("newer").onclick = () => page(view.historyOffset - PAGE);
 $("older").onclick = () => page(view.historyOffset + PAGE);
