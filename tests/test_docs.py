@@ -160,8 +160,10 @@ def test_executors_doc_tutorials_run_as_written(tmp_path: Path) -> None:
         wait_until(lambda: len(messages()) == 2, 30.0, "both tutorial orders")
         product, saved = messages()  # most recent first
         assert product == "10 x 20 = 200"
-        assert saved.startswith("saved 64x48 photo to ")
-        assert Path(saved.removeprefix("saved 64x48 photo to ")).is_file()
+        prefix = "took a 64x48 photo (kept on the robot as "
+        assert saved.startswith(prefix), saved
+        assert saved.endswith(")"), saved
+        assert Path(saved.removeprefix(prefix)[:-1]).is_file()
 
 
 def test_executors_doc_executors_file_binds_and_its_typo_fails_as_shown(tmp_path: Path) -> None:

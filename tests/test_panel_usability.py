@@ -26,7 +26,9 @@ from shared.messages import Doubt, Proposal
 if TYPE_CHECKING:
     from playwright.sync_api import Page
 
-from .conftest import REPO, Speak, Stack, async_wait_until
+from harness.wait import async_wait_until
+
+from .conftest import REPO, Speak, Stack
 from .support import on_bus
 from .test_panel_browser import ARTIFACTS, login, panel, pytestmark
 
@@ -501,3 +503,33 @@ def test_a_stop_not_confirmed_says_so_and_keeps_stop_at_hand(
         page.click("#stop")
         expect(page.locator("#stop")).to_be_hidden()
         expect(banner).to_be_hidden()  # the stop that worked is news the banner had wrong
+
+
+def test_a_photo_an_order_took_is_shown_in_its_history_row(
+    stack: Stack, tmp_path: Path, screen: str
+) -> None:
+    """A photo is a file on the robot: its history row shows it, fetched with the token,
+    and keeps it when the history is drawn again."""
+    from playwright.sync_api import expect
+
+    with panel(stack, tmp_path / "profile") as page:
+        open_panel(page, stack, screen)
+        type_command(page, "take a picture")
+        expect(page.locator("#staged li")).to_have_count(1)
+        page.click("#send")
+        row = page.locator("#history tr", has_text="photo").first
+        expect(row.locator("td.succeeded")).to_be_visible(timeout=60_000)
+        row.locator("button.show-photo").click()
+        image = row.locator("img.photo")
+        expect(image).to_be_visible()
+        page.wait_for_function(
+            "() => document.querySelector('#history img.photo')?.naturalWidth === 64"
+        )
+        type_command(page, "wait one second")  # the history is drawn again as it runs
+        page.click("#send")
+        expect(
+            page.locator("#history tr", has_text="wait").first.locator("td.succeeded")
+        ).to_be_visible(timeout=60_000)
+        expect(page.locator("#history img.photo")).to_have_count(1)
+        image.scroll_into_view_if_needed()
+        shot(page, "9-photo-in-history", screen)

@@ -59,7 +59,7 @@ class TakePhoto(Executor):
             path = stem.with_suffix(".png")
             width, height = frame.width, frame.height
             await asyncio.to_thread(_save_png, frame, path)
-        return f"saved {width}x{height} photo to {path}"
+        return f"took a {width}x{height} photo (kept on the robot as {path})"
 
 
 def _save_file(frame: CompressedImage, stem: Path) -> tuple[Path, tuple[int, int]]:

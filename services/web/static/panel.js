@@ -34,6 +34,7 @@ const view = {
   finished: null, // ids of the history shown, to tell which orders have just ended
   dropped: null, // the closed microphone whose unfinished sentence the person dropped
   unconfirmed: false, // the last STOP pressed here was not confirmed by every part
+  photos: new Map(), // order id -> the object URL of the photo it took, once shown
 };
 const voice = { context: null, asked: null, playing: null }; // the spoken answers, see say
 const answers = window.voicectlAnswers;
@@ -803,7 +804,7 @@ function showHistory(records, total) {
     const row = el("tr");
     const ended = record.ended_at ? new Date(record.ended_at * 1000).toLocaleString() : "";
     row.append(el("td", record.order.description, "what"), el("td", record.status, record.status),
-      el("td", record.message, "message"), el("td", record.transcript, "muted said"),
+      resultCell(record), el("td", record.transcript, "muted said"),
       el("td", ended, "muted ended"));
     return row;
   }));
@@ -813,6 +814,38 @@ function showHistory(records, total) {
   $("newer").disabled = view.historyOffset === 0;
   $("older").disabled = total !== null ? view.historyOffset + records.length >= total
     : records.length < PAGE; // the live page is the most recent records only
+}
+
+// A photo stays on the robot: the panel fetches it through the API (with the token) and
+// shows it in the row, which keeps it when the history is drawn again.
+function resultCell(record) {
+  const cell = el("td", record.message, "message");
+  if (record.order.label !== "pic" || record.status !== "succeeded") return cell;
+  const shown = view.photos.get(record.id);
+  if (shown) {
+    const image = el("img", undefined, "photo");
+    image.src = shown;
+    image.alt = `photo taken by “${record.order.description}”`;
+    cell.append(image);
+  } else {
+    cell.append(" ", button("Show photo", "show-photo", () => showPhoto(record, cell)));
+  }
+  return cell;
+}
+
+async function showPhoto(record, cell) {
+  try {
+    const params = new URLSearchParams({ robot: view.robot, order: record.id });
+    const response = await fetch(`/api/photo?${params}`, {
+      headers: { Authorization: `Bearer ${store.token}` },
+    });
+    if (!response.ok) throw new Error((await response.json().catch(() => ({}))).error || response.statusText);
+    view.photos.set(record.id, URL.createObjectURL(await response.blob()));
+    cell.replaceWith(resultCell(record));
+  } catch (error) {
+    cell.querySelector(".show-photo")?.remove();
+    cell.append(el("span", ` No photo: ${forPerson(error.message)}`, "muted"));
+  }
 }
 
 async function page(offset) {
