@@ -393,6 +393,9 @@ class RobotPose(Message):
     y: float
     yaw: float
     frame: str = "odom"
+    run: str = ""
+    """Which run of the executor sent it: a new one after a restart, whose odometry may
+    start anywhere (the panel's trail breaks there instead of joining the two)."""
 
 
 # --- supervisor ---------------------------------------------------------------------------

@@ -76,28 +76,12 @@ def test_the_examples_answer_as_shown(stack: Stack, tmp_path: Path) -> None:
         for index, (language, code) in enumerate(blocks):
             shown = blocks[index + 1] if index + 1 < len(blocks) else ("", "")
             if language == "sh":
-                done = subprocess.run(
-                    ["bash", "-c", f"set -e\n{setup}\n{code}"],
-                    capture_output=True,
-                    text=True,
-                    cwd=tmp_path,
-                    env=env,
-                    timeout=60,
-                    check=False,
-                )
+                done = _bash(f"set -e\n{setup}\n{code}", tmp_path, env)
             elif language == "python":
                 script = tmp_path / "example.py"
                 script.write_text(code)
                 run = f"{setup}\nexport PANEL TOKEN\n{sys.executable} {script}"
-                done = subprocess.run(
-                    ["bash", "-c", run],
-                    capture_output=True,
-                    text=True,
-                    cwd=tmp_path,
-                    env=env,
-                    timeout=60,
-                    check=False,
-                )
+                done = _bash(run, tmp_path, env)
             else:
                 continue
             ran += 1
@@ -119,3 +103,15 @@ def test_the_examples_answer_as_shown(stack: Stack, tmp_path: Path) -> None:
                 assert shown[0] == "json", where
                 same_shape(json.loads(shown[1]), json.loads(done.stdout), where)
     assert ran >= 16
+
+
+def _bash(script: str, cwd: Path, env: dict[str, str]) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        ["bash", "-c", script],
+        capture_output=True,
+        text=True,
+        cwd=cwd,
+        env=env,
+        timeout=60,
+        check=False,
+    )

@@ -280,12 +280,7 @@ def test_a_doubtful_value_is_asked_never_sent(stack: Stack, tmp_path: Path) -> N
     speech makes the real one doubt is tests/test_hearing.py's business."""
     from playwright.sync_api import expect
 
-    silence = tmp_path / "silence.wav"
-    with wave.open(str(silence), "wb") as out:
-        out.setnchannels(1)
-        out.setsampwidth(2)
-        out.setframerate(16000)
-        out.writeframes(bytes(2 * 16000 * 20))
+    silence = silent_wav(tmp_path / "silence.wav", 20.0)
     with panel(stack, tmp_path / "doubt", microphone=silence) as page:
         login(page, stack)
         page.check("#auto-send")
@@ -323,3 +318,13 @@ def test_a_doubtful_value_is_asked_never_sent(stack: Stack, tmp_path: Path) -> N
         box.locator("button", has_text="two").click()
         expect(box).to_be_hidden()
         expect(page.locator("#staged li .what")).to_have_text(["move forward 2 m"])
+
+
+def silent_wav(path: Path, seconds: float) -> Path:
+    """A 16 kHz mono WAV of silence: a fake microphone that hears nothing."""
+    with wave.open(str(path), "wb") as out:
+        out.setnchannels(1)
+        out.setsampwidth(2)
+        out.setframerate(16000)
+        out.writeframes(bytes(2 * int(16000 * seconds)))
+    return path

@@ -11,7 +11,6 @@ import concurrent.futures
 import os
 import re
 import signal
-import wave
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -30,7 +29,7 @@ from harness.wait import async_wait_until
 
 from .conftest import REPO, Speak, Stack
 from .support import on_bus
-from .test_panel_browser import ARTIFACTS, login, panel, pytestmark
+from .test_panel_browser import ARTIFACTS, login, panel, pytestmark, silent_wav
 
 __all__ = ["pytestmark"]  # the browser's marks and skip, as in test_panel_browser
 
@@ -160,6 +159,11 @@ def test_messages_stand_by_their_control_and_go_when_stale(
 
 def kill_the_web_service(stack: Stack) -> None:
     """SIGKILL the stack's web service (its panel's server), as a crash would."""
+    kill_service(stack, "web")
+
+
+def kill_service(stack: Stack, name: str) -> None:
+    """SIGKILL one service of the stack, as a crash would; `voicectl up` starts it again."""
     for entry in Path("/proc").iterdir():
         if not entry.name.isdigit():
             continue
@@ -168,10 +172,10 @@ def kill_the_web_service(stack: Stack) -> None:
             parent = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
         except (OSError, ValueError, IndexError):
             continue
-        if parent == stack.process.pid and b"services.web" in argv:
+        if parent == stack.process.pid and f"services.{name}".encode() in argv:
             os.kill(int(entry.name), signal.SIGKILL)
             return
-    raise AssertionError("no web service under the stack")
+    raise AssertionError(f"no {name} service under the stack")
 
 
 def stack_get(stack: Stack, path: str) -> tuple[int, str]:
@@ -268,12 +272,7 @@ def test_a_doubt_with_one_choice_is_a_yes_or_no(stack: Stack, tmp_path: Path, sc
     """Item 4: "Did you say … one? [yes, add it] [say again]", not a list of one."""
     from playwright.sync_api import expect
 
-    silence = tmp_path / "silence.wav"
-    with wave.open(str(silence), "wb") as out:
-        out.setnchannels(1)
-        out.setsampwidth(2)
-        out.setframerate(16000)
-        out.writeframes(bytes(2 * 16000 * 20))
+    silence = silent_wav(tmp_path / "silence.wav", 20.0)
     with panel(stack, tmp_path / "doubt", microphone=silence) as page:
         open_panel(page, stack, screen)
         page.click("#mic")
@@ -434,6 +433,17 @@ def test_the_map_warns_of_goals_off_the_map_places_labels_apart_and_breaks_the_t
         page.click("#send")
         expect(page.locator("#pose")).to_contain_text("x 2.0 m", timeout=60_000)
         expect(trail).to_have_count(2)  # two pieces, not one line across the restart
+        # The executor restarts (the robot's odometry may start anywhere then): the
+        # trail breaks again, though the panel's connection stayed up and the pose did
+        # not jump.
+        kill_service(stack, "executor")
+        executor = page.locator('#parts li[data-part="executor"]')
+        expect(executor).to_have_class(re.compile(r"\boffline\b"), timeout=30_000)
+        expect(executor).to_have_class(re.compile(r"\bonline\b"), timeout=60_000)
+        type_command(page, "go forward one meter")
+        page.click("#send")
+        expect(page.locator("#pose")).to_contain_text("x 3.0 m", timeout=60_000)
+        expect(trail).to_have_count(3)
         page.locator("#map").scroll_into_view_if_needed()
         shot(page, "6-trail-after-restart", screen)
 

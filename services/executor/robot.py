@@ -23,6 +23,7 @@ import io
 import logging
 import math
 import time
+import uuid
 from collections.abc import Callable
 
 import msgspec
@@ -722,6 +723,7 @@ class PoseRelay:
         self._bus = bus
         self._key = key
         self._sent = -POSE_EVERY
+        self._run = uuid.uuid4().hex[:8]
         link.on_pose(self._on_pose)
 
     def _on_pose(self, pose: Pose2D) -> None:
@@ -729,7 +731,9 @@ class PoseRelay:
         if now - self._sent >= POSE_EVERY:
             self._sent = now
             self._bus.publish(
-                self._key, RobotPose(x=pose.x, y=pose.y, yaw=pose.yaw), superseded=True
+                self._key,
+                RobotPose(x=pose.x, y=pose.y, yaw=pose.yaw, run=self._run),
+                superseded=True,
             )
 
 

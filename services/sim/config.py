@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from shared.process import add_bus_arguments
+from shared.process import add_bus_arguments, positive_float
 from shared.robot import TransportKind
 from shared.robot_options import add_robot_arguments, robot_options
 from shared.ros2 import CameraType, CmdVelType, RosDistro
@@ -18,16 +18,6 @@ def _bounds(text: str) -> Bounds:
         return Bounds.parse(text)
     except ValueError as exc:
         raise argparse.ArgumentTypeError(str(exc)) from exc
-
-
-def _positive(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        value = 0.0
-    if not 0 < value < float("inf"):
-        raise argparse.ArgumentTypeError(f"{text!r} is not a positive number")
-    return value
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -49,7 +39,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument(
         "--time-scale",
-        type=_positive,
+        type=positive_float,
         default=1.0,
         metavar="FACTOR",
         help="simulated seconds per wall second (default: 1)",
@@ -62,10 +52,10 @@ def build_parser() -> argparse.ArgumentParser:
         help="goals outside this rectangle are rejected (default: -10,-10,10,10)",
     )
     parser.add_argument(
-        "--max-linear", type=_positive, default=0.5, metavar="M/S", help="default: 0.5"
+        "--max-linear", type=positive_float, default=0.5, metavar="M/S", help="default: 0.5"
     )
     parser.add_argument(
-        "--max-angular", type=_positive, default=1.5, metavar="RAD/S", help="default: 1.5"
+        "--max-angular", type=positive_float, default=1.5, metavar="RAD/S", help="default: 1.5"
     )
     return parser
 

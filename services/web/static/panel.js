@@ -27,6 +27,7 @@ const view = {
   mic: null, // the open microphone, see startMic
   pose: null, // the robot's last pose
   trail: [], // its recent poses
+  poseRun: undefined, // the executor run the last pose came from (RobotPose.run)
   places: [], // the named places of the orders
   map: null, // the robot's own map, when it has one
   startedAt: {}, // order id -> the pose where it started (a relative goal is from there)
@@ -180,6 +181,7 @@ function selectRobot(name) {
   view.labels = null;
   view.pose = null;
   view.trail = [];
+  view.poseRun = undefined;
   view.map = null;
   view.startedAt = {};
   view.finished = null;
@@ -235,9 +237,11 @@ function showPose(pose) {
   $("pose").textContent = `x ${pose.x.toFixed(1)} m, y ${pose.y.toFixed(1)} m, facing ${degrees}°`;
   view.pose = { x: pose.x, y: pose.y, yaw: pose.yaw };
   const last = view.trail[view.trail.length - 1];
-  // A jump no drive makes between two poses (a restarted robot, a relocalised one) breaks
-  // the trail: a straight line across it would be a path never taken.
-  if (last && Math.hypot(last.x - pose.x, last.y - pose.y) > JUMP) view.trail.push(null);
+  // A restarted executor, or a jump no drive makes between two poses (a relocalised
+  // robot), breaks the trail: a straight line across it would be a path never taken.
+  const restarted = view.poseRun !== undefined && pose.run !== view.poseRun;
+  view.poseRun = pose.run;
+  if (last && (restarted || Math.hypot(last.x - pose.x, last.y - pose.y) > JUMP)) view.trail.push(null);
   if (!last || Math.hypot(last.x - pose.x, last.y - pose.y) > 0.02) view.trail.push(view.pose);
   if (view.trail.length > TRAIL) view.trail.splice(0, view.trail.length - TRAIL);
   redraw();
