@@ -13,7 +13,7 @@ from pathlib import Path
 from harness.client import Client, client_wait_ready
 from harness.wait import async_wait_until
 from services.executor.runner import SUPERVISOR_LOST
-from services.supervisor.service import SETTLE
+from services.supervisor.robot import SETTLE
 from shared.errors import BusError
 from shared.keys import RobotKeys, RobotNames
 from shared.messages import (
