@@ -16,7 +16,7 @@ import pytest
 
 from harness.client import Client, client_wait_ready
 from harness.wait import async_wait_until
-from services.executor.robot import UNSUPERVISED
+from services.executor.fence import UNSUPERVISED
 from services.executor.runner import SUPERVISOR_LOST
 from shared.keys import RobotKeys, RobotNames
 from shared.messages import Done, Order, OrderStatus, Resume, TargetPose

@@ -13,7 +13,8 @@ from .builtin import builtin_executors
 from .config import ExecutorConfig
 from .framework import Bindings, load_binding, load_bindings_file
 from .photos import PhotoShelf
-from .robot import MapRelay, PoseRelay, RobotLink
+from .relays import MapRelay, PoseRelay
+from .robot import RobotLink
 from .runner import ExecutorService
 
 _LOGGER = logging.getLogger(__name__)

@@ -23,7 +23,7 @@ from shared.errors import VoicectlError
 from shared.messages import Order, Progress
 
 if TYPE_CHECKING:
-    from .robot import OrderRobot
+    from .fence import OrderRobot
 
 
 class ExecutionContext:

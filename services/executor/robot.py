@@ -4,9 +4,9 @@
 robot's topics take from what the robot's graph announces, learns the ROS distribution
 from a get_result reply, and does the navigation and stop work, through zenoh-bridge-ros2dds
 or rmw_zenoh alike (shared/robot/: Nav2 through the seam's action client, the stop through
-its stop). Each order gets an `OrderRobot`, a handle onto the link that is revoked when the
-order ends, so that an executor that outlives its order can never move the robot again.
-`PoseRelay` publishes the pose for voicectl's own panels.
+its stop). Each order gets an `OrderRobot` (fence.py), a handle onto the link that is
+revoked when the order ends, so that an executor that outlives its order can never move the
+robot again; relays.py publishes the pose and the map for voicectl's own panels.
 
 Every velocity the executor publishes goes through `RobotLink.drive`, which holds it to
 the robot's `SpeedLimits` (top speeds, and how fast it may speed up), whatever an order
@@ -17,24 +17,17 @@ configured with, on the robot.
 from __future__ import annotations
 
 import asyncio
-import base64
 import contextlib
-import io
 import logging
 import math
 import time
-import uuid
 from collections.abc import Callable
 
 import msgspec
-import numpy as np
-from PIL import Image as PilImage
 
-from shared.bus import Bus
 from shared.errors import BusError, OrderFailed
 from shared.geometry import compose, map_cell
-from shared.keys import RobotNames
-from shared.messages import RobotMap, RobotPose, TargetPose
+from shared.messages import TargetPose
 from shared.robot import Interface, RobotTransport, Role
 from shared.robot.action import ActionClient
 from shared.robot.stop import RobotStop
@@ -62,10 +55,6 @@ from shared.throttle import Throttled
 
 _LOGGER = logging.getLogger(__name__)
 
-POSE_EVERY = 0.5
-"""Seconds between two poses published for panels."""
-MAP_EVERY = 2.0
-"""Seconds between two maps relayed for panels (a SLAM map changes about once a second)."""
 OCCUPANCY_GRID = "nav_msgs/msg/OccupancyGrid"
 MAP_WAIT = 2.5
 """Seconds a refused goal waits for the robot's map to say why: a latched map comes at
@@ -606,193 +595,3 @@ def _raise_unless_succeeded(result: NavigateResult, distro: RosDistro) -> None:
     if result.error_msg:
         detail += f"{': ' if not detail else ', '}{result.error_msg}"
     raise OrderFailed(f"navigation ended {status.name}{detail}")
-
-
-UNSUPERVISED = "supervisor lost: the robot takes no command while no one could STOP it"
-"""Why an order may not command the robot while the supervisor is lost."""
-LATCHED = "the emergency stop is on: the robot takes no command until it is released"
-
-
-class OrderRobot:
-    """The robot as one order sees it. Calls go to the process's `RobotLink` until the
-    order ends or is abandoned; then the handle is revoked, and every call raises
-    `RobotRevoked` and sends nothing.
-
-    The handle also notes whether the order has commanded the robot (anything but
-    reading it or stopping it), and refuses commands while `unsupervised()` says no one
-    could STOP the robot: they raise OrderFailed and send nothing."""
-
-    def __init__(
-        self, link: RobotLink, order_id: str, unsupervised: Callable[[], bool] = lambda: False
-    ) -> None:
-        self._link = link
-        self._order_id = order_id
-        self._revoked = False
-        self._unsupervised = unsupervised
-        self.commanded = False
-        """Whether the order has moved the robot, navigated, or sent it anything else."""
-        self.problems: list[str] = []
-        """What the robot did not confirm while this order ran (a refused cancel)."""
-
-    def revoke(self) -> None:
-        """End the handle; a plain flag, so any thread may do it (the emergency stop's)."""
-        self._revoked = True
-
-    @property
-    def revoked(self) -> bool:
-        return self._revoked
-
-    def _live(self) -> RobotLink:
-        if self._revoked:
-            raise RobotRevoked(f"order '{self._order_id}' has ended: its robot handle is revoked")
-        return self._link
-
-    def _command(self) -> RobotLink:
-        """The link, for a call that may move the robot."""
-        link = self._live()
-        if link.latched:
-            raise RobotRevoked(LATCHED)
-        if self._unsupervised():
-            raise OrderFailed(UNSUPERVISED)
-        self.commanded = True
-        return link
-
-    @property
-    def pose(self) -> Pose2D | None:
-        """The latest odometry pose, None until the first."""
-        return self._link.pose
-
-    @property
-    def names(self) -> RobotNames:
-        """The robot's ROS names; `names.topic("name")` is a name under its namespace."""
-        return self._link.names
-
-    @property
-    def codec(self) -> Ros2Codec:
-        return self._link.codec
-
-    def drive(self, linear_x: float, angular_z: float) -> None:
-        """Publish one velocity command on the robot's cmd_vel (a zero one is a stop,
-        always allowed, even once the handle is revoked)."""
-        if linear_x == 0.0 and angular_z == 0.0:
-            self._link.drive(0.0, 0.0)  # even revoked: an executor's clean-up may stop
-            return
-        self._command().drive(linear_x, angular_z)
-
-    async def next_pose(self, timeout: float = 5.0) -> Pose2D:
-        return await self._live().next_pose(timeout)
-
-    async def next_image(self, timeout: float = 5.0) -> Image | CompressedImage:
-        return await self._live().next_image(timeout)
-
-    async def navigate(
-        self, target: TargetPose, on_feedback: Callable[[Pose2D, float], None]
-    ) -> None:
-        await self._command().navigate(target, on_feedback, self.problems.append)
-
-    def publish(self, name: str, ros_type: str, payload: bytes) -> None:
-        """Publish CDR bytes on any other topic of the robot (`names.topic("name")`, of
-        ROS type `ros_type`): any topic may move it. A velocity on cmd_vel goes as `drive`
-        sends it, held to the speed limits (OrderFailed if it cannot be read)."""
-        link = self._command()
-        if name != link.names.cmd_vel:
-            link.transport.publish(name, ros_type, payload)
-            return
-        kind = CmdVelType.of(ros_type)
-        try:
-            if kind is None:
-                raise CdrError(f"{ros_type} is not a Twist or a TwistStamped")
-            linear_x, angular_z = link.codec.read_velocity(kind, payload)
-        except CdrError as exc:
-            raise OrderFailed(
-                f"a velocity on '{name}' must be one the executor can read, to hold it to "
-                f"the speed limits: {exc}"
-            ) from exc
-        link.drive(linear_x, angular_z)
-
-    async def call(self, name: str, service_type: str, request: bytes, timeout: float) -> bytes:
-        """Call any other service of the robot with CDR bytes; its reply's bytes."""
-        return await self._command().transport.call(name, service_type, request, timeout)
-
-
-class PoseRelay:
-    """The robot's pose for voicectl's panels (`voice/<robot>/robot/pose`), from the
-    link's odometry, at most every `POSE_EVERY` seconds: the panel's, not the robot's."""
-
-    def __init__(self, bus: Bus, key: str, link: RobotLink) -> None:
-        self._bus = bus
-        self._key = key
-        self._sent = -POSE_EVERY
-        self._run = uuid.uuid4().hex[:8]
-        link.on_pose(self._on_pose)
-
-    def _on_pose(self, pose: Pose2D) -> None:
-        now = asyncio.get_running_loop().time()
-        if now - self._sent >= POSE_EVERY:
-            self._sent = now
-            self._bus.publish(
-                self._key,
-                RobotPose(x=pose.x, y=pose.y, yaw=pose.yaw, run=self._run),
-                superseded=True,
-            )
-
-
-class MapRelay:
-    """The robot's own map for voicectl's panels (`voice/<robot>/robot/map`): its occupancy
-    grid, subscribed on the robot only while someone listens to the relay (a map crosses
-    the robot's link only for a panel that shows it), at most every `MAP_EVERY` seconds,
-    as a PNG, kept for panels that open later."""
-
-    def __init__(self, bus: Bus, key: str, link: RobotLink) -> None:
-        self._link = link
-        self._latest = bus.latest(key)
-        self._unsubscribe: Callable[[], None] | None = None
-        self._sent = -MAP_EVERY
-        self._encoding: asyncio.Task[None] | None = None
-        bus.watch_heard(key, self._on_heard)
-
-    def _on_heard(self, heard: bool) -> None:
-        if heard and self._unsubscribe is None:
-            link = self._link
-            self._unsubscribe = link.transport.subscribe(
-                link.names.map,
-                OCCUPANCY_GRID,
-                link.codec.read_occupancy_grid,
-                self._on_map,
-                latched=True,
-            )
-        elif not heard and self._unsubscribe is not None:
-            self._unsubscribe()
-            self._unsubscribe = None
-
-    def _on_map(self, grid: OccupancyGrid) -> None:
-        loop = asyncio.get_running_loop()
-        busy = self._encoding is not None and not self._encoding.done()
-        if busy or loop.time() - self._sent < MAP_EVERY:
-            return
-        self._sent = loop.time()
-        self._encoding = loop.create_task(self._relay(grid))
-
-    async def _relay(self, grid: OccupancyGrid) -> None:
-        png = await asyncio.to_thread(map_png, grid)  # a large map takes a while
-        origin = TargetPose(frame=grid.frame, x=grid.origin.x, y=grid.origin.y, yaw=grid.origin.yaw)
-        self._latest.publish(
-            RobotMap(
-                width=grid.width,
-                height=grid.height,
-                resolution=grid.resolution,
-                origin=origin,
-                png=base64.b64encode(png).decode(),
-            )
-        )
-
-
-def map_png(grid: OccupancyGrid) -> bytes:
-    """An occupancy grid as an 8-bit grey PNG in map_server's colours: occupied black (0),
-    free white (254), unknown grey (205), and shades between; row 0 first."""
-    cells = np.frombuffer(grid.cells, dtype=np.int8).astype(np.int16)
-    grey = np.where(cells < 0, 205, 254 - np.clip(cells, 0, 100) * 254 // 100).astype(np.uint8)
-    image = PilImage.fromarray(grey.reshape(grid.height, grid.width), mode="L")
-    encoded = io.BytesIO()
-    image.save(encoded, format="PNG", optimize=True)
-    return encoded.getvalue()

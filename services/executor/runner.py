@@ -41,8 +41,9 @@ from shared.messages import (
 )
 from shared.process import Service, forever
 
+from .fence import OrderRobot
 from .framework import Bindings, ExecutionContext, Executor, ParamsMismatch, order_params
-from .robot import OrderRobot, RobotLink
+from .robot import RobotLink
 from .watchdog import LoopWatchdog
 
 _LOGGER = logging.getLogger(__name__)
