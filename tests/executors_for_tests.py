@@ -9,9 +9,7 @@ from typing import Annotated
 
 import msgspec
 
-from services.executor import ExecutionContext, Executor
-from shared.errors import OrderFailed
-from shared.messages import Order, TargetPose
+from voicectl.executor import ExecutionContext, Executor, Order, OrderFailed, TargetPose
 
 
 class Speed(msgspec.Struct):
