@@ -269,13 +269,13 @@ def test_say_submits_only_what_was_wholly_understood(stack: Stack) -> None:
     assert half.returncode == 1
     assert json.loads(half.stdout)["order_ids"] == []
     assert half.stderr.splitlines() == [
-        "voicectl say: 'dance': no order matches",
-        "voicectl say: nothing submitted (--partial submits what was understood)",
+        "voicectl say: nothing submitted (--partial submits what was understood): "
+        "'dance': no order matches",
     ]
     partial = stack.voicectl(
         "say", "--connect", stack.router, "--partial", "multiply primes then dance"
     )
-    assert partial.returncode == 1
+    assert partial.returncode == 0, partial.stderr  # it submitted what was understood
     assert len(json.loads(partial.stdout)["order_ids"]) == 1
 
 
