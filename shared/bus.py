@@ -361,14 +361,18 @@ class Bus:
             }
         if complete:
             qos.update(_COMPLETE)
-        self._session.get(
-            key,
-            zenoh.handlers.Callback(on_reply, on_done, indirect=False),
-            payload=payload,
-            attachment=attachment,
-            timeout=timeout,
-            **qos,
-        )
+        try:
+            self._session.get(
+                key,
+                zenoh.handlers.Callback(on_reply, on_done, indirect=False),
+                payload=payload,
+                attachment=attachment,
+                timeout=timeout,
+                **qos,
+            )
+        except zenoh.ZError as exc:  # the session is closing: no one can answer now
+            future.cancel()  # on_done's late "no answer" is dropped, not left unretrieved
+            raise BusError(f"{key}: {_zenoh_reason(exc)}") from None
         return await future
 
     def query_and_forget(

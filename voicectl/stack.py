@@ -52,9 +52,10 @@ class Child:
     def start(self) -> None:
         self._close_output()
         # Own session: a Ctrl-C in the terminal reaches `voicectl up` alone, which then
-        # stops the children in order (web first, router last). VOICECTL_PARENT makes each
-        # service end with `voicectl up` even when it is killed (shared.process): set by the
-        # child itself, since a fork of this threaded process may run nothing before exec.
+        # stops the children (the services together, the router last). VOICECTL_PARENT
+        # makes each service end with `voicectl up` even when it is killed
+        # (shared.process): set by the child itself, since a fork of this threaded process
+        # may run nothing before exec.
         self.process = subprocess.Popen(
             [sys.executable, "-m", *self.argv],
             stdout=subprocess.PIPE,
@@ -67,20 +68,23 @@ class Child:
         )
         self._pump.start()
 
-    def stop(self) -> int | None:
+    def terminate(self) -> None:
+        """Ask it to stop (SIGTERM), without waiting."""
+        if self.process is not None and self.process.poll() is None:
+            self.process.send_signal(signal.SIGTERM)
+
+    def finish(self, deadline: float) -> None:
+        """Wait for it to have stopped until `deadline` (monotonic), then kill it."""
         process = self.process
         if process is None:
-            return None
-        if process.poll() is None:
-            process.send_signal(signal.SIGTERM)
-            try:
-                process.wait(timeout=STOP_TIMEOUT)
-            except subprocess.TimeoutExpired:
-                print(f"voicectl up: {self.name} did not stop in {STOP_TIMEOUT:g} s; killing")
-                process.kill()
-                process.wait()
+            return
+        try:
+            process.wait(timeout=max(0.0, deadline - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            print(f"voicectl up: {self.name} did not stop in {STOP_TIMEOUT:g} s; killing")
+            process.kill()
+            process.wait()
         self._close_output()
-        return process.returncode
 
     def _close_output(self) -> None:
         if self._pump is not None:
@@ -88,6 +92,33 @@ class Child:
             self._pump = None
         if self.process is not None and self.process.stdout is not None:
             self.process.stdout.close()
+
+
+STOP_STAGES = (
+    frozenset({"supervisor", "stt", "converter", "listen"}),
+    frozenset({"sim"}),
+    frozenset({"router"}),
+)
+"""Who stops after whom on Ctrl-C; any other service (the panel, the executor) stops
+first. The supervisor outlives the executor to record how the running order ended, the
+robot outlives the executor that cancels its goal, the router outlives everyone."""
+
+
+def stop_all(children: list[Child]) -> None:
+    """Stop the services stage by stage (`STOP_STAGES`), those of a stage together, each
+    given `STOP_TIMEOUT` before it is killed: one at a time, slow ones made Ctrl-C wait for
+    the sum of their delays."""
+
+    def stage(child: Child) -> int:
+        return next((k + 1 for k, names in enumerate(STOP_STAGES) if child.name in names), 0)
+
+    for current in range(len(STOP_STAGES) + 1):
+        together = [child for child in reversed(children) if stage(child) == current]
+        for child in together:
+            child.terminate()
+        deadline = time.monotonic() + STOP_TIMEOUT
+        for child in together:
+            child.finish(deadline)
 
 
 def port_in_use(host: str, port: int) -> bool:
@@ -246,7 +277,6 @@ def run_stack(
                     exit_code = 1
                     break
         finally:
-            for child in reversed(started):
-                child.stop()
+            stop_all(started)
             print("voicectl up: stopped", flush=True)
     return exit_code
