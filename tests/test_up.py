@@ -4,6 +4,7 @@ a second stack does not touch the first one's data."""
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import os
 import signal
@@ -12,7 +13,9 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -125,16 +128,10 @@ def test_ctrl_c_during_start_up_stops_everything(tmp_path: Path) -> None:
         assert process.stdout is not None
         reader = threading.Thread(target=lambda: lines.extend(process.stdout or ()), daemon=True)
         reader.start()
-        try:
+        with interrupted(process, reader):
             # A child has said something: the stack is starting, and not ready yet.
             wait_until(lambda: any(" | " in line for line in lines), 60.0, "a child's output")
             assert not any("voicectl up: ready" in line for line in lines)
-            process.send_signal(signal.SIGINT)
-            process.wait(timeout=30)
-            reader.join(timeout=10)
-        finally:
-            if process.poll() is None:
-                os.killpg(process.pid, signal.SIGKILL)
     output = "".join(lines)
     assert process.returncode == 0, output
     assert "voicectl up: stopped while starting; stopping the stack" in output
@@ -271,18 +268,13 @@ def test_the_login_address_goes_to_a_terminal_never_to_a_log(tmp_path: Path, out
     reader = threading.Thread(target=read, daemon=True)
     reader.start()
     try:
-        wait_until(
-            lambda: "voicectl up: ready" in "".join(said) or process.poll() is not None,
-            60.0,
-            "the stack to start",
-        )
-        process.send_signal(signal.SIGINT)
-        process.wait(timeout=30)
-        reader.join(timeout=10)
+        with interrupted(process, reader):
+            wait_until(
+                lambda: "voicectl up: ready" in "".join(said) or process.poll() is not None,
+                60.0,
+                "the stack to start",
+            )
     finally:
-        if process.poll() is None:
-            os.killpg(process.pid, signal.SIGKILL)
-            process.wait()
         os.close(reading)
     lines = "".join(said).replace("\r\n", "\n").splitlines()
     assert process.returncode == 0, lines
@@ -297,3 +289,18 @@ def test_the_login_address_goes_to_a_terminal_never_to_a_log(tmp_path: Path, out
             in lines[lines.index(f"voicectl up: panel on {address}") + 1]
         )
         assert not [line for line in lines if token in line]
+
+
+@contextlib.contextmanager
+def interrupted(process: subprocess.Popen[Any], reader: threading.Thread) -> Iterator[None]:
+    """Ctrl-C `process` (as a terminal does) once the block has run, and wait for it and
+    its output; its whole group killed if it is still there, on failure too."""
+    try:
+        yield
+        process.send_signal(signal.SIGINT)
+        process.wait(timeout=30)
+        reader.join(timeout=10)
+    finally:
+        if process.poll() is None:
+            os.killpg(process.pid, signal.SIGKILL)
+            process.wait()
