@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import concurrent.futures
 import os
+import re
 import shutil
 import wave
 from collections.abc import Iterator
@@ -209,6 +210,10 @@ def test_queue_reorder_cancel_and_stop(stack: Stack, tmp_path: Path) -> None:
         expect(page.locator("#current")).to_contain_text("wait 2 s")
 
 
+SAID = re.compile(r"^\s*turn left (then|and) reach kitchen\s*$")
+SAID_IN = re.compile(r"turn left (then|and) reach kitchen")
+
+
 def test_speak_a_command_and_a_non_command(stack: Stack, speech: Speak, tmp_path: Path) -> None:
     from playwright.sync_api import expect
 
@@ -221,14 +226,16 @@ def test_speak_a_command_and_a_non_command(stack: Stack, speech: Speak, tmp_path
         expect(page.locator("#stt-status")).to_contain_text("listening for")
         page.click("#mic")
         expect(page.locator("#mic")).to_have_attribute("aria-pressed", "true")
-        expect(page.locator("#heard")).to_have_text("turn left then reach kitchen")
+        # "then" and "and" join the same two orders; which one the grammar ear picks from
+        # this voice varies with how Chromium's fake microphone paces the file on a busy machine
+        expect(page.locator("#heard")).to_have_text(SAID)
         expect(page.locator("#heard")).to_have_class("heard final")
         expect(page.locator("#staged li .what")).to_have_text(["turn left", "reach kitchen"])
         # what each ear heard, and why the orders are these
         ears = page.locator("#ears li")
         expect(ears).to_have_count(3)
         expect(ears.nth(0)).to_contain_text("grammar")
-        expect(ears.nth(0)).to_contain_text("turn left then reach kitchen")
+        expect(ears.nth(0)).to_contain_text(SAID_IN)
         expect(ears.nth(1)).to_contain_text("moonshine")
         expect(ears.nth(1)).to_contain_text("turn left; reach kitchen")
         expect(ears.nth(2)).to_contain_text("both heard")
