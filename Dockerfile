@@ -110,7 +110,7 @@ USER voicectl
 WORKDIR /home/voicectl
 # Moonshine's model, prepared for onnxruntime once here (services/stt/moonshine.py), not at
 # every start of a container.
-RUN python3 -c "from services.stt.moonshine import prepare, weights_dir; \
-from shared.config import cache_dir; prepare(weights_dir(), cache_dir())"
+RUN python3 -c "from voicectl.services.stt.moonshine import prepare, weights_dir; \
+from voicectl.shared.config import cache_dir; prepare(weights_dir(), cache_dir())"
 ENTRYPOINT ["voicectl"]
 CMD ["--help"]

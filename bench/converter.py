@@ -23,9 +23,9 @@ from pathlib import Path
 from hassil import Intents, recognize
 
 from bench.orders_gen import UNRELATED, generate, near_misses
-from services.converter.grammar import build_grammar
-from services.converter.orders import OrderSet
-from services.converter.parser import Parser
+from voicectl.services.converter.grammar import build_grammar
+from voicectl.services.converter.orders import OrderSet
+from voicectl.services.converter.parser import Parser
 
 REPO = Path(__file__).resolve().parents[1]
 

@@ -33,10 +33,10 @@ import zenoh
 
 from harness.cross_host import ROBOT, RobotWatch, observer, start_stack
 from harness.netns import LEASE_MS, TwoHosts, impairment_unavailable, unavailable
-from shared.bus import Bus, BusOptions, json_decoder
-from shared.errors import BusError
-from shared.keys import RobotKeys
-from shared.messages import (
+from voicectl.shared.bus import Bus, BusOptions, json_decoder
+from voicectl.shared.errors import BusError
+from voicectl.shared.keys import RobotKeys
+from voicectl.shared.messages import (
     Done,
     EmergencyStop,
     GetHistory,

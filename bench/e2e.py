@@ -48,8 +48,8 @@ import websockets
 from harness.measure import MOTION_WAIT, Robot, cpu_seconds, line, percentile, raw_latency
 from harness.speech_set import Utterance, Voice, speak
 from harness.stack import children, stack_up
-from services.stt.audio import frames, read_wav
-from shared.bus import Bus, BusOptions
+from voicectl.services.stt.audio import frames, read_wav
+from voicectl.shared.bus import Bus, BusOptions
 
 COMMANDS = (
     "turn left",

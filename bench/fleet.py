@@ -35,11 +35,11 @@ from pathlib import Path
 from harness.measure import MOTION_WAIT, Robot, cpu_seconds, line, percentile, raw_latency
 from harness.ports import free_port
 from harness.processes import REPO, rss_mb
-from shared.bus import Bus, BusOptions
-from shared.client import VoicectlClient
-from shared.errors import BusError
-from shared.keys import RobotNames
-from shared.messages import (
+from voicectl.shared.bus import Bus, BusOptions
+from voicectl.shared.client import VoicectlClient
+from voicectl.shared.errors import BusError
+from voicectl.shared.keys import RobotNames
+from voicectl.shared.messages import (
     CancelAll,
     GetState,
     Order,

@@ -36,12 +36,12 @@ from harness.measure import Robot, line
 from harness.processes import REPO
 from harness.speech_set import Voice, pink_noise, speak
 from harness.stack import stack_up
-from services.stt.audio import read_wav
-from shared.bus import Bus, BusOptions
-from shared.client import VoicectlClient
-from shared.config import cache_dir
-from shared.messages import GetState, Release, StateReply
-from shared.tts import load_voice
+from voicectl.services.stt.audio import read_wav
+from voicectl.shared.bus import Bus, BusOptions
+from voicectl.shared.client import VoicectlClient
+from voicectl.shared.config import cache_dir
+from voicectl.shared.messages import GetState, Release, StateReply
+from voicectl.shared.tts import load_voice
 
 VOICES = [Voice("flite", "slt"), Voice("festival", "cmu_us_slt_arctic_hts")]
 CHUNK = 640

@@ -27,11 +27,11 @@ from pathlib import Path
 
 from harness.processes import REPO, rss_mb
 from harness.speech_set import Voice, generate, speak
-from services.converter.orders import OrderSet
-from services.converter.parser import Parser
-from services.stt.audio import read_wav
-from services.stt.moonshine import Moonshine, prepare, weights_dir
-from shared.config import cache_dir
+from voicectl.services.converter.orders import OrderSet
+from voicectl.services.converter.parser import Parser
+from voicectl.services.stt.audio import read_wav
+from voicectl.services.stt.moonshine import Moonshine, prepare, weights_dir
+from voicectl.shared.config import cache_dir
 
 VARIANTS = {
     "shipped (.ort), 1 thread": ("shipped", 1, True),

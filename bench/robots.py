@@ -15,16 +15,16 @@ from __future__ import annotations
 import argparse
 import asyncio
 
-from services.executor.build import build as build_executor
-from services.executor.build import load_bindings
-from services.executor.config import ExecutorConfig
-from services.sim.build import build as build_sim
-from services.sim.node import SimConfig
-from shared.bus import Bus, BusOptions
-from shared.keys import RobotNames
-from shared.process import Service, serve, setup_logging
-from shared.robot import TransportKind
-from shared.robot_options import RobotOptions
+from voicectl.services.executor.build import build as build_executor
+from voicectl.services.executor.build import load_bindings
+from voicectl.services.executor.config import ExecutorConfig
+from voicectl.services.sim.build import build as build_sim
+from voicectl.services.sim.node import SimConfig
+from voicectl.shared.bus import Bus, BusOptions
+from voicectl.shared.keys import RobotNames
+from voicectl.shared.process import Service, serve, setup_logging
+from voicectl.shared.robot import TransportKind
+from voicectl.shared.robot_options import RobotOptions
 
 
 async def main() -> None:

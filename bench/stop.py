@@ -32,8 +32,8 @@ from harness.measure import percentile
 from harness.ports import free_port
 from harness.processes import Processes
 from harness.stop_rig import CASES, Outcome, StopRig
-from shared.bus import Bus, BusOptions
-from shared.client import VoicectlClient
+from voicectl.shared.bus import Bus, BusOptions
+from voicectl.shared.client import VoicectlClient
 
 
 def raw_put(router: str, rounds: int) -> list[float]:

@@ -39,11 +39,11 @@ from harness.processes import Processes
 from harness.ros2_rig import ROBOT, DdsRobot, dds_robot
 from harness.stop_rig import StopRig, order
 from harness.wait import async_wait_until
-from shared.bus import Bus, BusOptions, json_decoder
-from shared.client import VoicectlClient
-from shared.keys import RobotKeys
-from shared.messages import Order, Release, RobotPose, TargetPose
-from shared.robot import TransportKind
+from voicectl.shared.bus import Bus, BusOptions, json_decoder
+from voicectl.shared.client import VoicectlClient
+from voicectl.shared.keys import RobotKeys
+from voicectl.shared.messages import Order, Release, RobotPose, TargetPose
+from voicectl.shared.robot import TransportKind
 
 CASES = {"navigating": "healthy", "blocked-loop": "blocked-loop"}
 """This bench's cases, by the name harness/stop_rig.py gives them."""

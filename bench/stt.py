@@ -49,7 +49,7 @@ from harness.measure import cpu_seconds, percentile, raw_latency
 from harness.ports import free_port
 from harness.processes import REPO, rss_mb
 from harness.speech_set import LEAD_SILENCE, Utterance, generate
-from services.converter.decide import (
+from voicectl.services.converter.decide import (
     SHIPPED,
     Decision,
     Rule,
@@ -58,19 +58,20 @@ from services.converter.decide import (
     grammar_reading,
     readings,
 )
-from services.converter.grammar import build_grammar
-from services.converter.orders import OrderSet
-from services.converter.parser import Parser
-from services.stt import sphinx
-from services.stt.audio import NoiseFloor, Suppressor, frames, read_wav
-from services.stt.config import add_engine_arguments, engine_options
-from services.stt.engine import Engine, EngineOptions, Final, finals, load_engine
-from services.stt.judge import OFF
-from services.stt.service import transcript_of
-from services.stt.sphinx import SUPPRESSION, PocketsphinxEngine
-from shared.bus import Bus, BusOptions, json_decoder
-from shared.keys import RobotKeys
-from shared.messages import (
+from voicectl.services.converter.grammar import build_grammar
+from voicectl.services.converter.orders import OrderSet
+from voicectl.services.converter.parser import Parser
+from voicectl.services.stt import sphinx
+from voicectl.services.stt.audio import NoiseFloor, Suppressor, frames, read_wav
+from voicectl.services.stt.config import add_engine_arguments, engine_options
+from voicectl.services.stt.engine import Engine, EngineOptions, Final, finals
+from voicectl.services.stt.judge import OFF
+from voicectl.services.stt.load import load_engine
+from voicectl.services.stt.service import transcript_of
+from voicectl.services.stt.sphinx import SUPPRESSION, PocketsphinxEngine
+from voicectl.shared.bus import Bus, BusOptions, json_decoder
+from voicectl.shared.keys import RobotKeys
+from voicectl.shared.messages import (
     AudioChunk,
     AudioStart,
     AudioStop,
@@ -460,8 +461,8 @@ async def through_service(
 
     engine = engine_options(args).argv()
     try:
-        start("services.router", "--listen", router)
-        start("services.converter", "--connect", router, "--orders", str(args.orders))
+        start("voicectl.services.router", "--listen", router)
+        start("voicectl.services.converter", "--connect", router, "--orders", str(args.orders))
         loop = asyncio.get_running_loop()
         with Bus.open(BusOptions(connect=[router]), loop) as bus:
             finals: dict[str, tuple[float, Transcript]] = {}
@@ -487,7 +488,7 @@ async def through_service(
 
             bus.subscribe(KEYS.stt_status, json_decoder(SttStatus), on_status, history=True)
             launched = time.monotonic()
-            stt = start("services.stt", "--connect", router, *engine)
+            stt = start("voicectl.services.stt", "--connect", router, *engine)
             await asyncio.wait_for(ready.wait(), 120)
             print(
                 f"{args.engine}: service start to grammar in use "

@@ -26,10 +26,10 @@ import zenoh
 from harness.measure import cpu_seconds, percentile
 from harness.ports import free_port
 from harness.processes import REPO
-from shared.bus import Bus, BusOptions, json_decoder
-from shared.errors import BusError
-from shared.keys import RobotKeys
-from shared.messages import (
+from voicectl.shared.bus import Bus, BusOptions, json_decoder
+from voicectl.shared.errors import BusError
+from voicectl.shared.keys import RobotKeys
+from voicectl.shared.messages import (
     Accepted,
     ControlRequest,
     Done,
@@ -294,12 +294,14 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         python = sys.executable
         children = [
-            subprocess.Popen([python, "-m", "services.router", "--listen", router], cwd=REPO),
+            subprocess.Popen(
+                [python, "-m", "voicectl.services.router", "--listen", router], cwd=REPO
+            ),
             subprocess.Popen(
                 [
                     python,
                     "-m",
-                    "services.supervisor",
+                    "voicectl.services.supervisor",
                     "--connect",
                     router,
                     "--db",

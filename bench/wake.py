@@ -42,8 +42,8 @@ from harness.speech_set import (
     real_recordings,
     speak,
 )
-from services.listen.listener import CHECK_BEFORE
-from services.listen.spotter import (
+from voicectl.services.listen.listener import CHECK_BEFORE
+from voicectl.services.listen.spotter import (
     STOP_LOOP_PENALTY,
     STOP_THRESHOLD,
     WAKE_LOOP_PENALTY,
@@ -52,9 +52,10 @@ from services.listen.spotter import (
     Spotted,
     Spotter,
 )
-from services.stt.audio import read_wav
-from services.stt.engine import Engine, EngineOptions, load_engine
-from shared.config import cache_dir
+from voicectl.services.stt.audio import read_wav
+from voicectl.services.stt.engine import Engine, EngineOptions
+from voicectl.services.stt.load import load_engine
+from voicectl.shared.config import cache_dir
 
 PIECE = 640
 COMMANDS = {

@@ -8,11 +8,11 @@ import uuid
 from collections.abc import Callable
 
 from harness.wait import async_wait_until
-from shared.bus import Bus
-from shared.client import VoicectlClient
-from shared.errors import BusError
-from shared.keys import RmwZenohKeys, RobotKeys
-from shared.messages import (
+from voicectl.shared.bus import Bus
+from voicectl.shared.client import VoicectlClient
+from voicectl.shared.errors import BusError
+from voicectl.shared.keys import RmwZenohKeys, RobotKeys
+from voicectl.shared.messages import (
     GetHistory,
     GetState,
     HistoryPage,
@@ -25,8 +25,8 @@ from shared.messages import (
     Submitted,
     SupervisorReply,
 )
-from shared.robot import TransportKind
-from shared.ros2 import RosDistro, dds_type_name, type_hash
+from voicectl.shared.robot import TransportKind
+from voicectl.shared.ros2 import RosDistro, dds_type_name, type_hash
 
 STARTING = 45.0
 """Seconds a service started by a test has to come up: a bound, not a wait (a few on an

@@ -9,9 +9,9 @@ import time
 from collections.abc import Callable
 from pathlib import Path
 
-from shared.bus import Bus, BusOptions
-from shared.keys import RobotNames
-from shared.ros2 import Odometry, Ros2Codec
+from voicectl.shared.bus import Bus, BusOptions
+from voicectl.shared.keys import RobotNames
+from voicectl.shared.ros2 import Odometry, Ros2Codec
 
 from .netns import LEASE, LEASE_MS, Side, TwoHosts
 
@@ -25,9 +25,9 @@ def start_stack(rig: TwoHosts, db: Path) -> None:
     rig.start_router("robot")
     local = ("--connect", rig.local_router(), *LEASE)
     supervisor = ("--robot", ROBOT, "--db", str(db))
-    rig.start("host", "services.supervisor", *local, *supervisor, name="supervisor")
-    rig.start("robot", "services.sim", *local, name="sim")
-    rig.start("robot", "services.executor", *local, "--robot", ROBOT, name="executor")
+    rig.start("host", "voicectl.services.supervisor", *local, *supervisor, name="supervisor")
+    rig.start("robot", "voicectl.services.sim", *local, name="sim")
+    rig.start("robot", "voicectl.services.executor", *local, "--robot", ROBOT, name="executor")
 
 
 def observer(rig: TwoHosts, side: Side) -> BusOptions:

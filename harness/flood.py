@@ -18,9 +18,9 @@ import threading
 import msgspec
 import zenoh
 
-from shared.bus import BusOptions
-from shared.keys import RobotKeys
-from shared.messages import ExecutorInfo, OrderFinished, OrderStatus
+from voicectl.shared.bus import BusOptions
+from voicectl.shared.keys import RobotKeys
+from voicectl.shared.messages import ExecutorInfo, OrderFinished, OrderStatus
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -10,9 +10,9 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from shared.bus import Bus
-from shared.keys import RobotNames
-from shared.ros2 import Ros2Codec
+from voicectl.shared.bus import Bus
+from voicectl.shared.keys import RobotNames
+from voicectl.shared.ros2 import Ros2Codec
 
 MOTION_WAIT = 5.0
 """Seconds an order may take to reach the simulator before it counts as lost."""

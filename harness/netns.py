@@ -174,7 +174,7 @@ class TwoHosts:
         args = [arg for endpoint in listen for arg in ("--listen", endpoint)]
         if side == "robot":
             args += ["--connect", self.host_router]
-        return self.start(side, "services.router", *args, *LEASE, name=f"{side}-router")
+        return self.start(side, "voicectl.services.router", *args, *LEASE, name=f"{side}-router")
 
     def log(self, name: str) -> str:
         return self.processes.log(name)

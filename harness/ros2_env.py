@@ -20,7 +20,7 @@ What the wheels leave out, done here in one place:
 Every process of such a venv re-executes itself once at start (a `.pth` in the wheels
 sets `LD_LIBRARY_PATH`); nothing needs sourcing. voicectl itself is not installed in the
 venvs: its runtime dependencies are, and a process runs it from the checkout
-(`python -m services.executor` with the checkout as working directory).
+(`python -m voicectl.services.executor` with the checkout as working directory).
 """
 
 from __future__ import annotations

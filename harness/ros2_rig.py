@@ -28,7 +28,7 @@ from harness.ports import free_port
 from harness.processes import REPO, Processes
 from harness.ros2_env import Ros2Env
 from harness.wait import async_wait_until
-from shared.bus import BusOptions
+from voicectl.shared.bus import BusOptions
 
 ROBOT = "r1"
 WAIT = 60.0
@@ -53,7 +53,7 @@ class DdsRobot:
 
     def start_executor(self) -> None:
         self.executor = self.start_inside(
-            "services.executor",
+            "voicectl.services.executor",
             *("--transport", "ros2", "--robot", ROBOT, "--connect", self.inside),
             *self.executor_args,
             name="executor",
@@ -99,11 +99,11 @@ def dds_robot(
     robot = DdsRobot(env, space, router, inside, processes, executor_args)
     try:
         robot.start_inside("harness.ros2_robot", name="robot")
-        robot.start_inside("services.relay", "--connect", inside, "--debug", name="relay")
+        robot.start_inside("voicectl.services.relay", "--connect", inside, "--debug", name="relay")
         robot.start_executor()
-        processes.start("services.supervisor", "--connect", router, "--robot", ROBOT)
+        processes.start("voicectl.services.supervisor", "--connect", router, "--robot", ROBOT)
         orders = str(REPO / "orders")
-        processes.start("services.converter", "--connect", router, "--orders", orders)
+        processes.start("voicectl.services.converter", "--connect", router, "--orders", orders)
         yield robot
     except BaseException:
         print(robot.dump())

@@ -53,8 +53,8 @@ from typing import Any
 
 import numpy as np
 
-from services.stt.moonshine import runtime
-from shared.config import cache_dir
+from voicectl.services.stt.moonshine import runtime
+from voicectl.shared.config import cache_dir
 
 LEAD_SILENCE = 0.5
 TAIL_SILENCE = 0.6

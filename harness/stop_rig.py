@@ -33,11 +33,11 @@ from pathlib import Path
 from harness.client import robot_key
 from harness.processes import Processes
 from harness.wait import async_wait_until
-from shared.bus import Bus
-from shared.client import VoicectlClient
-from shared.errors import BusError
-from shared.keys import RmwKind, RmwZenohKeys, RobotNames
-from shared.messages import (
+from voicectl.shared.bus import Bus
+from voicectl.shared.client import VoicectlClient
+from voicectl.shared.errors import BusError
+from voicectl.shared.keys import RmwKind, RmwZenohKeys, RobotNames
+from voicectl.shared.messages import (
     GetState,
     Order,
     OrderRecord,
@@ -48,8 +48,8 @@ from shared.messages import (
     Submit,
     TargetPose,
 )
-from shared.robot import TransportKind
-from shared.ros2 import CmdVelType, Odometry, Ros2Codec, ros_type_of
+from voicectl.shared.robot import TransportKind
+from voicectl.shared.ros2 import CmdVelType, Odometry, Ros2Codec, ros_type_of
 
 ROBOT = "r1"
 CODEC = Ros2Codec()
@@ -139,7 +139,7 @@ class StopRig:
         self.db = db
         self.transport = transport
         self.sim = processes.start(
-            "services.sim",
+            "voicectl.services.sim",
             "--connect",
             router,
             "--time-scale",
@@ -161,13 +161,19 @@ class StopRig:
 
     def start_supervisor(self) -> None:
         self.supervisor = self.processes.start(
-            "services.supervisor", "--connect", self.router, "--robot", ROBOT, "--db", str(self.db)
+            "voicectl.services.supervisor",
+            "--connect",
+            self.router,
+            "--robot",
+            ROBOT,
+            "--db",
+            str(self.db),
         )
 
     def start_executor(self) -> None:
         executors = [arg for name in EXECUTORS for arg in ("--executor", name)]
         self.executor = self.processes.start(
-            "services.executor",
+            "voicectl.services.executor",
             "--connect",
             self.router,
             "--robot",

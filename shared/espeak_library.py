@@ -2,7 +2,7 @@
 without Debian's `espeak-ng` binary: run as a child process by shared/tts.py, so that the
 library's global state, a crash or a hang never touches the process that asked.
 
-``python -m shared.espeak_library [--voice NAME] [--rate WPM]`` reads UTF-8 text on stdin
+``python -m voicectl.shared.espeak_library [--voice NAME] [--rate WPM]`` reads UTF-8 text on stdin
 and writes a WAV on stdout, as ``espeak-ng --stdout`` does.
 """
 
@@ -12,7 +12,7 @@ import argparse
 import ctypes
 import sys
 
-from shared.tts import Speech, to_wav
+from voicectl.shared.tts import Speech, to_wav
 
 SYNCHRONOUS = 2
 """espeak_AUDIO_OUTPUT: synthesis returns when done, handing samples to the callback."""
@@ -96,7 +96,9 @@ def _set_voice(lib: ctypes.CDLL, voice: str) -> bool:
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m shared.espeak_library", description=__doc__)
+    parser = argparse.ArgumentParser(
+        prog="python -m voicectl.shared.espeak_library", description=__doc__
+    )
     parser.add_argument("--voice", default=None)
     parser.add_argument("--rate", type=int, default=None)
     args = parser.parse_args(argv)

@@ -184,7 +184,7 @@ def _espeak_ng(voice: str | None, rate: int | None) -> Voice:
         argv = [binary, "--stdout", "-b", "1", *options, "--stdin"]
     elif importlib.util.find_spec("espeakng_loader") is not None:
         library = [*(["--voice", voice] if voice else []), *(["--rate", str(rate)] if rate else [])]
-        argv = [sys.executable, "-m", "shared.espeak_library", *library]
+        argv = [sys.executable, "-m", "voicectl.shared.espeak_library", *library]
     else:
         raise TtsError(not_installed("espeak-ng", ESPEAK_INSTALL))
     return CommandVoice("espeak-ng", lambda text: (argv, text.encode()), ESPEAK_INSTALL)

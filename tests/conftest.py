@@ -22,8 +22,8 @@ from harness.ports import free_port, free_ports
 from harness.processes import Processes
 from harness.speech_set import Voice, real_recordings, speak
 from harness.wait import wait_until
-from shared.bus import BusOptions
-from shared.robot import TransportKind
+from voicectl.shared.bus import BusOptions
+from voicectl.shared.robot import TransportKind
 
 if TYPE_CHECKING:
     from .support import Site

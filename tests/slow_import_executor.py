@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import time
 
-from services.executor.framework import Executor
+from voicectl.services.executor.framework import Executor
 
 time.sleep(60)
 

@@ -14,9 +14,9 @@ from pathlib import Path
 from typing import Any, TypeVar
 
 from harness.wait import async_wait_until
-from shared.bus import Bus, BusOptions, json_decoder
-from shared.keys import RobotKeys, RobotNames
-from shared.messages import (
+from voicectl.shared.bus import Bus, BusOptions, json_decoder
+from voicectl.shared.keys import RobotKeys, RobotNames
+from voicectl.shared.messages import (
     Accepted,
     CancelOrder,
     ControlRequest,
@@ -30,8 +30,8 @@ from shared.messages import (
     Running,
     TargetPose,
 )
-from shared.robot import TransportKind, open_transport
-from shared.ros2 import Odometry, Ros2Codec
+from voicectl.shared.robot import TransportKind, open_transport
+from voicectl.shared.ros2 import Odometry, Ros2Codec
 
 from .conftest import Processes
 
@@ -174,9 +174,9 @@ def start_robot(
     executor_args: tuple[str, ...] = (),
 ) -> None:
     """The simulator and an executor for robot 'r1' that saves photos in `photos`."""
-    processes.start("services.sim", "--connect", router, *sim_args)
+    processes.start("voicectl.services.sim", "--connect", router, *sim_args)
     processes.start(
-        "services.executor",
+        "voicectl.services.executor",
         "--connect",
         router,
         "--robot",
@@ -204,7 +204,7 @@ class Site:
     def start_supervisor(self, *extra: str) -> None:
         """A supervisor serving r1 from the start (other robots once an executor comes)."""
         self.supervisor = self.processes.start(
-            "services.supervisor",
+            "voicectl.services.supervisor",
             *("--connect", self.router, "--db", str(self.db), "--robot", "r1", *extra),
         )
 
@@ -215,7 +215,7 @@ class Site:
 
     def start_executor(self, robot: str = "r1") -> None:
         self.executors[robot] = self.processes.start(
-            "services.executor", "--connect", self.router, "--robot", robot, *EXECUTORS
+            "voicectl.services.executor", "--connect", self.router, "--robot", robot, *EXECUTORS
         )
 
     def kill_executor(self, robot: str = "r1") -> None:

@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import pytest
 
-from shared.answers import outcome_words, proposal_words, short, spoken, stopped_words
-from shared.messages import (
+from voicectl.shared.answers import outcome_words, proposal_words, short, spoken, stopped_words
+from voicectl.shared.messages import (
     Doubt,
     Order,
     OrderRecord,

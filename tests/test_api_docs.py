@@ -9,7 +9,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from services.web.app import Access, Panel
+from voicectl.services.web.app import Access, Panel
 
 from .conftest import REPO, Stack
 

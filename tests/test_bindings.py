@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pytest
 
-from services.executor.framework import BindingError, load_bindings_file, order_params
-from shared.messages import Order
+from voicectl.services.executor.framework import BindingError, load_bindings_file, order_params
+from voicectl.shared.messages import Order
 
 from .conftest import voicectl
 from .executors_for_tests import Greeter, Strict

@@ -10,9 +10,9 @@ from typing import Any
 import json5
 import pytest
 
-from services.executor.config import parse_args
-from shared.keys import RobotNames
-from shared.robot_options import robot_options
+from voicectl.services.executor.config import parse_args
+from voicectl.shared.keys import RobotNames
+from voicectl.shared.robot_options import robot_options
 
 from .conftest import REPO
 from .test_docs import block_after

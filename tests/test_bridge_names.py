@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from shared.keys import BridgeKind, BridgeToken, RobotNames, check_ros_name
+from voicectl.shared.keys import BridgeKind, BridgeToken, RobotNames, check_ros_name
 
 
 def test_remapped_names_become_keys_under_the_namespace() -> None:

@@ -13,9 +13,9 @@ import pytest
 import zenoh
 
 from harness.wait import async_wait_until
-from shared.bus import BusOptions, Pending, json_decoder
-from shared.errors import BusError
-from shared.messages import (
+from voicectl.shared.bus import BusOptions, Pending, json_decoder
+from voicectl.shared.errors import BusError
+from voicectl.shared.messages import (
     Done,
     EmergencyStop,
     ExecutorEvent,
@@ -41,7 +41,7 @@ async def test_publish_subscribe_decodes_and_drops_junk(
 ) -> None:
     received: list[tuple[str, Transcript]] = []
     with (
-        caplog.at_level(logging.WARNING, logger="shared.bus"),
+        caplog.at_level(logging.WARNING, logger="voicectl.shared.bus"),
         joined(router) as sub,
         joined(router) as pub,
     ):

@@ -33,7 +33,7 @@ def test_the_panel_serves_https_with_it(tmp_path: Path, router: str, processes: 
     assert voicectl("cert", "127.0.0.1", "--out", str(tmp_path)).returncode == 0
     port = free_port()
     processes.start(
-        "services.web",
+        "voicectl.services.web",
         *("--port", str(port), "--connect", router),
         *("--certfile", str(tmp_path / "panel.crt"), "--keyfile", str(tmp_path / "panel.key")),
     )

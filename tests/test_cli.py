@@ -12,10 +12,10 @@ from typing import Any
 
 from harness.client import Client, client_wait_ready
 from harness.wait import async_wait_until, wait_until
-from shared.bus import json_decoder
-from shared.keys import RobotKeys, RobotNames
-from shared.messages import Failed, GetState, StateReply, SupervisorReply
-from shared.ros2 import Pose2D, Ros2Codec, RosDistro, new_goal_id
+from voicectl.shared.bus import json_decoder
+from voicectl.shared.keys import RobotKeys, RobotNames
+from voicectl.shared.messages import Failed, GetState, StateReply, SupervisorReply
+from voicectl.shared.ros2 import Pose2D, Ros2Codec, RosDistro, new_goal_id
 
 from .conftest import Processes, voicectl
 from .support import joined
@@ -79,7 +79,9 @@ def test_executor_refuses_a_bad_binding() -> None:
 
 
 async def test_supervisor_answers_junk_and_keeps_serving(router: str, processes: Processes) -> None:
-    supervisor = processes.start("services.supervisor", "--connect", router, "--robot", "r1")
+    supervisor = processes.start(
+        "voicectl.services.supervisor", "--connect", router, "--robot", "r1"
+    )
     key = RobotKeys("r1").supervisor
 
     with joined(router) as bus:
@@ -130,9 +132,9 @@ async def test_a_stop_navigation_refuses_is_said_to_be_unconfirmed(
 ) -> None:
     """`voicectl stop` never reports a stop nothing confirmed as done: exit status 4 and
     one line saying what is in doubt."""
-    processes.start("services.sim", "--connect", router, "--fault", "cancel-rejected")
-    processes.start("services.supervisor", "--connect", router, "--robot", "r1")
-    processes.start("services.executor", "--connect", router, "--robot", "r1")
+    processes.start("voicectl.services.sim", "--connect", router, "--fault", "cancel-rejected")
+    processes.start("voicectl.services.supervisor", "--connect", router, "--robot", "r1")
+    processes.start("voicectl.services.executor", "--connect", router, "--robot", "r1")
 
     def executor_online() -> bool:
         state = voicectl("state", "--robot", "r1", "--connect", router, timeout=30.0)
@@ -161,10 +163,10 @@ async def test_say_tells_a_person_what_was_sent_and_when(router: str, processes:
     """`voicectl say` says in one stderr line what it did not understand, suggesting
     once; what it did not submit is not printed as sent; `state` and `history` give
     every time as an epoch and in ISO 8601."""
-    processes.start("services.sim", "--connect", router, "--time-scale", "10")
-    processes.start("services.converter", "--connect", router)
-    processes.start("services.supervisor", "--connect", router, "--robot", "r1")
-    processes.start("services.executor", "--connect", router, "--robot", "r1")
+    processes.start("voicectl.services.sim", "--connect", router, "--time-scale", "10")
+    processes.start("voicectl.services.converter", "--connect", router)
+    processes.start("voicectl.services.supervisor", "--connect", router, "--robot", "r1")
+    processes.start("voicectl.services.executor", "--connect", router, "--robot", "r1")
     bus = ("--robot", "r1", "--connect", router)
 
     def executor_online() -> bool:
@@ -261,10 +263,10 @@ async def test_cancel_all_says_what_it_cancelled_and_partial_say_exits_0(
 ) -> None:
     """`cancel-all` names what there was to cancel (nothing, the queue, the running
     order); `say --partial` that submitted something exits 0."""
-    processes.start("services.sim", "--connect", router)
-    processes.start("services.converter", "--connect", router)
-    processes.start("services.supervisor", "--connect", router, "--robot", "r1")
-    processes.start("services.executor", "--connect", router, "--robot", "r1")
+    processes.start("voicectl.services.sim", "--connect", router)
+    processes.start("voicectl.services.converter", "--connect", router)
+    processes.start("voicectl.services.supervisor", "--connect", router, "--robot", "r1")
+    processes.start("voicectl.services.executor", "--connect", router, "--robot", "r1")
     bus = ("--robot", "r1", "--connect", router)
 
     def state() -> dict[str, Any]:

@@ -30,9 +30,9 @@ import zenoh
 
 from harness.ports import free_port
 from harness.wait import wait_until
-from shared.bus import BusOptions
 from voicectl.bus_secrets import CONTAINER_DIR, DEFAULT_ROBOT, BusRobot, client_files
 from voicectl.cli import SERVICES, build_parser
+from voicectl.shared.bus import BusOptions
 
 from .conftest import REPO, voicectl
 from .containers import base_image, images_unavailable, skip_unless
@@ -167,7 +167,7 @@ def test_every_required_dependency_runs_on_the_same_machine(profiles: set[str]) 
 def test_each_command_is_valid_for_its_service(name: str) -> None:
     command = VOICECTL[name]["command"]
     assert command[0] in SERVICES
-    module = importlib.import_module(f"services.{command[0]}.__main__")
+    module = importlib.import_module(f"voicectl.services.{command[0]}.__main__")
     module.parse_args(command[1:])  # argparse exits (fails the test) on an unknown flag
 
 
@@ -512,7 +512,7 @@ def test_on_two_machines_the_robots_router_connects_to_the_hosts() -> None:
 def test_vosk_with_a_mounted_model() -> None:
     services = load("compose.yaml", "compose.vosk.yaml", env={"VOSK_MODEL": "small-en"})
     stt = services["stt"]
-    args = importlib.import_module("services.stt.__main__").parse_args(stt["command"][1:])
+    args = importlib.import_module("voicectl.services.stt.__main__").parse_args(stt["command"][1:])
     assert (args.engine, args.vosk_model) == ("vosk", Path("/models/small-en"))
     assert "./models:/models:ro" in stt["volumes"]
     assert stt["build"] == {
@@ -545,7 +545,7 @@ USER_OF = {
 def test_on_the_secured_bus_each_service_has_its_own_credentials(name: str) -> None:
     service = SECURED[name]
     command = service["command"]
-    importlib.import_module(f"services.{command[0]}.__main__").parse_args(command[1:])
+    importlib.import_module(f"voicectl.services.{command[0]}.__main__").parse_args(command[1:])
     assert flag(command, "--config") == f"{CONTAINER_DIR}/{USER_OF[name]}.json5"
     assert "--connect" not in command  # the file names the router (TLS)
     assert f"bus-secrets:{CONTAINER_DIR}:ro" in service["volumes"]

@@ -26,7 +26,7 @@ import pytest
 
 from harness.client import Client, client_wait_ready
 from harness.ports import free_ports
-from shared.messages import OrderStatus
+from voicectl.shared.messages import OrderStatus
 
 from .conftest import REPO
 from .containers import base_image, skip_unless, stack_unavailable
@@ -43,8 +43,8 @@ TOKEN = "compose-test-token"
 
 WATCH = """
 import json, sys, time, zenoh
-from shared.keys import RobotNames
-from shared.ros2 import Ros2Codec
+from voicectl.shared.keys import RobotNames
+from voicectl.shared.ros2 import Ros2Codec
 codec, seen = Ros2Codec(), []
 if sys.argv[1].endswith(".json5"):  # a client configuration of the secured bus
     config = zenoh.Config.from_file(sys.argv[1])
@@ -67,8 +67,8 @@ secured router does, with a client configuration)."""
 
 INTRUDE = """
 import json, time, zenoh
-from shared.keys import RobotNames, RobotKeys
-from shared.ros2 import Ros2Codec
+from voicectl.shared.keys import RobotNames, RobotKeys
+from voicectl.shared.ros2 import Ros2Codec
 with zenoh.open(zenoh.Config.from_file("/etc/voicectl/bus/panel.json5")) as session:
     for _ in range(20):
         session.put(RobotNames().cmd_vel, Ros2Codec().twist(0.5, 0.0))

@@ -14,10 +14,10 @@ from pathlib import Path
 import pytest
 
 from harness.wait import async_wait_until, wait_until
-from shared.bus import Bus, json_decoder
-from shared.errors import BusError
-from shared.keys import ConverterKeys, RobotKeys
-from shared.messages import (
+from voicectl.shared.bus import Bus, json_decoder
+from voicectl.shared.errors import BusError
+from voicectl.shared.keys import ConverterKeys, RobotKeys
+from voicectl.shared.messages import (
     ConverterReply,
     GetGrammar,
     Grammar,
@@ -56,7 +56,7 @@ class Converter:
         bus.subscribe(KEYS.grammar, json_decoder(Grammar), lambda _k, m: self.grammars.append(m))
         bus.watch(KEYS.alive(), lambda _k, alive: self.alive.append(alive))
         self.process = processes.start(
-            "services.converter", "--connect", router, "--orders", str(orders), "--debug"
+            "voicectl.services.converter", "--connect", router, "--orders", str(orders), "--debug"
         )
         self.status_times: list[float] = []
 
@@ -287,7 +287,9 @@ def test_a_bad_file_at_start_is_fatal_in_one_line(
 ) -> None:
     orders = tmp_path / "bad.yaml"
     orders.write_text("orders:\n  go:\n    voice_alias: 'go {d}'\n    label: x\n")
-    process = processes.start("services.converter", "--connect", router, "--orders", str(orders))
+    process = processes.start(
+        "voicectl.services.converter", "--connect", router, "--orders", str(orders)
+    )
     wait_until(lambda: process.poll() is not None, WAIT, "the converter to refuse the file")
     assert process.returncode == 2
     *logged, last = processes.log(process).strip().splitlines()

@@ -10,7 +10,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from services.converter.slots import (
+from voicectl.services.converter.slots import (
     MAX_GRID,
     SlotSpec,
     SlotType,
@@ -18,7 +18,7 @@ from services.converter.slots import (
     read_number,
     say_number,
 )
-from services.converter.text import normalise
+from voicectl.services.converter.text import normalise
 
 
 @pytest.mark.parametrize(

@@ -9,9 +9,9 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from services.converter.orders import OrderSet
-from services.converter.parser import Parser
-from services.converter.suggest import MAX_QUERY_CHARS, MAX_SUGGESTIONS
+from voicectl.services.converter.orders import OrderSet
+from voicectl.services.converter.parser import Parser
+from voicectl.services.converter.suggest import MAX_QUERY_CHARS, MAX_SUGGESTIONS
 
 ALL = Parser(OrderSet.load(Path(__file__).resolve().parents[1] / "orders"))
 

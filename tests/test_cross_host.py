@@ -21,7 +21,7 @@ import pytest
 from harness.client import Client, client_wait_ready
 from harness.cross_host import RobotWatch, observer, start_stack
 from harness.netns import LEASE_MS, TwoHosts, impairment_unavailable, unavailable
-from shared.messages import EmergencyStop, Order, OrderStatus, Stopped, TargetPose
+from voicectl.shared.messages import EmergencyStop, Order, OrderStatus, Stopped, TargetPose
 
 from .support import joined, order
 

@@ -6,10 +6,10 @@ from __future__ import annotations
 from hypothesis import given
 from hypothesis import strategies as st
 
-from services.converter.decide import Rule, decide, numbers, once, readings
-from services.converter.orders import OrderSet
-from services.converter.parser import Parser
-from shared.messages import Doubt, Transcript, Transcription
+from voicectl.services.converter.decide import Rule, decide, numbers, once, readings
+from voicectl.services.converter.orders import OrderSet
+from voicectl.services.converter.parser import Parser
+from voicectl.shared.messages import Doubt, Transcript, Transcription
 
 from .conftest import REPO
 

@@ -17,11 +17,11 @@ import zenoh
 
 from harness.ports import free_port
 from harness.wait import wait_until
-from services.executor.builtin.pic import TakePhoto
-from services.executor.framework import load_bindings_file
-from shared.keys import ConverterKeys, RobotKeys
-from shared.process import bus_options
 from voicectl.cli import build_parser
+from voicectl.services.executor.builtin.pic import TakePhoto
+from voicectl.services.executor.framework import load_bindings_file
+from voicectl.shared.keys import ConverterKeys, RobotKeys
+from voicectl.shared.process import bus_options
 
 from .conftest import REPO
 
@@ -181,7 +181,7 @@ def test_executors_doc_executors_file_binds_and_its_typo_fails_as_shown(tmp_path
     (tmp_path / "executors.yaml").write_text(text.replace("directory", "directry"))
     shown = block_after(doc, "With `directry` for `directory`", "").strip()
     done = subprocess.run(
-        [sys.executable, "-m", "services.executor", "--executors", "executors.yaml"],
+        [sys.executable, "-m", "voicectl.services.executor", "--executors", "executors.yaml"],
         capture_output=True,
         text=True,
         cwd=tmp_path,
@@ -228,7 +228,7 @@ def test_deploy_doc_secured_bus_commands_run_as_written(
         name, argv = words[1], words[2:]
         if name == "say":
             continue  # a command, not a service: its flags are the same bus flags
-        module = importlib.import_module(f"services.{name}.__main__")
+        module = importlib.import_module(f"voicectl.services.{name}.__main__")
         args = module.parse_args(argv)
         options = bus_options(args, router=name == "router", environ={})
         assert options.config_file is not None
@@ -312,8 +312,8 @@ def test_speech_doc_transcribe_example_prints_what_it_shows(tmp_path: Path) -> N
 
 
 def test_speech_doc_voice_command_and_table_are_what_the_panel_takes() -> None:
-    from services.web.config import parse_args
-    from shared.tts import VOICES
+    from voicectl.services.web.config import parse_args
+    from voicectl.shared.tts import VOICES
 
     doc = DOCS / "speech.md"
     command = block_after(doc, "## Spoken answers", "sh").strip()

@@ -22,12 +22,12 @@ from PIL import Image as PilImage
 from harness.client import robot_key
 from harness.speech_set import in_pink_noise
 from harness.wait import async_wait_until, wait_until
-from services.stt.audio import frames, read_wav
-from shared.bus import Bus, BusOptions, json_decoder
-from shared.client import VoicectlClient
-from shared.keys import RobotKeys, RobotNames
-from shared.kinds import ON_ZENOH
-from shared.messages import (
+from voicectl.services.stt.audio import frames, read_wav
+from voicectl.shared.bus import Bus, BusOptions, json_decoder
+from voicectl.shared.client import VoicectlClient
+from voicectl.shared.keys import RobotKeys, RobotNames
+from voicectl.shared.kinds import ON_ZENOH
+from voicectl.shared.messages import (
     AudioChunk,
     AudioStart,
     AudioStop,
@@ -37,8 +37,8 @@ from shared.messages import (
     StateUpdate,
     SttStatus,
 )
-from shared.robot import TransportKind
-from shared.ros2 import Pose2D, Ros2Codec, RosDistro
+from voicectl.shared.robot import TransportKind
+from voicectl.shared.ros2 import Pose2D, Ros2Codec, RosDistro
 
 from .conftest import Stack
 from .support import on_bus

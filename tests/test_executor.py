@@ -13,13 +13,13 @@ from hypothesis import strategies as st
 from PIL import Image as PilImage
 
 from harness.wait import async_wait_until
-from services.executor.robot import CONTROL_STEP, SAFE_LIMITS, RobotLink, limited
-from services.sim.robot import Bounds
-from services.sim.world import floor_plan
-from shared.bus import Bus, json_decoder
-from shared.geometry import map_cell
-from shared.keys import RobotNames
-from shared.messages import (
+from voicectl.services.executor.robot import CONTROL_STEP, SAFE_LIMITS, RobotLink, limited
+from voicectl.services.sim.robot import Bounds
+from voicectl.services.sim.world import floor_plan
+from voicectl.shared.bus import Bus, json_decoder
+from voicectl.shared.geometry import map_cell
+from voicectl.shared.keys import RobotNames
+from voicectl.shared.messages import (
     CancelOrder,
     Done,
     Execute,
@@ -32,9 +32,9 @@ from shared.messages import (
     Rejected,
     TargetPose,
 )
-from shared.robot import TransportKind, open_transport
-from shared.robot_options import RobotOptions
-from shared.ros2 import Pose2D, Ros2Codec, RosDistro
+from voicectl.shared.robot import TransportKind, open_transport
+from voicectl.shared.robot_options import RobotOptions
+from voicectl.shared.ros2 import Pose2D, Ros2Codec, RosDistro
 
 from .conftest import Processes
 from .support import TURN_LEFT, harness_on, joined, order, start_robot, until_heard

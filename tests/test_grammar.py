@@ -9,11 +9,11 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from services.converter.expand import MAX_PHRASES, SlotRef, expand
-from services.converter.grammar import build_grammar
-from services.converter.orders import DEFAULT_SKIP_WORDS, OrderSet
-from services.converter.parser import Parser
-from shared.messages import Grammar
+from voicectl.services.converter.expand import MAX_PHRASES, SlotRef, expand
+from voicectl.services.converter.grammar import build_grammar
+from voicectl.services.converter.orders import DEFAULT_SKIP_WORDS, OrderSet
+from voicectl.services.converter.parser import Parser
+from voicectl.shared.messages import Grammar
 
 ORDERS = Path(__file__).resolve().parents[1] / "orders"
 

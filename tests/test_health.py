@@ -10,9 +10,9 @@ import pytest
 import zenoh
 
 from harness.ports import free_port
-from shared.bus import BusOptions
-from shared.keys import ConverterKeys, RobotKeys, RobotNames
 from voicectl.health import SERVICES, token_key
+from voicectl.shared.bus import BusOptions
+from voicectl.shared.keys import ConverterKeys, RobotKeys, RobotNames
 
 from .conftest import voicectl
 

@@ -14,12 +14,13 @@ import pocketsphinx
 import pytest
 
 from harness.speech_set import pink_noise
-from services.converter.grammar import build_grammar
-from services.converter.orders import OrderSet
-from services.stt import sphinx
-from services.stt.audio import Loudness, Suppressor, frames, read_wav
-from services.stt.engine import EngineOptions, Final, finals, load_engine
-from services.stt.judge import OFF, Thresholds, Vocabulary, Word, judge
+from voicectl.services.converter.grammar import build_grammar
+from voicectl.services.converter.orders import OrderSet
+from voicectl.services.stt import sphinx
+from voicectl.services.stt.audio import Loudness, Suppressor, frames, read_wav
+from voicectl.services.stt.engine import EngineOptions, Final, finals
+from voicectl.services.stt.judge import OFF, Thresholds, Vocabulary, Word, judge
+from voicectl.services.stt.load import load_engine
 
 from .conftest import Speak, voicectl
 

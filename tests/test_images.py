@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pytest
 
-from services.converter.shipped import shipped_orders
+from voicectl.services.converter.shipped import shipped_orders
 
 from .conftest import REPO
 
@@ -101,11 +101,11 @@ def test_the_hook_refuses_the_hosts_packages() -> None:
 def test_what_a_robot_runs_imports_without_the_extras() -> None:
     done = on_robot(
         """
-        import services.executor.__main__
-        import services.executor.config as executor
-        import services.router.__main__
-        import services.sim.__main__
-        import services.supervisor.__main__
+        import voicectl.services.executor.__main__
+        import voicectl.services.executor.config as executor
+        import voicectl.services.router.__main__
+        import voicectl.services.sim.__main__
+        import voicectl.services.supervisor.__main__
         import voicectl.cli
         import voicectl.health
 
@@ -124,10 +124,15 @@ def test_what_a_robot_runs_imports_without_the_extras() -> None:
         "from voicectl.cli import main; sys.exit(main(['executor', '--help']))",
         "from voicectl.cli import main; sys.exit(main(['health', '--help']))",
         "from voicectl.cli import main; sys.exit(main(['--help']))",
-        "import runpy; sys.argv[1:] = ['--help']; runpy.run_module('services.executor', "
+        "import runpy; sys.argv[1:] = ['--help']; runpy.run_module('voicectl.services.executor', "
         "run_name='__main__')",
     ],
-    ids=["voicectl executor", "voicectl health", "voicectl", "python -m services.executor"],
+    ids=[
+        "voicectl executor",
+        "voicectl health",
+        "voicectl",
+        "python -m voicectl.services.executor",
+    ],
 )
 def test_a_robots_commands_answer_help(code: str) -> None:
     done = on_robot(code)
@@ -167,20 +172,23 @@ def test_host_and_test_extras_carry_every_role() -> None:
 
 def test_every_package_is_listed() -> None:
     listed = set(PYPROJECT["tool"]["setuptools"]["packages"])
+    # voicectl/shared and voicectl/services are links to the top-level folders
     found = {
-        ".".join(init.parent.relative_to(REPO).parts)
+        ".".join(("voicectl", *init.parent.relative_to(REPO).parts)).replace(
+            "voicectl.voicectl", "voicectl"
+        )
         for top in ("shared", "services", "voicectl")
         for init in (REPO / top).rglob("__init__.py")
         if "__pycache__" not in init.parts
     }
-    data = {"services.web.static", "services.converter.shipped_orders"}
+    data = {"voicectl.services.web.static", "voicectl.services.converter.shipped_orders"}
     assert listed == found | data
 
 
 def test_the_shipped_orders_are_package_data() -> None:
     setuptools = PYPROJECT["tool"]["setuptools"]
-    assert setuptools["package-dir"] == {"services.converter.shipped_orders": "orders"}
-    assert setuptools["package-data"]["services.converter.shipped_orders"] == ["*.yaml"]
+    assert setuptools["package-dir"] == {"voicectl.services.converter.shipped_orders": "orders"}
+    assert setuptools["package-data"]["voicectl.services.converter.shipped_orders"] == ["*.yaml"]
     assert {p.suffix for p in (REPO / "orders").iterdir()} == {".yaml"}
 
 

@@ -22,11 +22,11 @@ from harness.pulse import PulseAudio
 from harness.pulse import unavailable as pulse_unavailable
 from harness.speech_set import pink_noise
 from harness.wait import wait_until
-from services.listen.listener import ECHO_TAIL
-from services.stt.audio import read_wav
-from shared.bus import Bus
-from shared.client import VoicectlClient
-from shared.messages import GetState, OrderStatus, Release, State, StateReply
+from voicectl.services.listen.listener import ECHO_TAIL
+from voicectl.services.stt.audio import read_wav
+from voicectl.shared.bus import Bus
+from voicectl.shared.client import VoicectlClient
+from voicectl.shared.messages import GetState, OrderStatus, Release, State, StateReply
 
 from .conftest import REPO, Speak, Stack
 from .support import on_bus

@@ -22,7 +22,7 @@ import soundfile
 
 from harness.pulse import PulseAudio, unavailable
 from harness.wait import wait_until
-from services.listen.audio_io import (
+from voicectl.services.listen.audio_io import (
     AudioError,
     AudioSource,
     list_devices,
@@ -30,7 +30,7 @@ from services.listen.audio_io import (
     open_source,
     rescan_devices,
 )
-from shared.messages import FRAME_BYTES, SAMPLE_RATE
+from voicectl.shared.messages import FRAME_BYTES, SAMPLE_RATE
 
 FRAME = FRAME_BYTES // 2
 """Samples in a 20 ms frame at 16 kHz."""
@@ -380,7 +380,7 @@ def test_an_unknown_sink_is_one_line() -> None:
 def test_the_microphone_comes_back_after_its_server_restarts(
     device: PulseAudio, speech: Path, caplog: pytest.LogCaptureFixture
 ) -> None:
-    caplog.set_level(logging.WARNING, logger="services.listen.audio_io")
+    caplog.set_level(logging.WARNING, logger="voicectl.services.listen.audio_io")
     capture = Capture(open_source("mic"))
     try:
         capture.more(0.2)
@@ -404,7 +404,7 @@ def test_the_microphone_comes_back_after_its_server_restarts(
 def test_closing_wakes_a_read_waiting_for_a_gone_microphone(
     device: PulseAudio, caplog: pytest.LogCaptureFixture
 ) -> None:
-    caplog.set_level(logging.WARNING, logger="services.listen.audio_io")
+    caplog.set_level(logging.WARNING, logger="voicectl.services.listen.audio_io")
     capture = Capture(open_source("mic"))
     try:
         capture.more(0.1)

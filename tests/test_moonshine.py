@@ -11,15 +11,16 @@ from pathlib import Path
 import pytest
 
 from harness.speech_set import in_pink_noise
-from services.converter.grammar import build_grammar
-from services.converter.orders import OrderSet
-from services.converter.parser import Parser
-from services.stt import moonshine
-from services.stt.audio import frames, read_wav
-from services.stt.engine import EngineError, EngineOptions, Final, load_engine
-from services.stt.moonshine import Moonshine, prepare, weights_dir
-from services.stt.moonshine_engine import MoonshineEngine
-from shared.config import cache_dir
+from voicectl.services.converter.grammar import build_grammar
+from voicectl.services.converter.orders import OrderSet
+from voicectl.services.converter.parser import Parser
+from voicectl.services.stt import moonshine
+from voicectl.services.stt.audio import frames, read_wav
+from voicectl.services.stt.engine import EngineError, EngineOptions, Final
+from voicectl.services.stt.load import load_engine
+from voicectl.services.stt.moonshine import Moonshine, prepare, weights_dir
+from voicectl.services.stt.moonshine_engine import MoonshineEngine
+from voicectl.shared.config import cache_dir
 
 from .conftest import REPO, Speak, voicectl
 

@@ -11,9 +11,9 @@ from pathlib import Path
 
 import pytest
 
-from services.converter.orders import OrderSet, OrdersInvalid
-from shared.errors import OrdersFileError
-from shared.messages import TargetPose
+from voicectl.services.converter.orders import OrderSet, OrdersInvalid
+from voicectl.shared.errors import OrdersFileError
+from voicectl.shared.messages import TargetPose
 
 ORDERS = Path(__file__).resolve().parents[1] / "orders"
 

@@ -14,7 +14,7 @@ from typing import Any
 import pytest
 
 from harness.client import Client, client_wait_ready
-from shared.messages import (
+from voicectl.shared.messages import (
     Cancel,
     Done,
     EmergencyStop,
@@ -58,7 +58,7 @@ class Robot:
 
     def start_executor(self) -> Any:
         return self.processes.start(
-            "services.executor",
+            "voicectl.services.executor",
             "--connect",
             self.router,
             "--robot",
@@ -73,7 +73,7 @@ class Robot:
 
 @pytest.fixture
 def robot(router: str, processes: Processes, tmp_path: Path) -> Robot:
-    processes.start("services.supervisor", "--connect", router, "--robot", "r1")
+    processes.start("voicectl.services.supervisor", "--connect", router, "--robot", "r1")
     executors_file = tmp_path / "executors.yaml"
     executors_file.write_text(EXECUTORS_FILE)
     bot = Robot(router, processes, executors_file)

@@ -17,11 +17,11 @@ from typing import Any
 import pytest
 
 from harness.wait import async_wait_until
-from services.converter.orders import OrderSet
-from services.converter.parser import Parser
-from shared.bus import Bus
-from shared.keys import RobotKeys, last_chunk
-from shared.messages import Doubt, Proposal
+from voicectl.services.converter.orders import OrderSet
+from voicectl.services.converter.parser import Parser
+from voicectl.shared.bus import Bus
+from voicectl.shared.keys import RobotKeys, last_chunk
+from voicectl.shared.messages import Doubt, Proposal
 
 from .conftest import REPO, Speak, Stack
 from .support import on_bus

@@ -16,11 +16,11 @@ from typing import TYPE_CHECKING
 
 import pytest
 
-from services.converter.orders import OrderSet
-from services.converter.parser import Parser
-from shared.bus import Bus
-from shared.keys import RobotKeys, last_chunk
-from shared.messages import Doubt, Proposal
+from voicectl.services.converter.orders import OrderSet
+from voicectl.services.converter.parser import Parser
+from voicectl.shared.bus import Bus
+from voicectl.shared.keys import RobotKeys, last_chunk
+from voicectl.shared.messages import Doubt, Proposal
 
 if TYPE_CHECKING:
     from playwright.sync_api import Page
@@ -172,7 +172,7 @@ def kill_service(stack: Stack, name: str) -> None:
             parent = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
         except (OSError, ValueError, IndexError):
             continue
-        if parent == stack.process.pid and f"services.{name}".encode() in argv:
+        if parent == stack.process.pid and f"voicectl.services.{name}".encode() in argv:
             os.kill(int(entry.name), signal.SIGKILL)
             return
     raise AssertionError(f"no {name} service under the stack")

@@ -12,7 +12,7 @@ from typing import Any
 
 import msgspec
 
-from shared.answers import outcome_words, proposal_words, stopped_words
+from voicectl.shared.answers import outcome_words, proposal_words, stopped_words
 
 from .conftest import REPO, Stack
 from .test_answers import OUTCOMES, PROPOSALS, STOPS

@@ -10,10 +10,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from services.converter.orders import OrderSet
-from services.converter.parser import MAX_TEXT_CHARS, Parser, normalise
-from shared.errors import OrdersFileError
-from shared.messages import ParseProblem
+from voicectl.services.converter.orders import OrderSet
+from voicectl.services.converter.parser import MAX_TEXT_CHARS, Parser, normalise
+from voicectl.shared.errors import OrdersFileError
+from voicectl.shared.messages import ParseProblem
 
 DEMO = Parser(OrderSet.load(Path(__file__).resolve().parents[1] / "orders" / "demo.yaml"))
 

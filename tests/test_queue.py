@@ -6,9 +6,9 @@ import itertools
 
 import pytest
 
-from services.supervisor import queue as queue_module
-from services.supervisor.queue import RequestConflict, RobotQueue
-from shared.messages import Order, OrderStatus, Progress
+from voicectl.services.supervisor import queue as queue_module
+from voicectl.services.supervisor.queue import RequestConflict, RobotQueue
+from voicectl.shared.messages import Order, OrderStatus, Progress
 
 
 def order(name: str) -> Order:

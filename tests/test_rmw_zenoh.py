@@ -26,14 +26,14 @@ import zenoh
 from zenoh.ext import Int64, z_serialize
 
 from harness.wait import async_wait_until
-from shared.errors import BusError
-from shared.keys import RMW_QOS_DEFAULT, RmwKind, RmwToken, RmwZenohKeys
-from shared.messages import ExecutorInfo
-from shared.robot import Interface, Role, TransportKind, open_transport
-from shared.robot.action import ActionClient, Cancelled
-from shared.robot.rmw_zenoh import Attachment, RmwZenohTransport, gid_of
-from shared.robot.stop import RobotStop
-from shared.ros2 import (
+from voicectl.shared.errors import BusError
+from voicectl.shared.keys import RMW_QOS_DEFAULT, RmwKind, RmwToken, RmwZenohKeys
+from voicectl.shared.messages import ExecutorInfo
+from voicectl.shared.robot import Interface, Role, TransportKind, open_transport
+from voicectl.shared.robot.action import ActionClient, Cancelled
+from voicectl.shared.robot.rmw_zenoh import Attachment, RmwZenohTransport, gid_of
+from voicectl.shared.robot.stop import RobotStop
+from voicectl.shared.ros2 import (
     CANCEL_GOAL,
     NAVIGATE_FEEDBACK,
     NAVIGATE_GET_RESULT,

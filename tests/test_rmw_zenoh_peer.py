@@ -20,8 +20,8 @@ import numpy as np
 import pytest
 
 from harness.wait import async_wait_until
-from shared.robot import TransportKind, open_transport
-from shared.ros2 import CANCEL_GOAL, Ros2Codec
+from voicectl.shared.robot import TransportKind, open_transport
+from voicectl.shared.ros2 import CANCEL_GOAL, Ros2Codec
 
 from .conftest import Processes
 from .ros2_support import env_of
@@ -94,7 +94,7 @@ def endpoint(router: str) -> dict[str, Any]:
 async def test_an_independent_rmw_zenoh_peer_drives_the_simulated_robot(
     router: str, processes: Processes, peer: Any
 ) -> None:
-    processes.start("services.sim", "--connect", router, "--transport", "rmw-zenoh")
+    processes.start("voicectl.services.sim", "--connect", router, "--transport", "rmw-zenoh")
     odometry: list[Any] = []
     where = endpoint(router)
     heard = sdk.ROS2Subscriber("/odom", "nav_msgs/msg/Odometry", odometry.append, **where)

@@ -11,10 +11,10 @@ import time
 import pytest
 
 from harness.wait import async_wait_until
-from shared.messages import ExecutorInfo
-from shared.robot import TransportKind, detect_transport, transports
-from shared.robot.stop import RobotStop
-from shared.ros2 import CmdVelType, Ros2Codec
+from voicectl.shared.messages import ExecutorInfo
+from voicectl.shared.robot import TransportKind, detect_transport, transports
+from voicectl.shared.robot.stop import RobotStop
+from voicectl.shared.ros2 import CmdVelType, Ros2Codec
 
 from .conftest import REPO, voicectl
 from .support import joined, until_heard
@@ -39,7 +39,7 @@ def test_without_rclpy_the_ros2_transport_says_what_to_install_at_once(command: 
 
 @NO_RCLPY
 async def test_auto_does_not_pick_ros2_where_rclpy_is_missing(router: str) -> None:
-    from shared.keys import RobotNames
+    from voicectl.shared.keys import RobotNames
 
     assert transports()[TransportKind.ROS2].unavailable() is not None
     with joined(router) as bus:
@@ -69,8 +69,8 @@ async def test_a_process_with_zenoh_alone_stops_a_dds_robot_on_the_relays_keys(
 def test_the_deploy_doc_s_ros2_commands_parse_as_written() -> None:
     """docs/deploy.md's commands for a robot on DDS, with HOST filled in: their flags are
     the ones the executor and the relay take."""
-    from services.executor.config import parse_args as executor_args
-    from services.relay.config import parse_args as relay_args
+    from voicectl.services.executor.config import parse_args as executor_args
+    from voicectl.services.relay.config import parse_args as relay_args
 
     doc = (REPO / "docs" / "deploy.md").read_text()
     section = doc[doc.index("## A robot on DDS") : doc.index("## Containers")]

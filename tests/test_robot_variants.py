@@ -22,10 +22,10 @@ from PIL import Image as PilImage
 
 from harness.client import robot_key
 from harness.wait import async_wait_until
-from shared.bus import json_decoder
-from shared.keys import RobotKeys, RobotNames
-from shared.kinds import ON_ZENOH
-from shared.messages import (
+from voicectl.shared.bus import json_decoder
+from voicectl.shared.keys import RobotKeys, RobotNames
+from voicectl.shared.kinds import ON_ZENOH
+from voicectl.shared.messages import (
     CancelOrder,
     Done,
     ExecutorInfo,
@@ -36,8 +36,8 @@ from shared.messages import (
     OrderStatus,
     TargetPose,
 )
-from shared.robot import TransportKind, open_transport
-from shared.ros2 import Ros2Codec, RosDistro
+from voicectl.shared.robot import TransportKind, open_transport
+from voicectl.shared.ros2 import Ros2Codec, RosDistro
 
 from .conftest import Processes, voicectl
 from .support import (
@@ -398,7 +398,7 @@ async def test_the_stop_at_start_up_is_in_the_type_the_robot_takes(
     """A starting executor stops whatever moves the robot; on a TwistStamped robot that
     stop must be a TwistStamped, so it waits for the robot to say so first."""
     processes.start(
-        "services.sim",
+        "voicectl.services.sim",
         "--connect",
         router,
         *NAMES,
@@ -415,7 +415,7 @@ async def test_the_stop_at_start_up_is_in_the_type_the_robot_takes(
         watch.subscribe(REMAPPED.cmd_vel, stamped, bytes, sent.append)
         with joined(router) as probe:
             await until_heard(probe, robot_key(transport, REMAPPED.cmd_vel, stamped))
-        processes.start("services.executor", "--connect", router, "--robot", "r1", *NAMES)
+        processes.start("voicectl.services.executor", "--connect", router, "--robot", "r1", *NAMES)
         online = RobotKeys("r1").alive("executor")
 
         def executor_online() -> bool:

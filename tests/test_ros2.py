@@ -12,8 +12,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from shared.errors import VoicectlError
-from shared.ros2 import (
+from voicectl.shared.errors import VoicectlError
+from voicectl.shared.ros2 import (
     CANCEL_ALL,
     SAME_RESULT,
     CameraType,

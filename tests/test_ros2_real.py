@@ -18,7 +18,7 @@ from typing import Any
 import pytest
 
 from harness.ros2_env import ROLLING_NAV2_MSGS
-from shared.ros2 import (
+from voicectl.shared.ros2 import (
     CANCEL_ALL,
     CANCEL_GOAL,
     NAVIGATE_FEEDBACK,

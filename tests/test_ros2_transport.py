@@ -28,10 +28,10 @@ from harness.netns import LoopbackOnly
 from harness.ros2_rig import ROBOT, WAIT, DdsRobot, dds_robot
 from harness.stop_rig import order
 from harness.wait import async_wait_until
-from shared.bus import json_decoder
-from shared.client import VoicectlClient
-from shared.keys import RobotKeys
-from shared.messages import (
+from voicectl.shared.bus import json_decoder
+from voicectl.shared.client import VoicectlClient
+from voicectl.shared.keys import RobotKeys
+from voicectl.shared.messages import (
     ExecutorEvent,
     ExecutorInfo,
     Order,
@@ -42,7 +42,7 @@ from shared.messages import (
     StateUpdate,
     TargetPose,
 )
-from shared.ros2 import Ros2Codec
+from voicectl.shared.ros2 import Ros2Codec
 
 from .conftest import REPO, Processes, voicectl
 from .ros2_support import DISTROS, env_of
@@ -261,7 +261,7 @@ async def test_auto_picks_ros2_where_no_robot_announces_itself_on_zenoh(dds: Dds
             history=True,
         )
         dds.start_inside(
-            "services.executor",
+            "voicectl.services.executor",
             *("--robot", "r2", "--transport", "auto", "--connect", dds.inside),
             name="auto-executor",
         )
@@ -282,9 +282,9 @@ async def test_auto_picks_ros2_where_no_robot_announces_itself_on_zenoh(dds: Dds
         # A simulated robot on rmw_zenoh, under a namespace of its own, beside the DDS one.
         names = ("--namespace", "bot3")
         sim = ("--transport", "rmw-zenoh", "--connect", dds.inside, *names)
-        dds.start_inside("services.sim", *sim, name="zenoh-robot")
+        dds.start_inside("voicectl.services.sim", *sim, name="zenoh-robot")
         dds.start_inside(
-            "services.executor",
+            "voicectl.services.executor",
             *("--robot", "r3", "--transport", "auto", "--connect", dds.inside, *names),
             name="zenoh-executor",
         )

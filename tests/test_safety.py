@@ -16,9 +16,9 @@ import pytest
 
 from harness.client import Client, client_wait_ready
 from harness.wait import async_wait_until
-from shared.bus import Bus, json_decoder
-from shared.keys import RobotKeys, RobotNames
-from shared.messages import (
+from voicectl.shared.bus import Bus, json_decoder
+from voicectl.shared.keys import RobotKeys, RobotNames
+from voicectl.shared.messages import (
     ControlRequest,
     Done,
     EmergencyStop,
@@ -36,7 +36,7 @@ from shared.messages import (
     Stopped,
     TargetPose,
 )
-from shared.ros2 import Odometry, Pose2D, Ros2Codec, RosDistro, new_goal_id
+from voicectl.shared.ros2 import Odometry, Pose2D, Ros2Codec, RosDistro, new_goal_id
 
 from .conftest import Processes
 from .support import joined, order
@@ -68,19 +68,25 @@ class Robot:
         self.robot_args = robot_args
         """Flags that say which robot the sim plays; the executor gets the names only."""
         self.bridge = bridge or RobotNames()
-        self.sim = processes.start("services.sim", "--connect", router, *robot_args)
+        self.sim = processes.start("voicectl.services.sim", "--connect", router, *robot_args)
         self.supervisor: subprocess.Popen[bytes] | None = None
         self.executor: subprocess.Popen[bytes] | None = None
         self.odometry: list[tuple[float, Odometry]] = []
 
     def start_supervisor(self) -> None:
         self.supervisor = self.processes.start(
-            "services.supervisor", "--connect", self.router, "--robot", "r1", "--db", str(self.db)
+            "voicectl.services.supervisor",
+            "--connect",
+            self.router,
+            "--robot",
+            "r1",
+            "--db",
+            str(self.db),
         )
 
     def start_executor(self) -> None:
         self.executor = self.processes.start(
-            "services.executor",
+            "voicectl.services.executor",
             "--connect",
             self.router,
             "--robot",

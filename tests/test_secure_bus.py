@@ -21,10 +21,18 @@ import zenoh
 from harness.client import Client, client_wait_ready
 from harness.ports import free_port
 from harness.wait import async_wait_until, wait_until
-from shared.bus import Bus, BusOptions, json_decoder
-from shared.errors import BusError
-from shared.keys import BRIDGE_TOKENS, BridgeKind, BridgeToken, RobotKeys, RobotNames
-from shared.messages import (
+from voicectl.bus_secrets import (
+    ROUTER_TEMPLATE,
+    BusRobot,
+    SecretsExist,
+    router_configuration,
+    users,
+    write_bus_secrets,
+)
+from voicectl.shared.bus import Bus, BusOptions, json_decoder
+from voicectl.shared.errors import BusError
+from voicectl.shared.keys import BRIDGE_TOKENS, BridgeKind, BridgeToken, RobotKeys, RobotNames
+from voicectl.shared.messages import (
     Done,
     EmergencyStop,
     Execute,
@@ -36,15 +44,7 @@ from shared.messages import (
     Release,
     Stopped,
 )
-from shared.ros2 import Odometry, Ros2Codec
-from voicectl.bus_secrets import (
-    ROUTER_TEMPLATE,
-    BusRobot,
-    SecretsExist,
-    router_configuration,
-    users,
-    write_bus_secrets,
-)
+from voicectl.shared.ros2 import Odometry, Ros2Codec
 
 from .conftest import REPO, Processes, voicectl
 from .support import joined, order, until_heard
@@ -91,7 +91,11 @@ def site(processes: Processes, tmp_path: Path, robots: list[BusRobot]) -> Secure
     write_bus_secrets(secrets, ["127.0.0.1"], port, robots)
     site = SecureSite(processes, secrets, port)
     processes.start(
-        "services.router", "--config", str(secrets / "router.json5"), "--listen", site.endpoint
+        "voicectl.services.router",
+        "--config",
+        str(secrets / "router.json5"),
+        "--listen",
+        site.endpoint,
     )
     # A client that finds no router gives up at once (Zenoh's CLI among them).
     wait_until(lambda: listening(port), 30.0, "the secured router to listen")
@@ -107,9 +111,9 @@ def listening(port: int) -> bool:
 
 
 def start_robot(site: SecureSite) -> None:
-    site.start("services.supervisor", "supervisor", "--robot", "r1")
-    site.start("services.sim", "robot-r1")
-    site.start("services.executor", "executor-r1", "--robot", "r1")
+    site.start("voicectl.services.supervisor", "supervisor", "--robot", "r1")
+    site.start("voicectl.services.sim", "robot-r1")
+    site.start("voicectl.services.executor", "executor-r1", "--robot", "r1")
 
 
 def user_of(config: Path) -> str:
@@ -187,7 +191,7 @@ def test_the_bus_secrets_command_names_robots_and_their_namespaces(tmp_path: Pat
 
 
 async def test_the_stack_runs_end_to_end_on_the_secured_bus(site: SecureSite) -> None:
-    site.start("services.converter", "converter")
+    site.start("voicectl.services.converter", "converter")
     start_robot(site)
     operator = str(site.config("operator"))
 
@@ -269,7 +273,7 @@ async def test_an_executor_cannot_speak_or_announce_for_another_robot(site: Secu
     reaches the panel, and the supervisor never takes r2 on; as r1 it is heard and
     served. What it forges is said first, on the same link: once the genuine reaches the
     panel, the forged would have too."""
-    site.start("services.supervisor", "supervisor")  # serves whichever executor announces
+    site.start("voicectl.services.supervisor", "supervisor")  # serves whichever executor announces
     r1, r2 = RobotKeys("r1"), RobotKeys("r2")
     tokens: list[str] = []
     events: list[str] = []

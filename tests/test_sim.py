@@ -14,9 +14,9 @@ import pytest
 import zenoh
 
 from harness.wait import wait_until
-from shared.bus import BusOptions
-from shared.keys import RobotNames
-from shared.ros2 import (
+from voicectl.shared.bus import BusOptions
+from voicectl.shared.keys import RobotNames
+from voicectl.shared.ros2 import (
     CANCEL_ALL,
     CancelCode,
     CancelResponse,
@@ -124,7 +124,7 @@ def start_sim(
     processes: Processes, router: str, namespace: str, *extra: str
 ) -> subprocess.Popen[bytes]:
     args = ["--connect", router, "--time-scale", str(TIME_SCALE), "--namespace", namespace]
-    return processes.start("services.sim", *args, *extra, name=f"sim-{namespace}")
+    return processes.start("voicectl.services.sim", *args, *extra, name=f"sim-{namespace}")
 
 
 @pytest.fixture

@@ -8,7 +8,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from services.sim.robot import (
+from voicectl.services.sim.robot import (
     CMD_VEL_TIMEOUT,
     Bounds,
     GoToPose,
@@ -17,8 +17,8 @@ from services.sim.robot import (
     SpeedLimits,
     integrate,
 )
-from shared.geometry import compose, normalize_angle
-from shared.ros2 import Pose2D
+from voicectl.shared.geometry import compose, normalize_angle
+from voicectl.shared.ros2 import Pose2D
 
 LIMITS = SpeedLimits(max_linear=0.5, max_angular=1.5)
 

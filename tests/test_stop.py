@@ -12,9 +12,9 @@ import pytest
 
 from harness.stop_rig import CASES, ROBOT, StopRig, ended, order
 from harness.wait import async_wait_until
-from shared.client import Unreachable, VoicectlClient
-from shared.errors import BusError
-from shared.messages import (
+from voicectl.shared.client import Unreachable, VoicectlClient
+from voicectl.shared.errors import BusError
+from voicectl.shared.messages import (
     EmergencyStop,
     ExecutorInfo,
     Failed,
@@ -24,9 +24,9 @@ from shared.messages import (
     StateReply,
     Stopped,
 )
-from shared.robot import TransportKind
-from shared.robot.stop import RobotStop, prepare, stop_codec
-from shared.ros2 import CmdVelType, RosDistro
+from voicectl.shared.robot import TransportKind
+from voicectl.shared.robot.stop import RobotStop, prepare, stop_codec
+from voicectl.shared.ros2 import CmdVelType, RosDistro
 
 from .conftest import Processes
 from .support import joined

@@ -12,9 +12,9 @@ from pathlib import Path
 import msgspec
 
 from harness.wait import async_wait_until
-from services.supervisor.latch import LatchFile
-from services.supervisor.store import RETRY_EVERY, OrderStore, StoreFull
-from shared.messages import OrderRecord, OrderStatus
+from voicectl.services.supervisor.latch import LatchFile
+from voicectl.services.supervisor.store import RETRY_EVERY, OrderStore, StoreFull
+from voicectl.shared.messages import OrderRecord, OrderStatus
 
 from .conftest import SmallDisk
 from .support import order

@@ -19,20 +19,27 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from services.converter.grammar import build_grammar
-from services.converter.orders import OrderSet
-from services.stt.audio import frames, read_wav
-from services.stt.engine import EngineError, EngineOptions, Final, Heard, finals, load_engine
-from services.stt.lexicon import (
+from voicectl.services.converter.grammar import build_grammar
+from voicectl.services.converter.orders import OrderSet
+from voicectl.services.stt.audio import frames, read_wav
+from voicectl.services.stt.engine import (
+    EngineError,
+    EngineOptions,
+    Final,
+    Heard,
+    finals,
+)
+from voicectl.services.stt.lexicon import (
     espeak_pronunciations,
     ipa_to_arpabet,
     non_rhotic,
     pronunciations,
     variants,
 )
-from services.stt.wordgraph import GrammarError, compile_jsgf
-from shared.errors import AudioError
-from shared.messages import FRAME_BYTES, AudioChunk, AudioMessage
+from voicectl.services.stt.load import load_engine
+from voicectl.services.stt.wordgraph import GrammarError, compile_jsgf
+from voicectl.shared.errors import AudioError
+from voicectl.shared.messages import FRAME_BYTES, AudioChunk, AudioMessage
 
 from .conftest import REPO, Speak, voicectl
 
@@ -357,7 +364,7 @@ def test_vosk_without_a_model_is_a_one_line_error_that_says_where_to_get_one(
 def test_an_engines_own_options_are_flags_that_voicectl_up_forwards() -> None:
     """The registry is the one place an engine's options are named: `voicectl stt` takes
     them, and the options give back the flags that `voicectl up` starts the service with."""
-    stt = importlib.import_module("services.stt.config")
+    stt = importlib.import_module("voicectl.services.stt.config")
     given = ["--engine", "vosk", "--vosk-model", "/models/en", "--workers", "2"]
     options = stt.engine_options(stt.parse_args(given))
     assert options.settings == {"vosk_model": Path("/models/en")}
@@ -391,7 +398,7 @@ def korean() -> object:
 def test_vosk_streams_partials_and_finals_and_switches_grammars(
     korean: object, speech: Speak
 ) -> None:
-    from services.stt.vosk_engine import VoskEngine
+    from voicectl.services.stt.vosk_engine import VoskEngine
 
     assert isinstance(korean, VoskEngine)
     orders = OrderSet.from_yaml(KOREAN)
@@ -420,7 +427,7 @@ def test_vosk_pool_lends_only_recognisers_of_the_current_grammar(
 ) -> None:
     """A recogniser built before a reload and given back after it is dropped, not lent out
     as if it had the new grammar (it was tagged with the version current at return)."""
-    from services.stt.vosk_engine import VoskEngine
+    from voicectl.services.stt.vosk_engine import VoskEngine
 
     assert isinstance(korean, VoskEngine)
     with_photo = build_grammar(OrderSet.from_yaml(KOREAN))
@@ -437,7 +444,7 @@ def test_vosk_pool_lends_only_recognisers_of_the_current_grammar(
 
 
 def test_vosk_alternatives_give_each_word_a_confidence_and_a_number_its_choices() -> None:
-    from services.stt.vosk_engine import best_words
+    from voicectl.services.stt.vosk_engine import best_words
 
     def path(*words: tuple[str, float, float]) -> list[dict[str, object]]:
         return [{"word": w, "start": a, "end": b} for w, a, b in words]

@@ -19,10 +19,10 @@ import pytest
 from harness.client import Client
 from harness.speech_set import in_babble
 from harness.wait import async_wait_until
-from services.stt.audio import frames, read_wav
-from shared.bus import Bus, json_decoder
-from shared.keys import ConverterKeys, RobotKeys, RobotNames
-from shared.messages import (
+from voicectl.services.stt.audio import frames, read_wav
+from voicectl.shared.bus import Bus, json_decoder
+from voicectl.shared.keys import ConverterKeys, RobotKeys, RobotNames
+from voicectl.shared.messages import (
     AudioChunk,
     AudioStart,
     AudioStop,
@@ -33,7 +33,7 @@ from shared.messages import (
     SttStatus,
     Transcript,
 )
-from shared.ros2 import Pose2D, Ros2Codec, RosDistro
+from voicectl.shared.ros2 import Pose2D, Ros2Codec, RosDistro
 
 from .conftest import REPO, Processes, Speak, Stack
 from .support import joined
@@ -124,8 +124,8 @@ async def scenario(
     """A converter and a recogniser, and the test listening to what they say."""
     with joined(router) as bus:
         listener = Listener(bus)
-        processes.start("services.converter", "--connect", router, "--orders", str(orders))
-        processes.start("services.stt", "--connect", router, "--debug", *stt_args)
+        processes.start("voicectl.services.converter", "--connect", router, "--orders", str(orders))
+        processes.start("voicectl.services.stt", "--connect", router, "--debug", *stt_args)
         await listener.ready()
         yield listener
 
@@ -165,14 +165,14 @@ async def test_speech_sent_before_the_grammar_is_heard_once_it_comes(
     wav = speech("turn right")
     with joined(router) as bus:
         listener = Listener(bus)
-        stt = processes.start("services.stt", "--connect", router, "--debug")
+        stt = processes.start("voicectl.services.stt", "--connect", router, "--debug")
         await stream(bus, "early", wav, stop=False)
         await async_wait_until(
             lambda: "session early cannot be recognised yet" in processes.log(stt),
             WAIT,
             "the recogniser to hold the early audio",
         )
-        processes.start("services.converter", "--connect", router, "--orders", str(ORDERS))
+        processes.start("voicectl.services.converter", "--connect", router, "--orders", str(ORDERS))
         await listener.ready()
         bus.publish(KEYS.stt_audio("early"), AudioStop())
         [final] = await listener.final("early")

@@ -12,11 +12,11 @@ from pathlib import Path
 
 from harness.client import Client, client_wait_ready
 from harness.wait import async_wait_until
-from services.executor.runner import SUPERVISOR_LOST
-from services.supervisor.robot import SETTLE
-from shared.errors import BusError
-from shared.keys import RobotKeys, RobotNames
-from shared.messages import (
+from voicectl.services.executor.runner import SUPERVISOR_LOST
+from voicectl.services.supervisor.robot import SETTLE
+from voicectl.shared.errors import BusError
+from voicectl.shared.keys import RobotKeys, RobotNames
+from voicectl.shared.messages import (
     Cancel,
     Done,
     EmergencyStop,
@@ -32,7 +32,7 @@ from shared.messages import (
     Submitted,
     TargetPose,
 )
-from shared.ros2 import Odometry, Ros2Codec, RosDistro
+from voicectl.shared.ros2 import Odometry, Ros2Codec, RosDistro
 
 from .support import Site, StandIn, order
 
@@ -42,7 +42,7 @@ async def test_sigkill_with_orders_in_flight_loses_nothing_and_resumes(site: Sit
     its utterance is cancelled (as after an executor's loss: nobody saw how the drive
     ended, and the next steps assume it happened), and another utterance's orders wait,
     paused, and run once resumed."""
-    site.processes.start("services.sim", "--connect", site.router)
+    site.processes.start("voicectl.services.sim", "--connect", site.router)
     site.start_supervisor()
     site.start_executor()
 
@@ -341,7 +341,7 @@ async def test_each_robot_has_its_own_queue_and_executor(site: Site) -> None:
 
 
 async def test_emergency_stop_halts_a_moving_robot_at_once(site: Site) -> None:
-    site.processes.start("services.sim", "--connect", site.router)
+    site.processes.start("voicectl.services.sim", "--connect", site.router)
     site.start_supervisor()
     site.start_executor()
     codec = Ros2Codec(RosDistro.JAZZY)
@@ -397,7 +397,7 @@ async def test_a_second_supervisor_on_the_bus_stands_down(site: Site, tmp_path: 
         client = Client(bus, "r1")
         await client_wait_ready(client, executor=False)
         second = site.processes.start(
-            "services.supervisor",
+            "voicectl.services.supervisor",
             "--connect",
             site.router,
             "--robot",

@@ -13,11 +13,11 @@ from pathlib import Path
 from harness.client import STARTING, Client, client_wait_ready
 from harness.processes import rss_mb
 from harness.wait import async_wait_until
-from services.supervisor.service import CLAIM_WINDOW, MAX_ROBOTS
-from shared.client import STOP_ANSWER, VoicectlClient
-from shared.errors import BusError
-from shared.keys import RobotKeys
-from shared.messages import (
+from voicectl.services.supervisor.service import CLAIM_WINDOW, MAX_ROBOTS
+from voicectl.shared.client import STOP_ANSWER, VoicectlClient
+from voicectl.shared.errors import BusError
+from voicectl.shared.keys import RobotKeys
+from voicectl.shared.messages import (
     Done,
     EmergencyStop,
     Execute,
@@ -280,7 +280,7 @@ async def test_a_second_supervisor_whose_clock_is_a_day_behind_stands_down_itsel
         (kept,) = await client.submit(order("mul"))
         second = site.processes.start(
             "tests.clock_a_day_behind",
-            "services.supervisor",
+            "voicectl.services.supervisor",
             *("--connect", site.router, "--robot", "r1", "--db", str(tmp_path / "second.db")),
             name="skewed-supervisor",
         )

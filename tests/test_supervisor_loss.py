@@ -16,11 +16,11 @@ import pytest
 
 from harness.client import Client, client_wait_ready
 from harness.wait import async_wait_until
-from services.executor.fence import UNSUPERVISED
-from services.executor.runner import SUPERVISOR_LOST
-from shared.keys import RobotKeys, RobotNames
-from shared.messages import Done, Order, OrderStatus, Resume, TargetPose
-from shared.ros2 import Odometry, Pose2D, Ros2Codec
+from voicectl.services.executor.fence import UNSUPERVISED
+from voicectl.services.executor.runner import SUPERVISOR_LOST
+from voicectl.shared.keys import RobotKeys, RobotNames
+from voicectl.shared.messages import Done, Order, OrderStatus, Resume, TargetPose
+from voicectl.shared.ros2 import Odometry, Pose2D, Ros2Codec
 
 from .conftest import Processes
 from .support import (
@@ -51,10 +51,10 @@ class Robot:
         self.router = router
         self.processes = processes
         self.db = db
-        processes.start("services.sim", "--connect", router)
+        processes.start("voicectl.services.sim", "--connect", router)
         self.supervisor = self.start_supervisor()
         self.executor = processes.start(
-            "services.executor",
+            "voicectl.services.executor",
             *("--connect", router, "--robot", "r1"),
             *("--executor", "tests.executors_for_tests:Slow=slow"),
         )
@@ -62,7 +62,13 @@ class Robot:
 
     def start_supervisor(self) -> subprocess.Popen[bytes]:
         self.supervisor = self.processes.start(
-            "services.supervisor", "--connect", self.router, "--robot", "r1", "--db", str(self.db)
+            "voicectl.services.supervisor",
+            "--connect",
+            self.router,
+            "--robot",
+            "r1",
+            "--db",
+            str(self.db),
         )
         return self.supervisor
 

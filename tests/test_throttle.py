@@ -6,7 +6,7 @@ import logging
 
 import pytest
 
-from shared.throttle import Throttled
+from voicectl.shared.throttle import Throttled
 
 
 def test_a_kind_is_said_once_per_interval_then_with_how_many_were_held_back(

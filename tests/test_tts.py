@@ -15,8 +15,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from shared.errors import TtsError
-from shared.tts import MAX_TEXT, CommandVoice, Speech, Voice, from_wav, load_voice, to_wav
+from voicectl.shared.errors import TtsError
+from voicectl.shared.tts import MAX_TEXT, CommandVoice, Speech, Voice, from_wav, load_voice, to_wav
 
 PHRASE = "turn left, then reach kitchen"
 

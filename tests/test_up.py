@@ -21,8 +21,8 @@ import pytest
 
 from harness.ports import free_port, free_ports
 from harness.wait import wait_until
-from shared.bus import Bus
-from shared.keys import RobotKeys
+from voicectl.shared.bus import Bus
+from voicectl.shared.keys import RobotKeys
 from voicectl.stack import Child, port_in_use, wait_for_port
 
 from .conftest import REPO, Stack, voicectl
@@ -46,7 +46,7 @@ def test_a_command_without_a_router_fails_in_seconds_naming_it() -> None:
 def test_a_service_waiting_for_the_router_stops_on_sigterm(tmp_path: Path) -> None:
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     with subprocess.Popen(
-        [sys.executable, "-m", "services.converter", "--connect", endpoint],
+        [sys.executable, "-m", "voicectl.services.converter", "--connect", endpoint],
         cwd=REPO,
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
@@ -162,7 +162,7 @@ def test_a_crashed_service_is_restarted_and_the_stack_stays_up(stack: Stack) -> 
     """One executor crash no longer takes the panel and the STOP path down with it."""
 
     def executor_pid() -> int | None:
-        found = pids(f"services.executor .*--connect {stack.router}")
+        found = pids(f"voicectl.services.executor .*--connect {stack.router}")
         return found[0] if len(found) == 1 else None
 
     first = executor_pid()
@@ -198,7 +198,7 @@ def test_children_start_without_code_between_fork_and_exec(
             self.stdout = None
 
     monkeypatch.setattr(subprocess, "Popen", Recorder)
-    Child("sim", ["services.sim"]).start()
+    Child("sim", ["voicectl.services.sim"]).start()
     assert "preexec_fn" not in seen
     assert seen["start_new_session"] is True
     env = seen["env"]
@@ -213,7 +213,7 @@ def test_a_forged_owner_token_does_not_stop_the_stack(stack: Stack) -> None:
 
     async def forge(bus: Bus) -> None:
         bus.announce(RobotKeys("robot").supervisor_owner("0-forged"))
-        (supervisor,) = pids(f"services.supervisor .*--connect {stack.router}")
+        (supervisor,) = pids(f"voicectl.services.supervisor .*--connect {stack.router}")
         os.kill(supervisor, signal.SIGKILL)
         await asyncio.to_thread(
             wait_until,

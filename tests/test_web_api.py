@@ -22,10 +22,10 @@ from starlette.websockets import WebSocketDisconnect
 from harness.ports import free_port
 from harness.processes import Process
 from harness.wait import wait_until
-from services.web.app import MAX_BODY, Access, Panel, create_app
-from shared.bus import BusOptions
-from shared.keys import RobotKeys
-from shared.messages import AudioChunk, AudioMessage, AudioStart, AudioStop
+from voicectl.services.web.app import MAX_BODY, Access, Panel, create_app
+from voicectl.shared.bus import BusOptions
+from voicectl.shared.keys import RobotKeys
+from voicectl.shared.messages import AudioChunk, AudioMessage, AudioStart, AudioStop
 
 from .conftest import Processes
 from .support import on_bus, until_heard
@@ -290,8 +290,8 @@ def test_bad_audio_ends_the_session_with_a_reason(
 def test_the_api_drives_the_converter_and_supervisor(
     client: TestClient, router: str, processes: Processes
 ) -> None:
-    processes.start("services.converter", "--connect", router)
-    processes.start("services.supervisor", "--robot", "robot", "--connect", router)
+    processes.start("voicectl.services.converter", "--connect", router)
+    processes.start("voicectl.services.supervisor", "--robot", "robot", "--connect", router)
     wait_until(
         lambda: client.post("/api/parse", json={"text": "x"}, headers=AUTH).status_code == 200,
         30.0,
@@ -327,7 +327,7 @@ def test_robots_follow_the_services_on_the_bus(
 ) -> None:
     # An open panel hears of the new robot on its event stream, without asking.
     with client.stream("GET", "/api/events?robot=robot", headers=AUTH) as response:
-        processes.start("services.supervisor", "--robot", "r2", "--connect", router)
+        processes.start("voicectl.services.supervisor", "--robot", "r2", "--connect", router)
         deadline = time.monotonic() + 30.0
         heard: list[object] = []
         for line in response.iter_lines():
@@ -388,7 +388,7 @@ def test_undecodable_bodies_are_a_400_never_a_500(
 def test_a_request_id_reused_for_other_orders_is_a_conflict(
     client: TestClient, router: str, processes: Processes
 ) -> None:
-    processes.start("services.supervisor", "--robot", "robot", "--connect", router)
+    processes.start("voicectl.services.supervisor", "--robot", "robot", "--connect", router)
     wait_until(
         lambda: client.get("/api/state", headers=AUTH).status_code == 200, 30.0, "the supervisor"
     )
@@ -418,7 +418,7 @@ def test_a_session_the_recogniser_cannot_serve_is_refused_in_words(
     """Past --max-sessions the browser is told, instead of streaming into the void; the
     recogniser says so once, not once per chunk."""
     stt = processes.start(
-        "services.stt", "--robot", "robot", "--max-sessions", "1", "--connect", router
+        "voicectl.services.stt", "--robot", "robot", "--max-sessions", "1", "--connect", router
     )
     hello = json.dumps({"token": TOKEN, "robot": "robot"})
     origin = {"origin": "http://testserver"}
@@ -454,7 +454,9 @@ def test_open_panels_learn_the_labels_the_executors_serve(
     """What the executors announce reaches the panel, which flags a staged order no
     executor would take before it is sent."""
     with client.stream("GET", "/api/events?robot=robot", headers=AUTH) as response:
-        executor = processes.start("services.executor", "--robot", "robot", "--connect", router)
+        executor = processes.start(
+            "voicectl.services.executor", "--robot", "robot", "--connect", router
+        )
         deadline = time.monotonic() + 30.0
         labels: list[str] = []
         for line in response.iter_lines():
@@ -476,7 +478,9 @@ def test_an_idle_session_ends_and_the_browser_is_told(
 ) -> None:
     """A microphone that goes quiet is ended by the recogniser, and the panel hears why;
     the recogniser's status counts the sessions as they open and close."""
-    stt = processes.start("services.stt", "--robot", "robot", "--idle", "1", "--connect", router)
+    stt = processes.start(
+        "voicectl.services.stt", "--robot", "robot", "--idle", "1", "--connect", router
+    )
     wait_until(lambda: "stt ready" in processes.log(stt), 60.0, "the recogniser")
     counts: list[int] = []
 
@@ -510,7 +514,13 @@ def _panel(router: str, processes: Processes, tmp_path: Path) -> tuple[Process, 
     token_file = tmp_path / "token"
     token_file.write_text(TOKEN)
     web = processes.start(
-        "services.web", "--connect", router, "--port", str(port), "--token-file", str(token_file)
+        "voicectl.services.web",
+        "--connect",
+        router,
+        "--port",
+        str(port),
+        "--token-file",
+        str(token_file),
     )
     wait_until(lambda: "panel on" in processes.log(web), 30.0, "the panel")
     return web, port
@@ -578,7 +588,7 @@ class StuckStream:
 
 
 def test_audio_never_blocks_the_loop_the_stop_is_served_on() -> None:
-    from services.web.audio import QUEUED, _Sender
+    from voicectl.services.web.audio import QUEUED, _Sender
 
     stream = StuckStream()
     sender = _Sender(stream, "s1")  # type: ignore[arg-type]
@@ -604,7 +614,7 @@ def test_made_up_robots_are_not_listed_and_the_panel_stays_quick(
     supervisor serves them; others are followed up to a bound, and ignored past it."""
     flood = processes.start("harness.flood", "--connect", router, "--robots", "2000")
     wait_until(lambda: "flooding: 2000" in processes.log(flood), 60.0, "the flood")
-    processes.start("services.supervisor", "--robot", "r2", "--connect", router)
+    processes.start("voicectl.services.supervisor", "--robot", "r2", "--connect", router)
 
     def listed() -> list[str]:
         robots: list[str] = client.get("/api/robots", headers=AUTH).json()["robots"]

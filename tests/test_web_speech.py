@@ -12,9 +12,9 @@ from pathlib import Path
 
 from starlette.testclient import TestClient
 
-from services.web.app import Access, Panel, create_app
-from shared.bus import BusOptions
-from shared.tts import MAX_TEXT, CommandVoice, Voice, from_wav, load_voice
+from voicectl.services.web.app import Access, Panel, create_app
+from voicectl.shared.bus import BusOptions
+from voicectl.shared.tts import MAX_TEXT, CommandVoice, Voice, from_wav, load_voice
 
 from .conftest import REPO
 

@@ -14,8 +14,8 @@ from pathlib import Path
 
 import pytest
 
-from shared.bus import DEFAULT_ROUTER, BusOptions
-from shared.process import add_bus_arguments, bus_options
+from voicectl.shared.bus import DEFAULT_ROUTER, BusOptions
+from voicectl.shared.process import add_bus_arguments, bus_options
 
 from .conftest import REPO, voicectl
 
@@ -45,7 +45,7 @@ def config_file(tmp_path: Path) -> Path:
 
 @pytest.mark.parametrize("service", SERVICES)
 def test_every_service_takes_the_zenoh_flags(service: str, config_file: Path) -> None:
-    module = importlib.import_module(f"services.{service}.__main__")
+    module = importlib.import_module(f"voicectl.services.{service}.__main__")
     args = module.parse_args(
         [
             "--mode",

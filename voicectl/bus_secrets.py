@@ -45,8 +45,8 @@ from cryptography.hazmat.primitives import hashes, serialization
 from cryptography.hazmat.primitives.asymmetric import ec
 from cryptography.x509.oid import NameOID
 
-from shared.errors import VoicectlError
-from shared.keys import RobotKeys, RobotNames, bridge_tokens, check_chunk, check_ros_name
+from voicectl.shared.errors import VoicectlError
+from voicectl.shared.keys import RobotKeys, RobotNames, bridge_tokens, check_chunk, check_ros_name
 
 from .cert import certificate_builder, key_pem, server_certificate, write_file
 

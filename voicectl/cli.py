@@ -12,16 +12,16 @@ from typing import NoReturn
 
 import msgspec
 
-from services.converter.shipped import shipped_orders
-from services.stt.config import add_engine_arguments, engine_options
-from services.web.tls import add_tls_arguments, tls_problem
-from shared.bus import DEFAULT_ROUTER, Bus
-from shared.client import Refused, VoicectlClient
-from shared.config import data_dir, default_token_file, load_or_create_token
-from shared.errors import BusError, OrdersFileError
-from shared.keys import ConverterKeys, RobotKeys, RobotNames, check_ros_name
-from shared.kinds import ON_ZENOH, TransportKind
-from shared.messages import (
+from voicectl.services.converter.shipped import shipped_orders
+from voicectl.services.stt.config import add_engine_arguments, engine_options
+from voicectl.services.web.tls import add_tls_arguments, tls_problem
+from voicectl.shared.bus import DEFAULT_ROUTER, Bus
+from voicectl.shared.client import Refused, VoicectlClient
+from voicectl.shared.config import data_dir, default_token_file, load_or_create_token
+from voicectl.shared.errors import BusError, OrdersFileError
+from voicectl.shared.keys import ConverterKeys, RobotKeys, RobotNames, check_ros_name
+from voicectl.shared.kinds import ON_ZENOH, TransportKind
+from voicectl.shared.messages import (
     Cancel,
     CancelAll,
     GetHistory,
@@ -33,7 +33,7 @@ from shared.messages import (
     Resume,
     StateReply,
 )
-from shared.process import add_bus_arguments, bus_options, robot_name
+from voicectl.shared.process import add_bus_arguments, bus_options, robot_name
 
 from .health import add_health_arguments, check
 from .stack import Child, PanelAddress, port_in_use, run_stack
@@ -248,7 +248,7 @@ def main(argv: list[str] | None = None) -> int:
 
 def _main(argv: list[str]) -> int:
     if argv and argv[0] in SERVICES:
-        module = importlib.import_module(f"services.{argv[0]}.__main__")
+        module = importlib.import_module(f"voicectl.services.{argv[0]}.__main__")
         result: int = module.run(argv[1:])
         return result
     args = build_parser().parse_args(argv)
@@ -294,7 +294,7 @@ def _main(argv: list[str]) -> int:
 
 def _up(args: argparse.Namespace) -> int:
     # The host's packages, before any child starts: one line, not a traceback per child.
-    for needed in ("services.converter.service", "services.web.app"):
+    for needed in ("voicectl.services.converter.service", "voicectl.services.web.app"):
         importlib.import_module(needed)
     busy = _busy_ports(args)
     if busy:
@@ -304,22 +304,25 @@ def _up(args: argparse.Namespace) -> int:
     robot = ["--robot", args.robot]
     transport = ["--transport", args.transport]
     children = [
-        Child("router", ["services.router", "--listen", args.router]),
+        Child("router", ["voicectl.services.router", "--listen", args.router]),
         # The robot before the services that drive it, so that it stops after them: on
         # Ctrl-C the executor cancels a running order while the robot still listens.
-        Child("sim", ["services.sim", "--time-scale", str(args.time_scale), *transport, *connect]),
-        Child("converter", ["services.converter", "--orders", str(args.orders), *connect]),
-        Child("supervisor", ["services.supervisor", *robot, *connect]),
+        Child(
+            "sim",
+            ["voicectl.services.sim", "--time-scale", str(args.time_scale), *transport, *connect],
+        ),
+        Child("converter", ["voicectl.services.converter", "--orders", str(args.orders), *connect]),
+        Child("supervisor", ["voicectl.services.supervisor", *robot, *connect]),
         Child(
             "executor",
-            ["services.executor", *robot, *transport, *connect]
+            ["voicectl.services.executor", *robot, *transport, *connect]
             + [arg for spec in args.executor for arg in ("--executor", spec)]
             + [arg for path in args.executors for arg in ("--executors", path)],
         ),
     ]
     if not args.no_stt:
         engine = engine_options(args).argv()
-        children.insert(3, Child("stt", ["services.stt", *robot, *engine, *connect]))
+        children.insert(3, Child("stt", ["voicectl.services.stt", *robot, *engine, *connect]))
     web = None
     if not args.no_web:
         problem = tls_problem(args)
@@ -330,7 +333,7 @@ def _up(args: argparse.Namespace) -> int:
         serve = ["--port", str(args.port), "--host", args.host]
         if args.certfile is not None:
             serve += ["--certfile", str(args.certfile), "--keyfile", str(args.keyfile)]
-        children.append(Child("web", ["services.web", *robot, *serve, *connect]))
+        children.append(Child("web", ["voicectl.services.web", *robot, *serve, *connect]))
         scheme = "https" if args.certfile is not None else "http"
         shown = "127.0.0.1" if args.host in ("0.0.0.0", "::") else args.host
         # The token rides in the fragment: one click logs in, and a browser never sends a
@@ -415,9 +418,9 @@ def _cert(args: argparse.Namespace) -> int:
 
 
 def _parse(args: argparse.Namespace) -> int:
-    from services.converter.grammar import build_grammar
-    from services.converter.orders import OrderSet
-    from services.converter.parser import Parser
+    from voicectl.services.converter.grammar import build_grammar
+    from voicectl.services.converter.orders import OrderSet
+    from voicectl.services.converter.parser import Parser
 
     if args.text is None and not args.grammar:
         print("voicectl parse: give a TEXT to parse, or --grammar", file=sys.stderr)
@@ -447,10 +450,11 @@ def _busy_ports(args: argparse.Namespace) -> str:
 
 
 def _transcribe(args: argparse.Namespace) -> int:
-    from services.converter.grammar import build_grammar
-    from services.converter.orders import OrderSet
-    from services.converter.parser import Parser
-    from services.stt.engine import EngineError, load_engine
+    from voicectl.services.converter.grammar import build_grammar
+    from voicectl.services.converter.orders import OrderSet
+    from voicectl.services.converter.parser import Parser
+    from voicectl.services.stt.engine import EngineError
+    from voicectl.services.stt.load import load_engine
 
     from .transcribe import Unreadable, transcribe
 

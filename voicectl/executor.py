@@ -9,11 +9,11 @@ Struct its parameters decode into; `execute(order, ctx)` does the work through
 the packages behind it may move.
 """
 
-from services.executor.fence import OrderRobot
-from services.executor.framework import ExecutionContext, Executor
-from shared.errors import OrderFailed
-from shared.messages import Order, TargetPose
-from shared.ros2 import Pose2D
+from voicectl.services.executor.fence import OrderRobot
+from voicectl.services.executor.framework import ExecutionContext, Executor
+from voicectl.shared.errors import OrderFailed
+from voicectl.shared.messages import Order, TargetPose
+from voicectl.shared.ros2 import Pose2D
 
 __all__ = [
     "ExecutionContext",

@@ -20,10 +20,10 @@ import urllib.request
 
 import zenoh
 
-from shared.bus import Bus
-from shared.errors import BusError
-from shared.keys import ConverterKeys, RobotKeys, RobotNames, check_ros_name
-from shared.process import add_bus_arguments, bus_options, robot_name
+from voicectl.shared.bus import Bus
+from voicectl.shared.errors import BusError
+from voicectl.shared.keys import ConverterKeys, RobotKeys, RobotNames, check_ros_name
+from voicectl.shared.process import add_bus_arguments, bus_options, robot_name
 
 SERVICES = ("router", "converter", "stt", "supervisor", "executor", "sim", "web")
 PER_ROBOT = ("stt", "supervisor", "executor")

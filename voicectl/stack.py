@@ -17,7 +17,7 @@ from typing import IO
 
 import zenoh
 
-from shared.bus import BusOptions
+from voicectl.shared.bus import BusOptions
 
 STOP_TIMEOUT = 10.0
 START_TIMEOUT = 60.0

@@ -12,13 +12,13 @@ from pathlib import Path
 
 import msgspec
 
-from services.converter.decide import decide, problem, readings
-from services.converter.parser import Parser
-from services.stt.audio import read_wav
-from services.stt.engine import Engine, finals
-from services.stt.service import transcript_of
-from shared.errors import AudioError
-from shared.messages import Doubt, Hearing, Order, ParseProblem
+from voicectl.services.converter.decide import decide, problem, readings
+from voicectl.services.converter.parser import Parser
+from voicectl.services.stt.audio import read_wav
+from voicectl.services.stt.engine import Engine, finals
+from voicectl.services.stt.service import transcript_of
+from voicectl.shared.errors import AudioError
+from voicectl.shared.messages import Doubt, Hearing, Order, ParseProblem
 
 MAX_FILE_SECONDS = 600.0
 

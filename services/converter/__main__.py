@@ -8,8 +8,8 @@ import logging
 import sys
 from pathlib import Path
 
-from shared.errors import OrdersFileError, ServiceError
-from shared.process import add_bus_arguments, open_bus, run_service, serve
+from voicectl.shared.errors import OrdersFileError, ServiceError
+from voicectl.shared.process import add_bus_arguments, open_bus, run_service, serve
 
 from .service import POLL_SECONDS, ConverterService, errors_of, load
 from .shipped import shipped_orders

@@ -28,7 +28,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, field, replace
 
-from shared.messages import Doubt, Hearing, Order, ParseProblem, Transcript, Transcription
+from voicectl.shared.messages import Doubt, Hearing, Order, ParseProblem, Transcript, Transcription
 
 from .parser import Parser
 from .slots import NUMBER_PATTERN, read_number, say_number

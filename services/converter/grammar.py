@@ -22,7 +22,7 @@ import itertools
 import math
 from collections.abc import Iterable
 
-from shared.messages import Grammar
+from voicectl.shared.messages import Grammar
 
 from .expand import SlotRef, Template
 from .model import Command

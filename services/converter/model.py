@@ -5,7 +5,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass, field
 
-from shared.messages import Order, ParamValue, TargetPose
+from voicectl.shared.messages import Order, ParamValue, TargetPose
 
 from .expand import Expansion
 from .patterns import PLACEHOLDER, combined

@@ -29,7 +29,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from shared.errors import OrdersFileError
+from voicectl.shared.errors import OrdersFileError
 
 from .expand import Expansion, expand
 from .model import Command, OrderSpec

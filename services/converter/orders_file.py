@@ -18,8 +18,8 @@ from typing import Any
 
 import yaml
 
-from shared.errors import OrdersFileError
-from shared.messages import ParamValue
+from voicectl.shared.errors import OrdersFileError
+from voicectl.shared.messages import ParamValue
 
 from .expand import SlotRef, expand
 from .model import POSE_KEYS, CaseSpec, Command, OrderSpec

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import regex
 
-from shared.messages import Order, ParseProblem, ParseResult
+from voicectl.shared.messages import Order, ParseProblem, ParseResult
 
 from .expand import SlotRef
 from .model import Command

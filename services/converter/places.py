@@ -7,7 +7,7 @@ it is staging what a person would have said.
 
 from __future__ import annotations
 
-from shared.messages import Place
+from voicectl.shared.messages import Place
 
 from .orders import OrderSet
 

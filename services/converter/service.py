@@ -8,10 +8,10 @@ import logging
 from dataclasses import dataclass
 from pathlib import Path
 
-from shared.bus import Bus, Latest, json_decoder
-from shared.errors import OrdersFileError
-from shared.keys import ConverterKeys, RobotKeys, robot_of
-from shared.messages import (
+from voicectl.shared.bus import Bus, Latest, json_decoder
+from voicectl.shared.errors import OrdersFileError
+from voicectl.shared.keys import ConverterKeys, RobotKeys, robot_of
+from voicectl.shared.messages import (
     ConverterRequest,
     GetGrammar,
     Grammar,
@@ -24,7 +24,7 @@ from shared.messages import (
     Transcript,
     excerpt,
 )
-from shared.process import Service
+from voicectl.shared.process import Service
 
 from .decide import decide, problem, readings
 from .grammar import build_grammar

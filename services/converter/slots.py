@@ -24,8 +24,8 @@ from typing import Any
 
 from text_to_num import alpha2digit  # type: ignore[import-untyped]
 
-from shared.errors import VoicectlError
-from shared.messages import ParamValue
+from voicectl.shared.errors import VoicectlError
+from voicectl.shared.messages import ParamValue
 
 MAX_GRID = 1000
 """At most this many spoken values per slot go to the recogniser's grammar."""

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import msgspec
 from rapidfuzz import fuzz, process
 
-from shared.messages import Order
+from voicectl.shared.messages import Order
 
 from .expand import SlotRef
 from .model import Command

@@ -7,9 +7,9 @@ import logging
 import os
 import sys
 
-from shared.errors import ServiceError
-from shared.process import open_bus, run_service, serve
-from shared.robot import transports
+from voicectl.shared.errors import ServiceError
+from voicectl.shared.process import open_bus, run_service, serve
+from voicectl.shared.robot import transports
 
 from .build import build, choose_transport, load_bindings
 from .config import ExecutorConfig, parse_args

@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import logging
 
-from shared.bus import Bus
-from shared.keys import RobotKeys
-from shared.robot import TransportKind, detect_transport, open_transport
+from voicectl.shared.bus import Bus
+from voicectl.shared.keys import RobotKeys
+from voicectl.shared.robot import TransportKind, detect_transport, open_transport
 
 from .builtin import builtin_executors
 from .config import ExecutorConfig

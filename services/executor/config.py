@@ -6,9 +6,9 @@ import argparse
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from shared.config import data_dir
-from shared.process import add_bus_arguments, positive_float, robot_name
-from shared.robot_options import RobotOptions, add_robot_arguments, robot_options
+from voicectl.shared.config import data_dir
+from voicectl.shared.process import add_bus_arguments, positive_float, robot_name
+from voicectl.shared.robot_options import RobotOptions, add_robot_arguments, robot_options
 
 from .robot import RESULT_GRACE, SAFE_LIMITS, SpeedLimits
 from .runner import STALL_LIMIT

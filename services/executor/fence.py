@@ -6,10 +6,10 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable
 
-from shared.errors import OrderFailed
-from shared.keys import RobotNames
-from shared.messages import TargetPose
-from shared.ros2 import (
+from voicectl.shared.errors import OrderFailed
+from voicectl.shared.keys import RobotNames
+from voicectl.shared.messages import TargetPose
+from voicectl.shared.ros2 import (
     CdrError,
     CmdVelType,
     CompressedImage,

@@ -19,8 +19,8 @@ from typing import TYPE_CHECKING, Any, ClassVar
 
 import msgspec
 
-from shared.errors import VoicectlError
-from shared.messages import Order, Progress
+from voicectl.shared.errors import VoicectlError
+from voicectl.shared.messages import Order, Progress
 
 if TYPE_CHECKING:
     from .fence import OrderRobot

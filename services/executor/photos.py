@@ -7,9 +7,9 @@ import asyncio
 import logging
 from pathlib import Path
 
-from shared.bus import Bus, json_decoder
-from shared.keys import RobotKeys
-from shared.messages import Failed, GetPhoto, Photo, PhotoReply
+from voicectl.shared.bus import Bus, json_decoder
+from voicectl.shared.keys import RobotKeys
+from voicectl.shared.messages import Failed, GetPhoto, Photo, PhotoReply
 
 _LOGGER = logging.getLogger(__name__)
 

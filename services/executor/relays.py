@@ -12,9 +12,9 @@ from collections.abc import Callable
 import numpy as np
 from PIL import Image as PilImage
 
-from shared.bus import Bus
-from shared.messages import RobotMap, RobotPose, TargetPose
-from shared.ros2 import (
+from voicectl.shared.bus import Bus
+from voicectl.shared.messages import RobotMap, RobotPose, TargetPose
+from voicectl.shared.ros2 import (
     OccupancyGrid,
     Pose2D,
 )

@@ -25,14 +25,14 @@ from collections.abc import Callable
 
 import msgspec
 
-from shared.errors import BusError, OrderFailed
-from shared.geometry import compose, map_cell
-from shared.messages import TargetPose
-from shared.robot import Interface, RobotTransport, Role
-from shared.robot.action import ActionClient
-from shared.robot.stop import RobotStop
-from shared.robot_options import RobotOptions
-from shared.ros2 import (
+from voicectl.shared.errors import BusError, OrderFailed
+from voicectl.shared.geometry import compose, map_cell
+from voicectl.shared.messages import TargetPose
+from voicectl.shared.robot import Interface, RobotTransport, Role
+from voicectl.shared.robot.action import ActionClient
+from voicectl.shared.robot.stop import RobotStop
+from voicectl.shared.robot_options import RobotOptions
+from voicectl.shared.ros2 import (
     NAVIGATION_ERRORS,
     SAME_RESULT,
     CameraType,
@@ -51,7 +51,7 @@ from shared.ros2 import (
     distro_of_result,
     new_goal_id,
 )
-from shared.throttle import Throttled
+from voicectl.shared.throttle import Throttled
 
 _LOGGER = logging.getLogger(__name__)
 

@@ -14,10 +14,10 @@ import contextlib
 import logging
 from collections.abc import Callable, Coroutine
 
-from shared.bus import Bus, Latest, json_decoder
-from shared.errors import OrderFailed
-from shared.keys import RobotKeys
-from shared.messages import (
+from voicectl.shared.bus import Bus, Latest, json_decoder
+from voicectl.shared.errors import OrderFailed
+from voicectl.shared.keys import RobotKeys
+from voicectl.shared.messages import (
     Accepted,
     CancelOrder,
     ControlRequest,
@@ -39,7 +39,7 @@ from shared.messages import (
     Rejected,
     Running,
 )
-from shared.process import Service, forever
+from voicectl.shared.process import Service, forever
 
 from .fence import OrderRobot
 from .framework import Bindings, ExecutionContext, Executor, ParamsMismatch, order_params

@@ -7,8 +7,8 @@ import contextlib
 import sys
 from collections.abc import Iterator
 
-from shared.errors import ServiceError
-from shared.process import add_bus_arguments, open_bus, robot_name, run_service, serve
+from voicectl.shared.errors import ServiceError
+from voicectl.shared.process import add_bus_arguments, open_bus, robot_name, run_service, serve
 
 from .audio_io import AudioError, list_devices, open_sink, open_source
 from .listener import ListenConfig, Listener, Speak
@@ -92,8 +92,8 @@ async def main(args: argparse.Namespace) -> None:
 def _voice(args: argparse.Namespace, stack: contextlib.ExitStack) -> Speak | None:
     if args.speak is None:
         return None
-    from shared.errors import TtsError
-    from shared.tts import load_voice
+    from voicectl.shared.errors import TtsError
+    from voicectl.shared.tts import load_voice
 
     try:
         voice = load_voice(args.speak)

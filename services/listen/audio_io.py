@@ -52,8 +52,8 @@ import numpy as np
 import soundfile
 import soxr
 
-from shared.errors import AudioError
-from shared.messages import FRAME_BYTES, SAMPLE_RATE
+from voicectl.shared.errors import AudioError
+from voicectl.shared.messages import FRAME_BYTES, SAMPLE_RATE
 
 __all__ = [
     "AudioError",

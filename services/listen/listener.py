@@ -24,12 +24,12 @@ from collections.abc import Callable, Coroutine
 from dataclasses import dataclass, field
 from typing import Any
 
-from shared import answers
-from shared.bus import Bus, Stream, json_decoder
-from shared.client import Refused, Unreachable, VoicectlClient
-from shared.errors import BusError
-from shared.keys import RobotKeys
-from shared.messages import (
+from voicectl.shared import answers
+from voicectl.shared.bus import Bus, Stream, json_decoder
+from voicectl.shared.client import Refused, Unreachable, VoicectlClient
+from voicectl.shared.errors import BusError
+from voicectl.shared.keys import RobotKeys
+from voicectl.shared.messages import (
     FRAME_BYTES,
     MAX_CHECK_SECONDS,
     AudioChunk,
@@ -46,7 +46,7 @@ from shared.messages import (
     Stopped,
     SttReply,
 )
-from shared.process import Service
+from voicectl.shared.process import Service
 
 from .spotter import (
     STOP_LOOP_PENALTY,

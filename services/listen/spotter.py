@@ -22,8 +22,8 @@ from typing import Any
 import numpy as np
 import pocketsphinx
 
-from shared.errors import VoicectlError
-from shared.sound import Suppressor
+from voicectl.shared.errors import VoicectlError
+from voicectl.shared.sound import Suppressor
 
 SAMPLE_RATE = 16000
 FRAME_SECONDS = 0.01

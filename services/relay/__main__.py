@@ -5,10 +5,10 @@ from __future__ import annotations
 import argparse
 import sys
 
-from shared.errors import ServiceError
-from shared.process import open_bus, run_service, serve
-from shared.robot.dds import Ros2Transport
-from shared.robot_options import robot_options
+from voicectl.shared.errors import ServiceError
+from voicectl.shared.process import open_bus, run_service, serve
+from voicectl.shared.robot.dds import Ros2Transport
+from voicectl.shared.robot_options import robot_options
 
 from .config import parse_args
 from .relay import StopRelay

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import argparse
 
-from shared.process import add_bus_arguments
-from shared.robot_options import add_robot_arguments
+from voicectl.shared.process import add_bus_arguments
+from voicectl.shared.robot_options import add_robot_arguments
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:

@@ -16,15 +16,15 @@ import asyncio
 import logging
 import time
 
-from shared.bus import Bus
-from shared.errors import BusError
-from shared.keys import RobotNames
-from shared.process import Service, forever
-from shared.robot import TransportKind, open_transport
-from shared.robot.action import CANCEL_TIMEOUT
-from shared.robot.dds import Ros2Transport
-from shared.ros2 import CANCEL_GOAL, CdrError, CmdVelType, Ros2Codec
-from shared.throttle import Throttled
+from voicectl.shared.bus import Bus
+from voicectl.shared.errors import BusError
+from voicectl.shared.keys import RobotNames
+from voicectl.shared.process import Service, forever
+from voicectl.shared.robot import TransportKind, open_transport
+from voicectl.shared.robot.action import CANCEL_TIMEOUT
+from voicectl.shared.robot.dds import Ros2Transport
+from voicectl.shared.ros2 import CANCEL_GOAL, CdrError, CmdVelType, Ros2Codec
+from voicectl.shared.throttle import Throttled
 
 _LOGGER = logging.getLogger(__name__)
 

@@ -8,9 +8,9 @@ import sys
 
 import zenoh
 
-from shared.bus import BusOptions
-from shared.errors import BusError, ServiceError
-from shared.process import Service, add_bus_arguments, bus_options, run_service, serve
+from voicectl.shared.bus import BusOptions
+from voicectl.shared.errors import BusError, ServiceError
+from voicectl.shared.process import Service, add_bus_arguments, bus_options, run_service, serve
 
 _LOGGER = logging.getLogger(__name__)
 

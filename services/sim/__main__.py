@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from shared.process import open_bus, run_service, serve
+from voicectl.shared.process import open_bus, run_service, serve
 
 from .build import build
 from .config import config_of, parse_args

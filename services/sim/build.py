@@ -3,9 +3,9 @@ hosts several."""
 
 from __future__ import annotations
 
-from shared.bus import Bus
-from shared.robot import open_transport
-from shared.ros2 import Ros2Codec
+from voicectl.shared.bus import Bus
+from voicectl.shared.robot import open_transport
+from voicectl.shared.ros2 import Ros2Codec
 
 from .node import SimConfig, SimNode
 

@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import argparse
 
-from shared.process import add_bus_arguments, positive_float
-from shared.robot import TransportKind
-from shared.robot_options import add_robot_arguments, robot_options
-from shared.ros2 import CameraType, CmdVelType, RosDistro
+from voicectl.shared.process import add_bus_arguments, positive_float
+from voicectl.shared.robot import TransportKind
+from voicectl.shared.robot_options import add_robot_arguments, robot_options
+from voicectl.shared.ros2 import CameraType, CmdVelType, RosDistro
 
 from .node import SimConfig, SimFault
 from .robot import Bounds, SpeedLimits

@@ -51,11 +51,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from PIL import Image as PilImage
 
-from shared.geometry import compose
-from shared.keys import RobotNames
-from shared.process import Service
-from shared.robot import Interface, RobotTransport, Role, TransportKind
-from shared.ros2 import (
+from voicectl.shared.geometry import compose
+from voicectl.shared.keys import RobotNames
+from voicectl.shared.process import Service
+from voicectl.shared.robot import Interface, RobotTransport, Role, TransportKind
+from voicectl.shared.ros2 import (
     CANCEL_ALL,
     CANCEL_GOAL,
     NAVIGATE_FEEDBACK,

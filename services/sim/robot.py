@@ -10,8 +10,8 @@ import enum
 import math
 from dataclasses import dataclass
 
-from shared.geometry import normalize_angle
-from shared.ros2 import Pose2D
+from voicectl.shared.geometry import normalize_angle
+from voicectl.shared.ros2 import Pose2D
 
 CMD_VEL_TIMEOUT = 0.5
 """Seconds after which a velocity command counts as zero, like a real base's watchdog."""

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from shared.ros2 import OccupancyGrid, Pose2D
+from voicectl.shared.ros2 import OccupancyGrid, Pose2D
 
 from .robot import Bounds
 

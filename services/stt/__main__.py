@@ -6,11 +6,12 @@ import argparse
 import asyncio
 import sys
 
-from shared.errors import ServiceError
-from shared.process import open_bus, run_service, serve
+from voicectl.shared.errors import ServiceError
+from voicectl.shared.process import open_bus, run_service, serve
 
 from .config import SttConfig, parse_args
-from .engine import EngineError, load_engine
+from .engine import EngineError
+from .load import load_engine
 from .service import SttService
 
 

@@ -19,10 +19,10 @@ from pathlib import Path
 
 import numpy as np
 
-from shared.errors import AudioError
-from shared.messages import FRAME_BYTES, SAMPLE_RATE
-from shared.sound import Suppressor as Suppressor  # re-exported: moved to shared/
-from shared.sound import whole as whole
+from voicectl.shared.errors import AudioError
+from voicectl.shared.messages import FRAME_BYTES, SAMPLE_RATE
+from voicectl.shared.sound import Suppressor as Suppressor  # re-exported: moved to shared/
+from voicectl.shared.sound import whole as whole
 
 NOISE_FLOOR = 30.0
 """Standard deviation of the added noise, in 16-bit sample units (about -60 dBFS)."""

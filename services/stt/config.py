@@ -6,7 +6,7 @@ from __future__ import annotations
 import argparse
 from dataclasses import dataclass, field
 
-from shared.process import add_bus_arguments, robot_name
+from voicectl.shared.process import add_bus_arguments, robot_name
 
 from .engine import ENGINES, EngineOptions
 from .service import SessionLimits

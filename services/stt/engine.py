@@ -25,8 +25,8 @@ from typing import Any, Protocol
 
 from msgspec import Struct
 
-from shared.errors import VoicectlError
-from shared.messages import Doubt, Grammar, PhraseCheck, Transcription
+from voicectl.shared.errors import VoicectlError
+from voicectl.shared.messages import Doubt, Grammar, PhraseCheck, Transcription
 
 from .audio import frames
 
@@ -133,12 +133,17 @@ ENGINES: dict[str, EngineKind] = {
     kind.name: kind
     for kind in (
         EngineKind(
-            "moonshine", "services.stt.moonshine_engine", requires="onnxruntime", extra="stt"
+            "moonshine",
+            "voicectl.services.stt.moonshine_engine",
+            requires="onnxruntime",
+            extra="stt",
         ),
-        EngineKind("pocketsphinx", "services.stt.sphinx", requires="pocketsphinx", extra="stt"),
+        EngineKind(
+            "pocketsphinx", "voicectl.services.stt.sphinx", requires="pocketsphinx", extra="stt"
+        ),
         EngineKind(
             "vosk",
-            "services.stt.vosk_engine",
+            "voicectl.services.stt.vosk_engine",
             requires="vosk",
             extra="vosk",
             flags=(
@@ -175,12 +180,9 @@ class EngineOptions:
         return flags
 
 
-def load_engine(options: EngineOptions) -> Engine:
-    """The engine `options` names, imported now; EngineError with an install hint."""
-    if options.workers > 0:
-        from .workers import ProcessEngine
-
-        return ProcessEngine(options, options.workers)
+def load_here(options: EngineOptions) -> Engine:
+    """The engine `options` names, imported now into this process (a worker process calls
+    this; everything else `load.load_engine`); EngineError with an install hint."""
     kind = ENGINES.get(options.name)
     if kind is None:
         raise EngineError(f"unknown engine {options.name!r}; engines: {', '.join(ENGINES)}")

@@ -42,7 +42,7 @@ from dataclasses import dataclass, field
 
 from rapidfuzz.distance import Levenshtein
 
-from shared.messages import Doubt
+from voicectl.shared.messages import Doubt
 
 ALIKE = 0.75
 """Words at least this alike sound like each other to the judge ("crimes"/"primes")."""

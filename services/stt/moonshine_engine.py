@@ -19,8 +19,8 @@ import threading
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 
-from shared.config import cache_dir
-from shared.messages import Grammar, PhraseCheck, Transcription
+from voicectl.shared.config import cache_dir
+from voicectl.shared.messages import Grammar, PhraseCheck, Transcription
 
 from .engine import EngineOptions, Recogniser
 from .moonshine import Cancelled, Moonshine, Transcript, prepare, weights_dir

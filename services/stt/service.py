@@ -20,9 +20,9 @@ import threading
 import time
 from dataclasses import dataclass
 
-from shared.bus import Bus, Latest, json_decoder
-from shared.keys import ConverterKeys, RobotKeys, last_chunk
-from shared.messages import (
+from voicectl.shared.bus import Bus, Latest, json_decoder
+from voicectl.shared.keys import ConverterKeys, RobotKeys, last_chunk
+from voicectl.shared.messages import (
     AudioChunk,
     AudioMessage,
     AudioStart,
@@ -37,7 +37,7 @@ from shared.messages import (
     Transcript,
     excerpt,
 )
-from shared.process import Service
+from voicectl.shared.process import Service
 
 from .audio import BYTES_PER_SECOND
 from .engine import Engine, EngineError, Final, Heard, Recogniser, RecognitionEvent, SpeechStarted

@@ -51,7 +51,7 @@ from typing import Any, Protocol
 
 import pocketsphinx
 
-from shared.messages import Grammar, PhraseCheck, Transcription
+from voicectl.shared.messages import Grammar, PhraseCheck, Transcription
 
 from .audio import Loudness, NoiseFloor, Suppressor, seconds, whole
 from .engine import (

@@ -19,7 +19,7 @@ from typing import Any
 
 import vosk
 
-from shared.messages import Doubt, Grammar, PhraseCheck
+from voicectl.shared.messages import Doubt, Grammar, PhraseCheck
 
 from .audio import seconds, whole
 from .engine import (

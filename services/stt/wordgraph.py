@@ -19,7 +19,7 @@ import re
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 
-from shared.errors import VoicectlError
+from voicectl.shared.errors import VoicectlError
 
 Arc = tuple[int, int, str | None]
 """(from state, to state, word); a None word is an epsilon move."""

@@ -25,9 +25,9 @@ from typing import TYPE_CHECKING, Any
 
 from msgspec import Struct
 
-from shared.messages import Grammar, PhraseCheck
+from voicectl.shared.messages import Grammar, PhraseCheck
 
-from .engine import EngineError, EngineOptions, Recogniser, RecognitionEvent, load_engine
+from .engine import EngineError, EngineOptions, Recogniser, RecognitionEvent, load_here
 
 if TYPE_CHECKING:
     from multiprocessing.context import SpawnProcess
@@ -194,7 +194,7 @@ def _serve(connection: Connection, options: EngineOptions) -> None:
     # Ctrl-C reaches the whole process group: the service stops its workers itself.
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     try:
-        engine = load_engine(options)
+        engine = load_here(options)
     except EngineError as exc:
         connection.send(_Reply(error=str(exc)))
         return

@@ -9,9 +9,9 @@ import sqlite3
 import sys
 from pathlib import Path
 
-from shared.config import data_dir
-from shared.errors import ServiceError, StoreError
-from shared.process import (
+from voicectl.shared.config import data_dir
+from voicectl.shared.errors import ServiceError, StoreError
+from voicectl.shared.process import (
     add_bus_arguments,
     open_bus,
     positive_int,

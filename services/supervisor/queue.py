@@ -14,8 +14,8 @@ from collections.abc import Callable
 
 import msgspec
 
-from shared.errors import VoicectlError
-from shared.messages import Order, OrderRecord, OrderStatus, Progress, State
+from voicectl.shared.errors import VoicectlError
+from voicectl.shared.messages import Order, OrderRecord, OrderStatus, Progress, State
 
 FINAL = frozenset(
     {

@@ -9,10 +9,10 @@ import functools
 import logging
 from collections.abc import Callable
 
-from shared.bus import Bus, json_decoder
-from shared.errors import BusError
-from shared.keys import RobotKeys
-from shared.messages import (
+from voicectl.shared.bus import Bus, json_decoder
+from voicectl.shared.errors import BusError
+from voicectl.shared.keys import RobotKeys
+from voicectl.shared.messages import (
     Accepted,
     Cancel,
     CancelAll,
@@ -48,8 +48,8 @@ from shared.messages import (
     Submitted,
     SupervisorRequest,
 )
-from shared.robot.stop import Cancelled, RobotStop, prepare
-from shared.ros2 import NAVIGATE_FEEDBACK
+from voicectl.shared.robot.stop import Cancelled, RobotStop, prepare
+from voicectl.shared.ros2 import NAVIGATE_FEEDBACK
 
 from .queue import QueueFull, RequestConflict, RobotQueue
 from .store import Operation, OrderStore

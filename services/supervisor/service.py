@@ -18,10 +18,10 @@ from typing import Any
 import msgspec
 import zenoh
 
-from shared.bus import Bus, Pending, json_decoder
-from shared.errors import ServiceError
-from shared.keys import ANY, RobotKeys, last_chunk, robot_of
-from shared.messages import (
+from voicectl.shared.bus import Bus, Pending, json_decoder
+from voicectl.shared.errors import ServiceError
+from voicectl.shared.keys import ANY, RobotKeys, last_chunk, robot_of
+from voicectl.shared.messages import (
     EmergencyStop,
     ExecutorEvent,
     ExecutorInfo,
@@ -35,9 +35,9 @@ from shared.messages import (
     SupervisorReply,
     SupervisorRequest,
 )
-from shared.process import Service
-from shared.robot.stop import prepare
-from shared.throttle import Throttled
+from voicectl.shared.process import Service
+from voicectl.shared.robot.stop import prepare
+from voicectl.shared.throttle import Throttled
 
 from .queue import MAX_QUEUE, RobotQueue
 from .robot import STOP_NODE, RobotSupervisor

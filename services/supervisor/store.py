@@ -36,8 +36,8 @@ from typing import IO, Any, TypeVar
 
 import msgspec
 
-from shared.errors import StoreError
-from shared.messages import OrderRecord
+from voicectl.shared.errors import StoreError
+from voicectl.shared.messages import OrderRecord
 
 from .latch import Latched, LatchFile, sync_directory
 

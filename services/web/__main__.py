@@ -5,8 +5,8 @@ from __future__ import annotations
 import argparse
 import sys
 
-from shared.errors import ServiceError
-from shared.process import bus_options, open_bus, run_service, serve
+from voicectl.shared.errors import ServiceError
+from voicectl.shared.process import bus_options, open_bus, run_service, serve
 
 from .config import WebConfig, parse_args
 from .server import build, panel_of

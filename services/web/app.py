@@ -30,11 +30,11 @@ from starlette.types import ASGIApp, Receive, Scope, Send
 from starlette.types import Message as ASGIMessage
 from starlette.websockets import WebSocket
 
-from shared.bus import Bus, BusOptions
-from shared.client import Refused, Unreachable, VoicectlClient
-from shared.errors import TtsError, VoicectlError
-from shared.keys import RobotKeys, check_chunk
-from shared.messages import (
+from voicectl.shared.bus import Bus, BusOptions
+from voicectl.shared.client import Refused, Unreachable, VoicectlClient
+from voicectl.shared.errors import TtsError, VoicectlError
+from voicectl.shared.keys import RobotKeys, check_chunk
+from voicectl.shared.messages import (
     Cancel,
     CancelAll,
     Done,
@@ -52,8 +52,8 @@ from shared.messages import (
     Submitted,
     SupervisorReply,
 )
-from shared.process import running
-from shared.tts import MAX_TEXT, Voice, to_wav
+from voicectl.shared.process import running
+from voicectl.shared.tts import MAX_TEXT, Voice, to_wav
 
 from .audio import AudioSocket
 from .hub import END, Hub

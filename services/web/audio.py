@@ -24,9 +24,9 @@ from typing import Any
 import msgspec
 from starlette.websockets import WebSocket, WebSocketDisconnect
 
-from shared.bus import Bus, Stream
-from shared.keys import RobotKeys, check_chunk
-from shared.messages import (
+from voicectl.shared.bus import Bus, Stream
+from voicectl.shared.keys import RobotKeys, check_chunk
+from voicectl.shared.messages import (
     FRAME_BYTES,
     MAX_CHUNK_FRAMES,
     AudioChunk,

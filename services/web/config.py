@@ -6,9 +6,9 @@ import argparse
 from dataclasses import dataclass
 from pathlib import Path
 
-from shared.config import default_token_file
-from shared.process import add_bus_arguments, robot_name
-from shared.tts import VOICES
+from voicectl.shared.config import default_token_file
+from voicectl.shared.process import add_bus_arguments, robot_name
+from voicectl.shared.tts import VOICES
 
 from .tls import add_tls_arguments
 

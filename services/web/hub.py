@@ -19,9 +19,9 @@ from collections.abc import Callable, Iterator
 
 import msgspec
 
-from shared.bus import Bus, json_decoder
-from shared.keys import ANY, ConverterKeys, RobotKeys, last_chunk, robot_of
-from shared.messages import (
+from voicectl.shared.bus import Bus, json_decoder
+from voicectl.shared.keys import ANY, ConverterKeys, RobotKeys, last_chunk, robot_of
+from voicectl.shared.messages import (
     PartialTranscript,
     Places,
     Proposal,
@@ -31,8 +31,8 @@ from shared.messages import (
     SttStatus,
     Transcript,
 )
-from shared.process import Service
-from shared.throttle import Throttled
+from voicectl.shared.process import Service
+from voicectl.shared.throttle import Throttled
 
 _LOGGER = logging.getLogger(__name__)
 

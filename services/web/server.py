@@ -15,11 +15,11 @@ from collections.abc import Iterator
 
 import uvicorn
 
-from shared.bus import Bus, BusOptions
-from shared.config import load_or_create_token
-from shared.errors import ServiceError, TtsError
-from shared.process import Service
-from shared.tts import Voice, load_voice
+from voicectl.shared.bus import Bus, BusOptions
+from voicectl.shared.config import load_or_create_token
+from voicectl.shared.errors import ServiceError, TtsError
+from voicectl.shared.process import Service
+from voicectl.shared.tts import Voice, load_voice
 
 from .app import Access, Panel, create_app
 from .audio import MAX_MESSAGE

@@ -8,10 +8,10 @@ from __future__ import annotations
 
 import math
 
-from shared.errors import OrderFailed
-from shared.geometry import compose, normalize_angle
-from shared.messages import Order, TargetPose
-from shared.ros2 import Pose2D
+from voicectl.shared.errors import OrderFailed
+from voicectl.shared.geometry import compose, normalize_angle
+from voicectl.shared.messages import Order, TargetPose
+from voicectl.shared.ros2 import Pose2D
 
 from ..framework import ExecutionContext, Executor
 

@@ -16,9 +16,9 @@ from typing import Annotated
 
 import msgspec
 
-from shared.errors import OrderFailed
-from shared.messages import Order
-from shared.ros2 import Pose2D
+from voicectl.shared.errors import OrderFailed
+from voicectl.shared.messages import Order
+from voicectl.shared.ros2 import Pose2D
 
 from ..framework import ExecutionContext, Executor
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import msgspec
 
-from shared.messages import Order
+from voicectl.shared.messages import Order
 
 from ..framework import ExecutionContext, Executor
 

@@ -13,9 +13,9 @@ from typing import Annotated
 import msgspec
 from PIL import Image as PilImage
 
-from shared.errors import OrderFailed
-from shared.messages import Order
-from shared.ros2 import CompressedImage, Image
+from voicectl.shared.errors import OrderFailed
+from voicectl.shared.messages import Order
+from voicectl.shared.ros2 import CompressedImage, Image
 
 from ..framework import ExecutionContext, Executor
 

@@ -7,7 +7,7 @@ from typing import Annotated
 
 import msgspec
 
-from shared.messages import Order
+from voicectl.shared.messages import Order
 
 from ..framework import ExecutionContext, Executor
 
