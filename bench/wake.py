@@ -42,16 +42,9 @@ from harness.speech_set import (
     real_recordings,
     speak,
 )
+from voicectl.services.listen import spotter as shipped
 from voicectl.services.listen.listener import CHECK_BEFORE
-from voicectl.services.listen.spotter import (
-    STOP_LOOP_PENALTY,
-    STOP_THRESHOLD,
-    WAKE_LOOP_PENALTY,
-    WAKE_THRESHOLD,
-    Phrase,
-    Spotted,
-    Spotter,
-)
+from voicectl.services.listen.spotter import Phrase, Spotted, Spotter
 from voicectl.services.stt.audio import read_wav
 from voicectl.services.stt.engine import Engine, EngineOptions
 from voicectl.services.stt.load import load_engine
@@ -195,12 +188,12 @@ def main() -> None:
     engine = load_engine(EngineOptions())
     check = checker(engine, args.wake)
     speech = long_speech(args.split)
-    wake, stop = Phrase(args.wake, WAKE_THRESHOLD), Phrase("stop", STOP_THRESHOLD)
+    wake, stop = Phrase(args.wake, shipped.WAKE_THRESHOLD), Phrase("stop", shipped.STOP_THRESHOLD)
     settings = [
-        Setting("wake phrase, shipped: spotter + check", wake, WAKE_LOOP_PENALTY, True),
-        Setting("wake phrase, the spotter alone", wake, WAKE_LOOP_PENALTY),
+        Setting("wake phrase, shipped: spotter + check", wake, shipped.WAKE_LOOP_PENALTY, True),
+        Setting("wake phrase, the spotter alone", wake, shipped.WAKE_LOOP_PENALTY),
         Setting("wake phrase, baseline", Phrase(args.wake, 1e-30), 0.1),
-        Setting("stop, shipped", stop, STOP_LOOP_PENALTY),
+        Setting("stop, shipped", stop, shipped.STOP_LOOP_PENALTY),
         Setting("stop, baseline", Phrase("stop", 1e-30), 0.1),
     ]
     print(f"{args.split} split; long speech {sum(map(len, speech)) / 32000 / 60:.1f} min")

@@ -23,7 +23,7 @@ import signal
 import sys
 from collections.abc import AsyncIterator, Awaitable, Callable, Mapping
 from pathlib import Path
-from typing import Self
+from typing import Self, TypeVar
 
 import zenoh
 
@@ -32,14 +32,24 @@ from .errors import BusError, ServiceError
 from .keys import check_chunk
 
 _LOGGER = logging.getLogger(__name__)
+T = TypeVar("T")
 
 
-def robot_name(text: str) -> str:
-    """argparse type for a robot name: a clear message instead of 'invalid value'."""
-    try:
-        return check_chunk(text, "robot name")
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from exc
+def argument_type(check: Callable[[str], T]) -> Callable[[str], T]:
+    """An argparse type from a check that raises ValueError: the check's own message in the
+    error instead of argparse's 'invalid value'."""
+
+    def convert(text: str) -> T:
+        try:
+            return check(text)
+        except ValueError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from exc
+
+    return convert
+
+
+robot_name = argument_type(lambda text: check_chunk(text, "robot name"))
+"""argparse type for a robot name."""
 
 
 def positive_int(text: str) -> int:

@@ -23,7 +23,7 @@ import zenoh
 from voicectl.shared.bus import Bus
 from voicectl.shared.errors import BusError
 from voicectl.shared.keys import ConverterKeys, RobotKeys, RobotNames, check_ros_name
-from voicectl.shared.process import add_bus_arguments, bus_options, robot_name
+from voicectl.shared.process import add_bus_arguments, argument_type, bus_options, robot_name
 
 SERVICES = ("router", "converter", "stt", "supervisor", "executor", "sim", "web")
 PER_ROBOT = ("stt", "supervisor", "executor")
@@ -32,11 +32,7 @@ DEFAULT_URL = "http://127.0.0.1:8000/api/health"
 UP, DOWN = 0, 1
 
 
-def _namespace(text: str) -> str:
-    try:
-        return check_ros_name(text, "ROS namespace")
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from exc
+_namespace = argument_type(lambda text: check_ros_name(text, "ROS namespace"))
 
 
 def _web_url(text: str) -> str:

@@ -131,14 +131,7 @@ def grammar_reading(transcript: Transcript, parser: Parser) -> Reading:
             reason = f"not a command: {reason}"
         return Reading(GRAMMAR, text, made, reason=reason)
     if result is None or result.errors or not result.orders:
-        problem = result.errors[0] if result is not None and result.errors else None
-        why = f" ('{problem.text}': {problem.reason})" if problem else ""
-        return Reading(
-            GRAMMAR,
-            text,
-            reason=f"I heard '{text}': not a command{why}",
-            candidates=problem.candidates if problem else [],
-        )
+        return not_a_command(GRAMMAR, text, result.errors if result is not None else [])
     return Reading(GRAMMAR, text, result.orders, accepted=True, doubts=transcript.doubts)
 
 
@@ -166,7 +159,14 @@ def free_reading(heard: Transcription, parser: Parser) -> Reading:
                     doubts=[doubt],
                     support=support,
                 )
-    problem = result.errors[0] if result.errors else None
+    return not_a_command(ear, text, result.errors, support)
+
+
+def not_a_command(
+    ear: str, text: str, errors: list[ParseProblem], support: float | None = None
+) -> Reading:
+    """Words that make no whole order: the first problem, and what it may have meant."""
+    problem = errors[0] if errors else None
     why = f" ('{problem.text}': {problem.reason})" if problem else ""
     return Reading(
         ear,

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 
-from voicectl.shared.process import add_bus_arguments, positive_float
+from voicectl.shared.process import add_bus_arguments, argument_type, positive_float
 from voicectl.shared.robot import TransportKind
 from voicectl.shared.robot_options import add_robot_arguments, robot_options
 from voicectl.shared.ros2 import CameraType, CmdVelType, RosDistro
@@ -12,12 +12,7 @@ from voicectl.shared.ros2 import CameraType, CmdVelType, RosDistro
 from .node import SimConfig, SimFault
 from .robot import Bounds, SpeedLimits
 
-
-def _bounds(text: str) -> Bounds:
-    try:
-        return Bounds.parse(text)
-    except ValueError as exc:
-        raise argparse.ArgumentTypeError(str(exc)) from exc
+_bounds = argument_type(Bounds.parse)
 
 
 def build_parser() -> argparse.ArgumentParser:
