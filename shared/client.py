@@ -22,13 +22,11 @@ from .bus import Bus, json_decoder
 from .errors import BusError, VoicectlError
 from .keys import ConverterKeys, RobotKeys, robot_of
 from .messages import (
-    Done,
     EmergencyStop,
     ExecutorInfo,
     ExecutorReply,
     Failed,
     GetPhoto,
-    Latch,
     Message,
     Order,
     ParseReply,
@@ -41,7 +39,7 @@ from .messages import (
     Submitted,
     SupervisorReply,
 )
-from .robot.stop import RobotStop, prepare
+from .robot.stop import ExecutorLatch, RobotStop, StopProcedure, prepare
 
 T = TypeVar("T")
 
@@ -122,22 +120,22 @@ class VoicectlClient:
         return None if info is None else RobotStop.of(info, self.bus)
 
     async def stop(self, robot: str) -> Stopped:
-        """Emergency stop that waits on no other process. Zero velocity and a cancel of
-        every navigation goal go out from here at once, while the supervisor is asked to
-        stop, latch and clear; its answer is the answer. If it gives none within
-        `STOP_ANSWER`, this client also latches the executor itself and says what it did.
+        """Emergency stop that waits on no other process. The stop's procedure runs from
+        here at once (`StopProcedure`: zero velocity, the executor latched, every
+        navigation goal cancelled), while the supervisor is asked to stop, latch and
+        clear; its answer is the answer. If it gives none within `STOP_ANSWER`, the
+        answer is what the procedure from here did, and that the supervisor did not.
         Raises only when nothing at all could be done: no supervisor answered and no
         executor ever announced the robot, so that its keys are unknown."""
         asked = asyncio.ensure_future(self.request(robot, EmergencyStop()))
         direct = await self._robot_stop(robot)
-        sent, cancelling, latching = "", None, None
+        stopping = None
         if direct is not None:
-            sent = direct.zero_velocity()
-            cancelling = self._keep(direct.cancel_goals())
             # The executor is latched from here too, as the supervisor will: the goal's
             # cancel can reach the robot, end the running order and let the supervisor
             # start the next one before the supervisor has heard of the stop.
-            latching = self._keep(self._latch(robot))
+            executor = ExecutorLatch(self.bus, RobotKeys(robot), self._executor_decode, STOP_ANSWER)
+            stopping = self._keep(StopProcedure.begin(direct, executor).outcome())
         try:
             async with asyncio.timeout(STOP_ANSWER):
                 reply = await asyncio.shield(asked)
@@ -152,20 +150,17 @@ class VoicectlClient:
                     why = reason
                 case other:
                     why = f"answered {type(other).__name__}"
-        if direct is None or cancelling is None or latching is None:
+        if stopping is None:
             raise Unreachable(
                 "supervisor",
                 BusError(f"{why}; and no executor has announced robot '{robot}': nothing stopped"),
             )
-        latched = await latching
-        cancelled = await cancelling
-        confirmed = latched[0] and (cancelled.confirmed or not cancelled.answered)
+        outcome = await stopping
         detail = (
-            f"SUPERVISOR DID NOT STOP IT ({why}); stopped from here: {sent}; "
-            f"{cancelled.detail}; {latched[1]}; not latched: start the supervisor before "
-            "new orders"
+            f"SUPERVISOR DID NOT STOP IT ({why}); stopped from here: {outcome.detail}; "
+            "not latched: start the supervisor before new orders"
         )
-        return Stopped(confirmed=confirmed, detail=detail)
+        return Stopped(confirmed=outcome.confirmed, detail=detail)
 
     def _keep(self, work: Coroutine[Any, Any, T]) -> asyncio.Future[T]:
         """`work` running on its own, kept until done (the loop keeps only weak references)."""
@@ -173,25 +168,6 @@ class VoicectlClient:
         self._pending.add(future)
         future.add_done_callback(self._pending.discard)
         return future
-
-    async def _latch(self, robot: str) -> tuple[bool, str]:
-        """Latch the executor's stop directly: (whether it is safe, what happened)."""
-        try:
-            reply = await self.bus.request(
-                RobotKeys(robot).executor_latch,
-                Latch(on=True),
-                self._executor_decode,
-                STOP_ANSWER,
-                urgent=True,
-            )
-        except BusError:
-            return True, "no executor answered (a dead executor commands nothing)"
-        match reply:
-            case Done(detail=detail):
-                return True, f"executor: {detail}"
-            case Failed(reason=reason):
-                return False, f"EXECUTOR: {reason}"
-        return False, f"executor answered {type(reply).__name__}"
 
     async def parse(self, text: str) -> ParseResult:
         """What the converter makes of `text`."""

@@ -12,11 +12,14 @@ import pytest
 
 from harness.stop_rig import CASES, ROBOT, StopRig, ended, order
 from harness.wait import async_wait_until
+from voicectl.shared.bus import json_decoder
 from voicectl.shared.client import Unreachable, VoicectlClient
 from voicectl.shared.errors import BusError
+from voicectl.shared.keys import RobotKeys
 from voicectl.shared.messages import (
     EmergencyStop,
     ExecutorInfo,
+    ExecutorReply,
     Failed,
     GetState,
     OrderStatus,
@@ -25,7 +28,15 @@ from voicectl.shared.messages import (
     Stopped,
 )
 from voicectl.shared.robot import TransportKind
-from voicectl.shared.robot.stop import RobotStop, prepare, stop_codec
+from voicectl.shared.robot.action import Cancelled
+from voicectl.shared.robot.stop import (
+    ExecutorLatch,
+    LatchAnswer,
+    RobotStop,
+    StopOutcome,
+    prepare,
+    stop_codec,
+)
 from voicectl.shared.ros2 import CmdVelType, RosDistro
 
 from .conftest import Processes
@@ -279,3 +290,44 @@ async def test_the_stop_codec_is_built_when_an_executor_announces_itself_not_at_
     for kind in CmdVelType:
         assert humble.velocity(kind, 0.0, 0.0, 1.0) == jazzy.velocity(kind, 0.0, 0.0, 1.0)
     assert humble.cancel_goal_request() == jazzy.cancel_goal_request()
+
+
+async def test_the_executor_latch_says_what_no_answer_means(router: str) -> None:
+    """The supervisor knows whether its executor is online: one that is not is not asked,
+    and one that is but does not answer has failed (its order may still run). A client
+    cannot know: no answer means no executor, and a dead executor commands nothing."""
+    keys, decode = RobotKeys(ROBOT), json_decoder(ExecutorReply)
+    with joined(router) as bus:
+        offline = ExecutorLatch(bus, keys, decode, 1.0, online=lambda: False)
+        assert await offline.latch() == LatchAnswer("no executor online", safe=True)
+        assert await offline.release() == ""
+        silent = await ExecutorLatch(bus, keys, decode, 1.0, online=lambda: True).latch()
+        assert silent.detail.startswith("EXECUTOR: executor unreachable: "), silent
+        assert (silent.safe, silent.failed) == (False, True), silent
+        unknown = await ExecutorLatch(bus, keys, decode, 1.0).latch()
+        dead = "no executor answered (a dead executor commands nothing)"
+        assert unknown == LatchAnswer(dead, safe=True)
+
+
+def test_a_stop_is_confirmed_once_navigation_and_the_executor_have_answered() -> None:
+    sent = "sent zero velocity on 'cmd_vel'"
+    cancelled = Cancelled(True, True, "navigation cancelled every goal")
+    latched = LatchAnswer("executor: latched", safe=True)
+    waiting = StopOutcome(sent, None, None)
+    assert not waiting.settled
+    assert not waiting.confirmed
+    assert waiting.detail == (
+        f"{sent}; navigation has not answered the cancel yet; the executor has not answered yet"
+    )
+    done = StopOutcome(sent, cancelled, latched)
+    assert done.settled
+    assert done.confirmed
+    assert done.detail == f"{sent}; navigation cancelled every goal; executor: latched"
+    # No navigation at all (a robot driven by cmd_vel alone): zero velocity is all.
+    silent = Cancelled(False, False, "navigation did not answer the cancel of every goal")
+    assert StopOutcome(sent, silent, latched).confirmed
+    refused = Cancelled(True, False, "navigation refused to cancel every goal")
+    assert not StopOutcome(sent, refused, latched).confirmed
+    stuck = LatchAnswer("EXECUTOR: stuck", safe=False, failed=True)
+    assert not StopOutcome(sent, cancelled, stuck).confirmed
+    assert not StopOutcome(sent, None, latched).confirmed

@@ -30,7 +30,6 @@ from voicectl.shared.messages import (
     GetState,
     Halt,
     HistoryPage,
-    Latch,
     Message,
     OrderFinished,
     OrderProgress,
@@ -48,7 +47,13 @@ from voicectl.shared.messages import (
     Submitted,
     SupervisorRequest,
 )
-from voicectl.shared.robot.stop import Cancelled, RobotStop, prepare
+from voicectl.shared.robot.stop import (
+    ExecutorLatch,
+    RobotStop,
+    StopOutcome,
+    StopProcedure,
+    prepare,
+)
 from voicectl.shared.ros2 import NAVIGATE_FEEDBACK
 
 from .queue import QueueFull, RequestConflict, RobotQueue
@@ -89,6 +94,13 @@ class RobotSupervisor:
         self._queue = queue
         self._keys = RobotKeys(queue.robot)
         self._reply_decode = json_decoder(ExecutorReply)
+        self._executor_latch = ExecutorLatch(
+            bus,
+            self._keys,
+            self._reply_decode,
+            EXECUTOR_TIMEOUT,
+            online=lambda: self._queue.executor_online,
+        )
         self._wake = asyncio.Event()
         self._publish_handle: asyncio.TimerHandle | None = None
         self._last_publish = 0.0
@@ -191,9 +203,9 @@ class RobotSupervisor:
                 self._queue.release()
                 self._store.set_stopped(self.robot, False)
                 self._changed()
-                match await self._latch_executor(False):
-                    case Failed(reason=reason):
-                        return Done(detail=f"emergency stop released; EXECUTOR: {reason}")
+                problem = await self._executor_latch.release()
+                if problem:
+                    return Done(detail=f"emergency stop released; EXECUTOR: {problem}")
                 return Done(detail="emergency stop released")
             case Resume():
                 if not self._queue.paused:
@@ -264,23 +276,18 @@ class RobotSupervisor:
     async def _emergency_stop(self) -> Message:
         """Zero velocity first, at once, before anything is asked of anyone; then latch,
         clear the queue, and in parallel latch the executor (answered off its event loop)
-        and cancel every navigation goal on the robot's bridge keys, so that STOP stops the
-        robot whatever process has died or blocked. Acknowledged after at most
-        `CONFIRM_WAIT`, with what answered by then; later answers land in the state."""
-        stop = self._robot_stop()
-        sent = stop.zero_velocity()
+        and cancel every navigation goal on the robot's keys (`StopProcedure`), so that
+        STOP stops the robot whatever process has died or blocked. Acknowledged after at
+        most `CONFIRM_WAIT`, with what answered by then; later answers land in the state."""
+        stop = StopProcedure.begin(self._robot_stop(), self._executor_latch)
         cleared = self._latch_queue()
-        latch = asyncio.ensure_future(self._latch_executor(True))
-        cancel = asyncio.ensure_future(stop.cancel_goals())
-        await asyncio.wait({latch, cancel}, timeout=CONFIRM_WAIT)
-        confirmed, detail = self._stop_outcome(sent, cleared, latch, cancel)
+        outcome = await stop.outcome(CONFIRM_WAIT)
+        detail = _stop_detail(outcome, cleared)
         self._queue.stop_detail = detail
         self._changed()
-        if not (latch.done() and cancel.done()):
-            self._tasks.append(
-                asyncio.ensure_future(self._stop_settles(sent, cleared, latch, cancel))
-            )
-        return Stopped(confirmed=confirmed, detail=detail)
+        if not outcome.settled:
+            self._tasks.append(asyncio.ensure_future(self._stop_settles(stop, cleared)))
+        return Stopped(confirmed=outcome.confirmed, detail=detail)
 
     def _latch_queue(self) -> int:
         """This supervisor's side of a stop: latched (remembered across restarts), the
@@ -291,76 +298,18 @@ class RobotSupervisor:
         self._hold()
         return cleared
 
-    def _stop_outcome(
-        self,
-        sent: str,
-        cleared: int,
-        latch: asyncio.Future[Message | None],
-        cancel: asyncio.Future[Cancelled],
-    ) -> tuple[bool, str]:
-        """Whether the stop is confirmed, and what answered it, in one line."""
-        parts = [sent]
-        confirmed = True
-        if not cancel.done():
-            parts.append("navigation has not answered the cancel yet")
-            confirmed = False
-        else:
-            navigation = cancel.result()
-            parts.append(navigation.detail)
-            # No navigation at all (a robot driven by cmd_vel alone): zero velocity is all.
-            confirmed &= navigation.confirmed or not navigation.answered
-        if not latch.done():
-            parts.append("the executor has not answered yet")
-            confirmed = False
-        else:
-            match latch.result():
-                case None:
-                    parts.append("no executor online")
-                case Done(detail=detail):
-                    parts.append(f"executor: {detail}")
-                case Failed(reason=reason):
-                    parts.append(f"EXECUTOR: {reason}")
-                    confirmed = False
-                case other:
-                    parts.append(f"executor answered {type(other).__name__}")
-                    confirmed = False
-        parts.append(f"cancelled {cleared} queued order(s)")
-        return confirmed, "; ".join(parts)
-
-    async def _stop_settles(
-        self,
-        sent: str,
-        cleared: int,
-        latch: asyncio.Future[Message | None],
-        cancel: asyncio.Future[Cancelled],
-    ) -> None:
+    async def _stop_settles(self, stop: StopProcedure, cleared: int) -> None:
         """The stop's late answers, into the state and the log; an order the executor
         could not be told to end is ended here, its robot handle being beyond reach."""
-        await latch
-        await cancel
-        _, detail = self._stop_outcome(sent, cleared, latch, cancel)
+        outcome = await stop.outcome()
+        detail = _stop_detail(outcome, cleared)
         if self._queue.stopped:
             self._queue.stop_detail = detail
         _LOGGER.info("%s: emergency stop: %s", self.robot, detail)
         current = self._queue.current
-        if current is not None and isinstance(latch.result(), Failed):
+        if current is not None and outcome.executor is not None and outcome.executor.failed:
             self._finish(current.id, OrderStatus.CANCELLED, f"emergency stop; {detail}")
         self._changed()
-
-    async def _latch_executor(self, on: bool) -> Message | None:
-        """Tell the executor to latch (or release) the stop; None when none is online."""
-        if not self._queue.executor_online:
-            return None
-        try:
-            return await self._bus.request(
-                self._keys.executor_latch if on else self._keys.executor_release,
-                Latch(on=on),
-                self._reply_decode,
-                EXECUTOR_TIMEOUT,
-                urgent=True,
-            )
-        except BusError as exc:
-            return Failed(reason=f"executor unreachable: {exc}")
 
     def _robot_stop(self) -> RobotStop:
         return RobotStop.of(self.executor_info, self._bus, STOP_NODE)
@@ -391,11 +340,6 @@ class RobotSupervisor:
                 await asyncio.sleep(HOLD_EVERY)
         finally:
             unsubscribe()
-
-    async def _halt_robot(self) -> str:
-        """Zero velocity and cancel every navigation goal, on the robot's transport and
-        names as the executor announced them; says what it did."""
-        return (await self._robot_stop().halt()).detail
 
     async def _send_control(self, request: CancelOrder | Halt | GetRunning | GetResult) -> Message:
         try:
@@ -553,8 +497,10 @@ class RobotSupervisor:
         self._tasks.append(loop.create_task(self._halt_after_loss("an order ran")))
 
     async def _halt_after_loss(self, when: str) -> None:
-        what = await self._halt_robot()
-        _LOGGER.warning("%s: executor lost while %s: %s", self.robot, when, what)
+        """Zero velocity and every navigation goal cancelled, on the robot's transport and
+        names as the executor announced them; logged with what it did."""
+        halted = await self._robot_stop().halt()
+        _LOGGER.warning("%s: executor lost while %s: %s", self.robot, when, halted.detail)
 
     async def _verify(self, order_id: str, restarted: str = "the supervisor") -> None:
         """After a restart (of `restarted`): resume the current order if the executor
@@ -643,6 +589,11 @@ class RobotSupervisor:
         self._bus.publish(
             self._keys.state, StateUpdate(state=self._queue.snapshot()), superseded=True
         )
+
+
+def _stop_detail(outcome: StopOutcome, cleared: int) -> str:
+    """A stop's outcome in one line, with the queued orders it cancelled."""
+    return f"{outcome.detail}; cancelled {cleared} queued order(s)"
 
 
 def cancelled_words(queued: int, running: OrderRecord | None) -> str:

@@ -2,9 +2,16 @@
 
 Zero velocity on cmd_vel, then a cancel of every navigation goal (through the action
 client of `action.py`, which the executor's navigation uses too), and what navigation
-answered. The executor stops its robot with it, the supervisor on STOP and when the
-executor is lost, and `voicectl stop` and the panel when no supervisor answers: whoever
-is left alive can stop the robot the same way, through the bridge or on rmw_zenoh.
+answered (`RobotStop`). The executor stops its robot with it, the supervisor on STOP and
+when the executor is lost, and `voicectl stop` and the panel when no supervisor answers:
+whoever is left alive can stop the robot the same way, through the bridge or on rmw_zenoh.
+
+The emergency stop is one procedure (`StopProcedure`), the same whether the supervisor
+runs it on STOP or a client does because no supervisor answered: zero velocity first, at
+once, before anything is asked of anyone; then the executor's latch (`ExecutorLatch`) and
+the cancel of every goal, under way together; then what answered, in words
+(`StopOutcome`). What only the supervisor has (its queue, its state, its history) it does
+around the procedure, which knows nothing of it.
 
 `zero_velocity` is a plain put: it may be called from any thread (a Zenoh callback, the
 executor's watchdog), never waits for an event loop, and goes out at once.
@@ -34,11 +41,14 @@ import asyncio
 import functools
 import logging
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any, TypeVar
 
-from ..bus import Bus
-from ..keys import RobotNames
-from ..messages import ExecutorInfo
+from ..bus import Bus, Decode
+from ..errors import BusError
+from ..keys import RobotKeys, RobotNames
+from ..messages import Done, ExecutorInfo, ExecutorReply, Failed, Latch
 from ..ros2 import (
     CANCEL_ALL,
     CANCEL_GOAL,
@@ -47,11 +57,12 @@ from ..ros2 import (
     RosDistro,
 )
 from . import TransportKind, open_transport, transports
-from .action import CANCEL_TIMEOUT, ActionClient
-from .action import Cancelled as Cancelled  # where the supervisor has always found it
+from .action import CANCEL_TIMEOUT, ActionClient, Cancelled
 from .transport import Interface, RobotTransport, Role
 
 _LOGGER = logging.getLogger(__name__)
+
+T = TypeVar("T")
 
 transports()  # every transport imported with the stop, not at a process's first STOP
 
@@ -190,6 +201,158 @@ class RobotStop:
         sent = self.zero_velocity()
         cancelled = await self.cancel_goals()
         return Cancelled(cancelled.answered, cancelled.confirmed, f"{sent}; {cancelled.detail}")
+
+
+@dataclass(frozen=True)
+class LatchAnswer:
+    """What the executor said to a stop's latch."""
+
+    detail: str
+    """In a few words, for a person."""
+    safe: bool
+    """It commands the robot no more: it latched, or there is no executor to command it."""
+    failed: bool = False
+    """It refused, or did not answer although it was online: the order it runs may go on
+    running there, and whoever keeps the order has to end it."""
+
+
+class ExecutorLatch:
+    """A robot's executor's stop latch, asked over the bus: while it is on, no order
+    commands the robot. The executor answers it off its event loop, so a blocked loop
+    does not hold the answer up."""
+
+    def __init__(
+        self,
+        bus: Bus,
+        keys: RobotKeys,
+        decode: Decode[ExecutorReply],
+        timeout: float,
+        online: Callable[[], bool] | None = None,
+    ) -> None:
+        """`online`: whether the executor is online now, for whoever knows (the
+        supervisor): one that is not is not asked, and one that is but does not answer has
+        failed. Without it (a client, which cannot know), no answer means no executor,
+        and a dead executor commands nothing."""
+        self._bus = bus
+        self._keys = keys
+        self._decode = decode
+        self._timeout = timeout
+        self._online = online
+
+    async def latch(self) -> LatchAnswer:
+        """Latch the executor's stop; what it said."""
+        try:
+            reply = await self._ask(on=True)
+        except BusError as exc:
+            if self._online is None:
+                return LatchAnswer(
+                    "no executor answered (a dead executor commands nothing)", safe=True
+                )
+            reply = _unreachable(exc)
+        match reply:
+            case None:
+                return LatchAnswer("no executor online", safe=True)
+            case Done(detail=detail):
+                return LatchAnswer(f"executor: {detail}", safe=True)
+            case Failed(reason=reason):
+                return LatchAnswer(f"EXECUTOR: {reason}", safe=False, failed=True)
+        return LatchAnswer(f"executor answered {type(reply).__name__}", safe=False)
+
+    async def release(self) -> str:
+        """Let the executor's latch go (the supervisor's to do, on a key of its own): ''
+        once it did, or when no executor is online; else why it did not."""
+        try:
+            reply = await self._ask(on=False)
+        except BusError as exc:
+            reply = _unreachable(exc)
+        return reply.reason if isinstance(reply, Failed) else ""
+
+    async def _ask(self, on: bool) -> ExecutorReply | None:
+        """The executor's reply; None when it is known to be offline, and not asked."""
+        if self._online is not None and not self._online():
+            return None
+        reply: ExecutorReply = await self._bus.request(
+            self._keys.executor_latch if on else self._keys.executor_release,
+            Latch(on=on),
+            self._decode,
+            self._timeout,
+            urgent=True,
+        )
+        return reply
+
+
+def _unreachable(exc: BusError) -> Failed:
+    return Failed(reason=f"executor unreachable: {exc}")
+
+
+@dataclass(frozen=True)
+class StopOutcome:
+    """What an emergency stop did, and what had answered it when it was looked at."""
+
+    sent: str
+    """Where zero velocity went."""
+    navigation: Cancelled | None
+    """What navigation said to the cancel of every goal; None while it has not answered."""
+    executor: LatchAnswer | None
+    """What the executor said to the latch; None while it has not answered."""
+
+    @property
+    def settled(self) -> bool:
+        """Everything asked has answered."""
+        return self.navigation is not None and self.executor is not None
+
+    @property
+    def confirmed(self) -> bool:
+        """Nothing moves the robot any more: navigation has no goal left (or there is no
+        navigation at all, a robot driven by cmd_vel alone, and zero velocity is all),
+        and the executor latched (or there is none)."""
+        navigation, executor = self.navigation, self.executor
+        if navigation is None or executor is None:
+            return False
+        return (navigation.confirmed or not navigation.answered) and executor.safe
+
+    @property
+    def detail(self) -> str:
+        """In one line: zero velocity, navigation, the executor."""
+        navigation = "navigation has not answered the cancel yet"
+        if self.navigation is not None:
+            navigation = self.navigation.detail
+        executor = "the executor has not answered yet"
+        if self.executor is not None:
+            executor = self.executor.detail
+        return f"{self.sent}; {navigation}; {executor}"
+
+
+@dataclass(frozen=True)
+class StopProcedure:
+    """One emergency stop of one robot, under way from `begin` on: zero velocity sent,
+    the executor's latch and the cancel of every navigation goal asked together, and their
+    answers gathered (`outcome`)."""
+
+    sent: str
+    """Where zero velocity went."""
+    latching: asyncio.Future[LatchAnswer]
+    cancelling: asyncio.Future[Cancelled]
+
+    @classmethod
+    def begin(cls, robot: RobotStop, executor: ExecutorLatch) -> StopProcedure:
+        """Stop `robot` now: zero velocity goes out at once, before anything is asked of
+        anyone, whatever the executor is doing; the latch and the cancel go out as soon as
+        the caller yields to the loop. Whoever begins it keeps it (or a task awaiting its
+        `outcome`) until it has settled: the loop keeps only weak references to them."""
+        sent = robot.zero_velocity()
+        latching = asyncio.ensure_future(executor.latch())
+        return cls(sent, latching, asyncio.ensure_future(robot.cancel_goals()))
+
+    async def outcome(self, wait: float | None = None) -> StopOutcome:
+        """What had answered after at most `wait` seconds; with no `wait`, once all has."""
+        asked: list[asyncio.Future[Any]] = [self.latching, self.cancelling]
+        await asyncio.wait(asked, timeout=wait)
+        return StopOutcome(self.sent, _answer(self.cancelling), _answer(self.latching))
+
+
+def _answer(asked: asyncio.Future[T]) -> T | None:
+    return asked.result() if asked.done() else None
 
 
 def _names(info: ExecutorInfo) -> RobotNames:
