@@ -56,6 +56,24 @@ class Processes:
         self.started.append((name, process, log))
         return process
 
+    def supervisor(
+        self, router: str, robot: str, db: Path, *args: str, name: str | None = None
+    ) -> Process:
+        """A supervisor on `router` serving `robot` from its start, with its database at
+        `db` (which outlives it: a supervisor started again finds what this one stored)
+        and `args`, its other flags."""
+        return self.start(
+            "voicectl.services.supervisor",
+            *("--connect", router, "--robot", robot, "--db", str(db), *args),
+            name=name,
+        )
+
+    def executor(self, router: str, robot: str, *args: str) -> Process:
+        """An executor on `router` for `robot`, with `args`, its other flags."""
+        return self.start(
+            "voicectl.services.executor", "--connect", router, "--robot", robot, *args
+        )
+
     def log(self, which: Process | str) -> str:
         """What a child (or the last one started under that name) has written so far."""
         for name, process, log in reversed(self.started):

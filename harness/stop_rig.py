@@ -160,23 +160,12 @@ class StopRig:
         self.start_executor()
 
     def start_supervisor(self) -> None:
-        self.supervisor = self.processes.start(
-            "voicectl.services.supervisor",
-            "--connect",
-            self.router,
-            "--robot",
-            ROBOT,
-            "--db",
-            str(self.db),
-        )
+        self.supervisor = self.processes.supervisor(self.router, ROBOT, self.db)
 
     def start_executor(self) -> None:
         executors = [arg for name in EXECUTORS for arg in ("--executor", name)]
-        self.executor = self.processes.start(
-            "voicectl.services.executor",
-            "--connect",
+        self.executor = self.processes.executor(
             self.router,
-            "--robot",
             ROBOT,
             "--stall-limit",
             f"{self.stall_limit:g}",

@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import signal
 import subprocess
 import uuid
 from collections.abc import AsyncIterator, Callable, Coroutine
@@ -203,24 +202,17 @@ class Site:
 
     def start_supervisor(self, *extra: str) -> None:
         """A supervisor serving r1 from the start (other robots once an executor comes)."""
-        self.supervisor = self.processes.start(
-            "voicectl.services.supervisor",
-            *("--connect", self.router, "--db", str(self.db), "--robot", "r1", *extra),
-        )
+        self.supervisor = self.processes.supervisor(self.router, "r1", self.db, *extra)
 
     def kill_supervisor(self) -> None:
         assert self.supervisor is not None
-        self.supervisor.send_signal(signal.SIGKILL)
-        self.supervisor.wait()
+        self.processes.kill(self.supervisor)
 
     def start_executor(self, robot: str = "r1") -> None:
-        self.executors[robot] = self.processes.start(
-            "voicectl.services.executor", "--connect", self.router, "--robot", robot, *EXECUTORS
-        )
+        self.executors[robot] = self.processes.executor(self.router, robot, *EXECUTORS)
 
     def kill_executor(self, robot: str = "r1") -> None:
-        self.executors[robot].send_signal(signal.SIGKILL)
-        self.executors[robot].wait()
+        self.processes.kill(self.executors[robot])
 
     def joined(self) -> Bus:
         return joined(self.router)

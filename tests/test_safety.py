@@ -6,7 +6,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import signal
 import stat
 import subprocess
 from collections.abc import AsyncIterator
@@ -23,12 +22,12 @@ from voicectl.shared.messages import (
     Done,
     EmergencyStop,
     Execute,
+    ExecutorEvent,
+    ExecutorReply,
     Failed,
-    Latch,
     Message,
     Order,
     OrderFinished,
-    OrderProgress,
     OrderStatus,
     Release,
     Reorder,
@@ -36,6 +35,7 @@ from voicectl.shared.messages import (
     Stopped,
     TargetPose,
 )
+from voicectl.shared.robot.stop import ExecutorLatch
 from voicectl.shared.ros2 import Odometry, Pose2D, Ros2Codec, RosDistro, new_goal_id
 
 from .conftest import Processes
@@ -74,31 +74,14 @@ class Robot:
         self.odometry: list[tuple[float, Odometry]] = []
 
     def start_supervisor(self) -> None:
-        self.supervisor = self.processes.start(
-            "voicectl.services.supervisor",
-            "--connect",
-            self.router,
-            "--robot",
-            "r1",
-            "--db",
-            str(self.db),
-        )
+        self.supervisor = self.processes.supervisor(self.router, "r1", self.db)
 
     def start_executor(self) -> None:
-        self.executor = self.processes.start(
-            "voicectl.services.executor",
-            "--connect",
-            self.router,
-            "--robot",
-            "r1",
-            *_names_only(self.robot_args),
-        )
+        self.executor = self.processes.executor(self.router, "r1", *_names_only(self.robot_args))
 
-    @staticmethod
-    def kill(process: subprocess.Popen[bytes] | None) -> None:
+    def kill(self, process: subprocess.Popen[bytes] | None) -> None:
         assert process is not None
-        process.send_signal(signal.SIGKILL)
-        process.wait()
+        self.processes.kill(process)
 
     @contextlib.asynccontextmanager
     async def session(self) -> AsyncIterator[tuple[Bus, Client]]:
@@ -263,10 +246,11 @@ async def test_a_stop_that_reaches_the_executor_first_stops_the_queue_too(robot:
         (moving,) = await client.submit(FAR)
         queued = await client.submit(order("drive", distance=1.0), order("rotate", angle=1.0))
         await robot.driving()
-        latched = await bus.request(
-            RobotKeys("r1").executor_latch, Latch(on=True), json_decoder(Done | Failed)
-        )
-        assert isinstance(latched, Done), latched
+        # Latched as the client latches it (and the supervisor: one `ExecutorLatch`).
+        latch = ExecutorLatch(bus, RobotKeys("r1"), json_decoder(ExecutorReply), timeout=5.0)
+        latched = await latch.latch()
+        assert latched.detail.startswith("executor: latched"), latched
+        assert latched.safe, latched
         stopped = await robot.standing(asyncio.get_running_loop().time())
         assert (await client.finished(moving)).status == OrderStatus.CANCELLED
         # The first was sent to the executor, which refused it for the stop; the second
@@ -399,7 +383,7 @@ async def test_a_result_reached_while_the_supervisor_was_down_is_kept(robot: Rob
         ended: list[OrderFinished] = []
         bus.subscribe(
             RobotKeys("r1").executor_events,
-            json_decoder(OrderProgress | OrderFinished),
+            json_decoder(ExecutorEvent),
             lambda _key, event: ended.append(event) if isinstance(event, OrderFinished) else None,
         )
         await client_wait_ready(client)

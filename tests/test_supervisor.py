@@ -396,15 +396,8 @@ async def test_a_second_supervisor_on_the_bus_stands_down(site: Site, tmp_path: 
     with site.joined() as bus:
         client = Client(bus, "r1")
         await client_wait_ready(client, executor=False)
-        second = site.processes.start(
-            "voicectl.services.supervisor",
-            "--connect",
-            site.router,
-            "--robot",
-            "r1",
-            "--db",
-            str(tmp_path / "second.sqlite3"),
-            name="second-supervisor",
+        second = site.processes.supervisor(
+            site.router, "r1", tmp_path / "second.sqlite3", name="second-supervisor"
         )
         await async_wait_until(lambda: second.poll() is not None, 30.0, "the second to stop")
         assert second.returncode == 2

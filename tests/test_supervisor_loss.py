@@ -7,7 +7,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import signal
 import subprocess
 from collections.abc import AsyncIterator, Callable
 from pathlib import Path
@@ -24,6 +23,7 @@ from voicectl.shared.ros2 import Odometry, Pose2D, Ros2Codec
 
 from .conftest import Processes
 from .support import (
+    EXECUTORS,
     harness_on,
     joined,
     order,
@@ -53,28 +53,15 @@ class Robot:
         self.db = db
         processes.start("voicectl.services.sim", "--connect", router)
         self.supervisor = self.start_supervisor()
-        self.executor = processes.start(
-            "voicectl.services.executor",
-            *("--connect", router, "--robot", "r1"),
-            *("--executor", "tests.executors_for_tests:Slow=slow"),
-        )
+        self.executor = processes.executor(router, "r1", *EXECUTORS)
         self.odometry: list[tuple[float, Odometry]] = []
 
     def start_supervisor(self) -> subprocess.Popen[bytes]:
-        self.supervisor = self.processes.start(
-            "voicectl.services.supervisor",
-            "--connect",
-            self.router,
-            "--robot",
-            "r1",
-            "--db",
-            str(self.db),
-        )
+        self.supervisor = self.processes.supervisor(self.router, "r1", self.db)
         return self.supervisor
 
     def kill_supervisor(self) -> None:
-        self.supervisor.send_signal(signal.SIGKILL)
-        self.supervisor.wait()
+        self.processes.kill(self.supervisor)
 
     def executor_log(self) -> str:
         return self.processes.log(self.executor)
