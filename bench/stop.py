@@ -32,8 +32,7 @@ from harness.measure import percentile
 from harness.ports import free_port
 from harness.processes import Processes
 from harness.stop_rig import CASES, Outcome, StopRig
-from voicectl.shared.bus import Bus, BusOptions
-from voicectl.shared.client import VoicectlClient
+from voicectl.shared.bus import BusOptions
 
 
 def raw_put(router: str, rounds: int) -> list[float]:
@@ -62,13 +61,7 @@ def raw_put(router: str, rounds: int) -> list[float]:
 
 async def bench(rig: StopRig, router: str, rounds: int) -> dict[str, list[Outcome]]:
     outcomes: dict[str, list[Outcome]] = {case: [] for case in CASES}
-    loop = asyncio.get_running_loop()
-    with (
-        Bus.open(BusOptions(connect=[router]), loop) as bus,
-        Bus.open(BusOptions(connect=[router]), loop) as ear,
-    ):
-        rig.listen(ear)
-        client = VoicectlClient(bus)
+    with rig.client() as client:
         for round_ in range(rounds):
             for case in CASES:
                 outcome = await rig.run(case, client)

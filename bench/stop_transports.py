@@ -59,13 +59,7 @@ async def on_zenoh(kind: TransportKind, rounds: dict[str, int], tmp: Path) -> Ti
         processes = Processes(tmp / kind.value)
         try:
             rig = StopRig(router, processes, tmp / f"{kind.value}.sqlite3", transport=kind)
-            loop = asyncio.get_running_loop()
-            with (
-                Bus.open(BusOptions(connect=[router]), loop) as bus,
-                Bus.open(BusOptions(connect=[router]), loop) as ear,
-            ):
-                rig.listen(ear)
-                client = VoicectlClient(bus)
+            with rig.client() as client:
                 for case, rig_case in CASES.items():
                     for _ in range(rounds[case]):
                         outcome = await rig.run(rig_case, client)

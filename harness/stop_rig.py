@@ -22,18 +22,19 @@ bench/stop.py and bench/stop_transports.py (many rounds, percentiles).
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import functools
 import math
 import subprocess
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
 from harness.client import robot_key
 from harness.processes import Processes
 from harness.wait import async_wait_until
-from voicectl.shared.bus import Bus
+from voicectl.shared.bus import Bus, BusOptions
 from voicectl.shared.client import VoicectlClient
 from voicectl.shared.errors import BusError
 from voicectl.shared.keys import RmwKind, RmwZenohKeys, RobotNames
@@ -181,6 +182,17 @@ class StopRig:
         if process is not None and process.poll() is None:
             process.kill()
             process.wait()
+
+    @contextlib.contextmanager
+    def client(self) -> Iterator[VoicectlClient]:
+        """A client of the rig's stack, with the stopwatch (`listen`) in a session of its
+        own, as the robot has: one that shared the client's would hear its puts without
+        the router."""
+        loop = asyncio.get_running_loop()
+        options = BusOptions(connect=[self.router])
+        with Bus.open(options, loop) as bus, Bus.open(options, loop) as ear:
+            self.listen(ear)
+            yield VoicectlClient(bus)
 
     def listen(self, bus: Bus) -> None:
         """Timestamps, on Zenoh's thread as they arrive: odometry, zero velocities, and

@@ -61,11 +61,7 @@ async def test_stop_stops_the_robot_at_once_and_for_good(
     case: str, transport: TransportKind, router: str, processes: Processes, tmp_path: Path
 ) -> None:
     rig = StopRig(router, processes, tmp_path / "supervisor.sqlite3", transport=transport)
-    # The stopwatch listens in a session of its own, as the robot does: one that shared
-    # the client's would hear its puts without the router.
-    with joined(router) as bus, joined(router) as ear:
-        rig.listen(ear)
-        client = VoicectlClient(bus)
+    with rig.client() as client:
         outcome = await rig.run(case, client)
         print(case, outcome)
         assert outcome.zero_velocity < BOUND, outcome
@@ -146,9 +142,7 @@ async def test_stop_on_rmw_zenoh_goes_to_the_key_the_robot_announced(
         transport=TransportKind.RMW_ZENOH,
         sim_args=sim_args,
     )
-    with joined(router) as bus, joined(router) as ear:
-        rig.listen(ear)
-        client = VoicectlClient(bus)
+    with rig.client() as client:
         await rig.ready(client)
         assert rig.cmd_vel_keys == [announced]  # the stopwatch hears as the robot does
         stopped: Stopped
@@ -200,9 +194,7 @@ async def test_a_stalled_event_loop_is_noticed_and_the_robot_halted(
     watchdog halts the robot once the loop has stalled for its limit (0.5 s)."""
     rig = StopRig(router, processes, tmp_path / "supervisor.sqlite3", stall_limit=0.5)
 
-    with joined(router) as bus, joined(router) as ear:
-        rig.listen(ear)
-        client = VoicectlClient(bus)
+    with rig.client() as client:
         await rig.ready(client)
         (order_id,) = await client.submit(ROBOT, [order("blockdrive", seconds=3)])
         await rig.driving()
@@ -227,9 +219,7 @@ async def test_an_executor_back_at_once_leaves_no_order_running(
     up` restarts it) no longer runs the order: the order ends, the robot stands."""
     rig = StopRig(router, processes, tmp_path / "supervisor.sqlite3")
 
-    with joined(router) as bus, joined(router) as ear:
-        rig.listen(ear)
-        client = VoicectlClient(bus)
+    with rig.client() as client:
         await rig.ready(client)
         (order_id,) = await client.submit(ROBOT, [order("runaway")])
         await rig.driving()
