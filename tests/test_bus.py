@@ -41,7 +41,7 @@ async def test_publish_subscribe_decodes_and_drops_junk(
 ) -> None:
     received: list[tuple[str, Transcript]] = []
     with (
-        caplog.at_level(logging.WARNING, logger="voicectl.shared.bus"),
+        caplog.at_level(logging.WARNING, logger="voicectl.shared.wire"),
         joined(router) as sub,
         joined(router) as pub,
     ):

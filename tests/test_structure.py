@@ -98,6 +98,14 @@ def test_every_import_runs_downward() -> None:
     assert upward == []
 
 
+def test_the_wire_knows_no_message() -> None:
+    """shared/wire.py carries bytes; voicectl's messages are spoken on top of it (bus.py)."""
+    above = ("voicectl.shared.messages", "voicectl.shared.bus")
+    imported = [name for _, name in voicectl_imports()["voicectl.shared.wire"]]
+    assert [name for name in imported if name.startswith(above)] == []
+    assert "voicectl.shared.errors" in imported  # the wire is read at all
+
+
 def test_no_import_circle() -> None:
     graph = voicectl_imports()
     known = set(graph)

@@ -41,7 +41,7 @@ from typing import Self, TypeVar
 
 import xxhash
 
-from ..bus import Bus, Kept
+from ..bus import Bus
 from ..keys import (
     RMW_QOS_DEFAULT,
     RMW_QOS_LATCHED,
@@ -58,6 +58,7 @@ from ..ros2 import (
     ros_type_of,
     type_hash,
 )
+from ..wire import Kept
 from .transport import (
     Announcements,
     Decode,
