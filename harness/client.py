@@ -11,7 +11,7 @@ from harness.wait import async_wait_until
 from voicectl.shared.bus import Bus
 from voicectl.shared.client import VoicectlClient
 from voicectl.shared.errors import BusError
-from voicectl.shared.keys import RmwZenohKeys, RobotKeys
+from voicectl.shared.keys import RobotKeys
 from voicectl.shared.messages import (
     GetHistory,
     GetState,
@@ -26,6 +26,7 @@ from voicectl.shared.messages import (
     SupervisorReply,
 )
 from voicectl.shared.robot import TransportKind
+from voicectl.shared.robot.keys import RmwZenohKeys
 from voicectl.shared.ros2 import RosDistro, dds_type_name, type_hash
 
 STARTING = 45.0

@@ -15,8 +15,9 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TypeVar
 
-from .keys import RmwZenohKeys, RobotNames, check_ros_name
+from .keys import RobotNames, check_ros_name
 from .kinds import ON_ZENOH, CameraType, CmdVelType, RosDistro, TransportKind
+from .robot.keys import RmwZenohKeys
 
 AUTO = "auto"
 _Kind = TypeVar("_Kind", RosDistro, CmdVelType, CameraType, TransportKind)

@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import pytest
 
-from voicectl.shared.keys import BridgeKind, BridgeToken, RobotNames, check_ros_name
+from voicectl.shared.keys import RobotNames, check_ros_name
+from voicectl.shared.robot.keys import BridgeKind, BridgeToken
 
 
 def test_remapped_names_become_keys_under_the_namespace() -> None:

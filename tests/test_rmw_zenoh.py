@@ -27,10 +27,10 @@ from zenoh.ext import Int64, z_serialize
 
 from harness.wait import async_wait_until
 from voicectl.shared.errors import BusError
-from voicectl.shared.keys import RMW_QOS_DEFAULT, RmwKind, RmwToken, RmwZenohKeys
 from voicectl.shared.messages import ExecutorInfo
 from voicectl.shared.robot import Interface, Role, TransportKind, open_transport
 from voicectl.shared.robot.action import ActionClient, Cancelled
+from voicectl.shared.robot.keys import RMW_QOS_DEFAULT, RmwKind, RmwToken, RmwZenohKeys
 from voicectl.shared.robot.rmw_zenoh import Attachment, RmwZenohTransport, gid_of
 from voicectl.shared.robot.stop import RobotStop
 from voicectl.shared.ros2 import (

@@ -46,7 +46,8 @@ from cryptography.hazmat.primitives.asymmetric import ec
 from cryptography.x509.oid import NameOID
 
 from voicectl.shared.errors import VoicectlError
-from voicectl.shared.keys import RobotKeys, RobotNames, bridge_tokens, check_chunk, check_ros_name
+from voicectl.shared.keys import RobotKeys, RobotNames, check_chunk, check_ros_name
+from voicectl.shared.robot.keys import bridge_tokens
 
 from .cert import certificate_builder, key_pem, server_certificate, write_file
 

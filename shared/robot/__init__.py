@@ -3,6 +3,7 @@
 - `transport.py`: the seam (`RobotTransport`) and what it speaks of (ROS names and types,
   discovered `Interface`s, a layout's `Announcements`);
 - `bridge.py`: zenoh-bridge-ros2dds; `rmw_zenoh.py`: ROS 2 nodes on rmw_zenoh, no bridge;
+  `keys.py`: the keys and liveliness tokens of those layouts;
 - `action.py`: a ROS 2 action client on the seam (send goal, feedback, status, get
   result, cancel), with which the executor runs Nav2's goals and the stop cancels them;
 - `stop.py`: stopping a robot, written once on top of the seam, for the executor, the

@@ -13,8 +13,8 @@ from collections.abc import Awaitable, Callable, Iterable
 from typing import Self, TypeVar
 
 from ..bus import Bus
-from ..keys import BRIDGE_TOKENS, BridgeKind, BridgeToken
 from ..kinds import RosDistro, TransportKind
+from .keys import BRIDGE_TOKENS, BridgeKind, BridgeToken
 from .transport import (
     Announcements,
     Decode,

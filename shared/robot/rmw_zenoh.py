@@ -42,13 +42,6 @@ from typing import Self, TypeVar
 import xxhash
 
 from ..bus import Bus
-from ..keys import (
-    RMW_QOS_DEFAULT,
-    RMW_QOS_LATCHED,
-    RmwKind,
-    RmwToken,
-    RmwZenohKeys,
-)
 from ..kinds import CmdVelType, TransportKind
 from ..ros2 import (
     NO_TYPE_HASH,
@@ -59,6 +52,13 @@ from ..ros2 import (
     type_hash,
 )
 from ..wire import Kept
+from .keys import (
+    RMW_QOS_DEFAULT,
+    RMW_QOS_LATCHED,
+    RmwKind,
+    RmwToken,
+    RmwZenohKeys,
+)
 from .transport import (
     Announcements,
     Decode,
