@@ -38,7 +38,6 @@ from harness.processes import REPO, rss_mb
 from voicectl.shared.bus import Bus, BusOptions
 from voicectl.shared.client import VoicectlClient
 from voicectl.shared.errors import BusError
-from voicectl.shared.keys import RobotNames
 from voicectl.shared.messages import (
     CancelAll,
     GetState,
@@ -48,6 +47,7 @@ from voicectl.shared.messages import (
     Submit,
     Submitted,
 )
+from voicectl.shared.robot.keys import RobotNames
 
 
 class Fleet:

@@ -21,9 +21,9 @@ from voicectl.services.executor.config import ExecutorConfig
 from voicectl.services.sim.build import build as build_sim
 from voicectl.services.sim.node import SimConfig
 from voicectl.shared.bus import Bus, BusOptions
-from voicectl.shared.keys import RobotNames
 from voicectl.shared.process import Service, serve, setup_logging
 from voicectl.shared.robot import TransportKind
+from voicectl.shared.robot.keys import RobotNames
 from voicectl.shared.robot_options import RobotOptions
 
 

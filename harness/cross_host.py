@@ -10,7 +10,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from voicectl.shared.bus import Bus, BusOptions
-from voicectl.shared.keys import RobotNames
+from voicectl.shared.robot.keys import RobotNames
 from voicectl.shared.ros2 import Odometry, Ros2Codec
 
 from .netns import LEASE, LEASE_MS, Side, TwoHosts

@@ -11,7 +11,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from voicectl.shared.bus import Bus
-from voicectl.shared.keys import RobotNames
+from voicectl.shared.robot.keys import RobotNames
 from voicectl.shared.ros2 import Ros2Codec
 
 MOTION_WAIT = 5.0

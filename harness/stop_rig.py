@@ -37,7 +37,6 @@ from harness.wait import async_wait_until
 from voicectl.shared.bus import Bus, BusOptions
 from voicectl.shared.client import VoicectlClient
 from voicectl.shared.errors import BusError
-from voicectl.shared.keys import RobotNames
 from voicectl.shared.messages import (
     GetState,
     Order,
@@ -50,7 +49,7 @@ from voicectl.shared.messages import (
     TargetPose,
 )
 from voicectl.shared.robot import TransportKind
-from voicectl.shared.robot.keys import RmwKind, RmwZenohKeys
+from voicectl.shared.robot.keys import RmwKind, RmwZenohKeys, RobotNames
 from voicectl.shared.ros2 import CmdVelType, Odometry, Ros2Codec, ros_type_of
 
 ROBOT = "r1"

@@ -1,12 +1,9 @@
-"""Every key expression of the voice bus is built here and nowhere else; so are the ROS
-names of a robot's topics and action (`RobotNames`), which the services, the commands and
-the robot transports share.
+"""Every key expression of the voice bus is built here and nowhere else.
 
 voicectl's own traffic lives under ``voice/<robot>/...`` so that one router can carry
-several robots and ``voice/**`` shows the whole order stream in any Zenoh tool. ROS 2
-traffic follows the robot's middleware: zenoh-bridge-ros2dds' ``<namespace>/<topic>``
-without the leading slash, or rmw_zenoh's ``<domain>/<namespace>/<topic>/<type>/<hash>``
-(shared/robot/keys.py builds those keys and each layout's tokens; shared/robot/ chooses).
+several robots and ``voice/**`` shows the whole order stream in any Zenoh tool. The robot's
+ROS 2 traffic follows its middleware: its names (`RobotNames`), and the keys and tokens of
+each Zenoh layout, are built in shared/robot/keys.py.
 """
 
 from __future__ import annotations
@@ -218,112 +215,3 @@ class ConverterKeys:
     @property
     def all_transcripts(self) -> str:
         return f"{ROOT}/*/stt/transcript"
-
-
-ACTION_MEMBERS = ("send_goal", "cancel_goal", "get_result", "feedback", "status")
-"""The services and topics ROS 2 makes of every action, under ``<action>/_action/``."""
-
-
-def action_member(action: str, member: str) -> str:
-    """The name of one of an action's services or topics ('navigate_to_pose/_action/status')."""
-    if member not in ACTION_MEMBERS:
-        raise ValueError(f"unknown action member {member!r}")
-    return f"{action.strip('/')}/_action/{member}"
-
-
-_ROS_TOKEN = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
-
-
-def check_ros_name(name: str, what: str) -> str:
-    """`name` without its leading '/', if ROS 2 accepts it as a topic, action or namespace
-    ('bot1', 'diff_drive_controller/cmd_vel'); else ValueError naming `what`."""
-    parts = name.strip("/").split("/") if name.strip("/") else []
-    for part in parts:
-        if not _ROS_TOKEN.match(part) or "__" in part:
-            raise ValueError(
-                f"{what} {name!r}: {part!r} is not a ROS 2 name; use letters, digits and "
-                "single '_', not starting with a digit ('-' and '.' are not allowed)"
-            )
-    return "/".join(parts)
-
-
-@dataclass(frozen=True)
-class RobotNames:
-    """The ROS names of one robot's topics and action, under its `namespace`, fully
-    qualified without the leading '/' ('bot1/cmd_vel'): what zenoh-bridge-ros2dds uses as
-    keys as they are, and rmw_zenoh inside its keys.
-
-    The names can be remapped ('diff_drive_controller/cmd_vel'): ROS name ``/a/b`` under
-    namespace ``/ns`` is ``ns/a/b``.
-    """
-
-    namespace: str = ""
-    cmd_vel_name: str = "cmd_vel"
-    odom_name: str = "odom"
-    camera_name: str = "camera/image_raw"
-    navigate_name: str = "navigate_to_pose"
-    """Nav2's NavigateToPose action."""
-    map_name: str = "map"
-    """The occupancy grid a Nav2 robot's map server publishes."""
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "namespace", check_ros_name(self.namespace, "ROS namespace"))
-        for field in ("cmd_vel_name", "odom_name", "camera_name", "navigate_name", "map_name"):
-            name = check_ros_name(getattr(self, field), field.removesuffix("_name") + " name")
-            if not name:
-                raise ValueError(f"{field.removesuffix('_name')} name must not be empty")
-            object.__setattr__(self, field, name)
-
-    def topic(self, name: str) -> str:
-        """The full name of a topic, service or action member `name` ('/cmd_vel' or 'cmd_vel')."""
-        name = name.strip("/")
-        return f"{self.namespace}/{name}" if self.namespace else name
-
-    @property
-    def cmd_vel(self) -> str:
-        return self.topic(self.cmd_vel_name)
-
-    @property
-    def odom(self) -> str:
-        return self.topic(self.odom_name)
-
-    @property
-    def tf(self) -> str:
-        return self.topic("tf")
-
-    @property
-    def camera_image(self) -> str:
-        return self.topic(self.camera_name)
-
-    @property
-    def map(self) -> str:
-        return self.topic(self.map_name)
-
-    @property
-    def simulator(self) -> str:
-        """Liveliness token of `voicectl sim` once it serves this namespace (the real
-        bridge announces itself under ``@/<zid>/@ros2_lv/...`` instead)."""
-        return self.topic("voicectl_sim/alive")
-
-    def action(self, action: str, member: str) -> str:
-        """One of an action's five routes: send_goal, get_result, cancel_goal, feedback, status."""
-        return self.topic(action_member(action, member))
-
-    def navigate(self, member: str) -> str:
-        """A route of the robot's NavigateToPose action."""
-        return self.action(self.navigate_name, member)
-
-    @property
-    def everything(self) -> str:
-        """Every key under the namespace (every key at all for a robot without one)."""
-        return self.topic("**")
-
-    @property
-    def any_cmd_vel(self) -> str:
-        """Any velocity topic under the namespace, remapped or not."""
-        return self.topic("**/cmd_vel")
-
-    @property
-    def any_action(self) -> str:
-        """Any action's send_goal, get_result or cancel_goal under the namespace."""
-        return self.topic("**/_action/*")

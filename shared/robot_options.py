@@ -15,9 +15,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TypeVar
 
-from .keys import RobotNames, check_ros_name
 from .kinds import ON_ZENOH, CameraType, CmdVelType, RosDistro, TransportKind
-from .robot.keys import RmwZenohKeys
+from .robot.keys import RmwZenohKeys, RobotNames, check_ros_name
 
 AUTO = "auto"
 _Kind = TypeVar("_Kind", RosDistro, CmdVelType, CameraType, TransportKind)

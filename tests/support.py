@@ -14,7 +14,7 @@ from typing import Any, TypeVar
 
 from harness.wait import async_wait_until
 from voicectl.shared.bus import Bus, BusOptions, json_decoder
-from voicectl.shared.keys import RobotKeys, RobotNames
+from voicectl.shared.keys import RobotKeys
 from voicectl.shared.messages import (
     Accepted,
     CancelOrder,
@@ -30,6 +30,7 @@ from voicectl.shared.messages import (
     TargetPose,
 )
 from voicectl.shared.robot import TransportKind, open_transport
+from voicectl.shared.robot.keys import RobotNames
 from voicectl.shared.ros2 import Odometry, Ros2Codec
 
 from .conftest import Processes

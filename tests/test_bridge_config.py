@@ -11,7 +11,7 @@ import json5
 import pytest
 
 from voicectl.services.executor.config import parse_args
-from voicectl.shared.keys import RobotNames
+from voicectl.shared.robot.keys import RobotNames
 from voicectl.shared.robot_options import robot_options
 
 from .conftest import REPO

@@ -5,8 +5,7 @@ from __future__ import annotations
 
 import pytest
 
-from voicectl.shared.keys import RobotNames, check_ros_name
-from voicectl.shared.robot.keys import BridgeKind, BridgeToken
+from voicectl.shared.robot.keys import BridgeKind, BridgeToken, RobotNames, check_ros_name
 
 
 def test_remapped_names_become_keys_under_the_namespace() -> None:

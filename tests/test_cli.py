@@ -13,8 +13,9 @@ from typing import Any
 from harness.client import Client, client_wait_ready
 from harness.wait import async_wait_until, wait_until
 from voicectl.shared.bus import json_decoder
-from voicectl.shared.keys import RobotKeys, RobotNames
+from voicectl.shared.keys import RobotKeys
 from voicectl.shared.messages import Failed, GetState, StateReply, SupervisorReply
+from voicectl.shared.robot.keys import RobotNames
 from voicectl.shared.ros2 import Pose2D, Ros2Codec, RosDistro, new_goal_id
 
 from .conftest import Processes, voicectl

@@ -43,7 +43,7 @@ TOKEN = "compose-test-token"
 
 WATCH = """
 import json, sys, time, zenoh
-from voicectl.shared.keys import RobotNames
+from voicectl.shared.robot.keys import RobotNames
 from voicectl.shared.ros2 import Ros2Codec
 codec, seen = Ros2Codec(), []
 if sys.argv[1].endswith(".json5"):  # a client configuration of the secured bus
@@ -67,7 +67,8 @@ secured router does, with a client configuration)."""
 
 INTRUDE = """
 import json, time, zenoh
-from voicectl.shared.keys import RobotNames, RobotKeys
+from voicectl.shared.keys import RobotKeys
+from voicectl.shared.robot.keys import RobotNames
 from voicectl.shared.ros2 import Ros2Codec
 with zenoh.open(zenoh.Config.from_file("/etc/voicectl/bus/panel.json5")) as session:
     for _ in range(20):

@@ -25,7 +25,7 @@ from harness.wait import async_wait_until, wait_until
 from voicectl.services.stt.audio import frames, read_wav
 from voicectl.shared.bus import Bus, BusOptions, json_decoder
 from voicectl.shared.client import VoicectlClient
-from voicectl.shared.keys import RobotKeys, RobotNames
+from voicectl.shared.keys import RobotKeys
 from voicectl.shared.kinds import ON_ZENOH
 from voicectl.shared.messages import (
     AudioChunk,
@@ -38,6 +38,7 @@ from voicectl.shared.messages import (
     SttStatus,
 )
 from voicectl.shared.robot import TransportKind
+from voicectl.shared.robot.keys import RobotNames
 from voicectl.shared.ros2 import Pose2D, Ros2Codec, RosDistro
 
 from .conftest import Stack

@@ -18,7 +18,6 @@ from voicectl.services.sim.robot import Bounds
 from voicectl.services.sim.world import floor_plan
 from voicectl.shared.bus import Bus, json_decoder
 from voicectl.shared.geometry import map_cell
-from voicectl.shared.keys import RobotNames
 from voicectl.shared.messages import (
     CancelOrder,
     Done,
@@ -33,6 +32,7 @@ from voicectl.shared.messages import (
     TargetPose,
 )
 from voicectl.shared.robot import TransportKind, open_transport
+from voicectl.shared.robot.keys import RobotNames
 from voicectl.shared.robot_options import RobotOptions
 from voicectl.shared.ros2 import Pose2D, Ros2Codec, RosDistro
 

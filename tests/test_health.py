@@ -12,7 +12,8 @@ import zenoh
 from harness.ports import free_port
 from voicectl.health import SERVICES, token_key
 from voicectl.shared.bus import BusOptions
-from voicectl.shared.keys import ConverterKeys, RobotKeys, RobotNames
+from voicectl.shared.keys import ConverterKeys, RobotKeys
+from voicectl.shared.robot.keys import RobotNames
 
 from .conftest import voicectl
 

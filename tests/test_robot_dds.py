@@ -39,7 +39,7 @@ def test_without_rclpy_the_ros2_transport_says_what_to_install_at_once(command: 
 
 @NO_RCLPY
 async def test_auto_does_not_pick_ros2_where_rclpy_is_missing(router: str) -> None:
-    from voicectl.shared.keys import RobotNames
+    from voicectl.shared.robot.keys import RobotNames
 
     assert transports()[TransportKind.ROS2].unavailable() is not None
     with joined(router) as bus:

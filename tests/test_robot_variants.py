@@ -23,7 +23,7 @@ from PIL import Image as PilImage
 from harness.client import robot_key
 from harness.wait import async_wait_until
 from voicectl.shared.bus import json_decoder
-from voicectl.shared.keys import RobotKeys, RobotNames
+from voicectl.shared.keys import RobotKeys
 from voicectl.shared.kinds import ON_ZENOH
 from voicectl.shared.messages import (
     CancelOrder,
@@ -37,6 +37,7 @@ from voicectl.shared.messages import (
     TargetPose,
 )
 from voicectl.shared.robot import TransportKind, open_transport
+from voicectl.shared.robot.keys import RobotNames
 from voicectl.shared.ros2 import Ros2Codec, RosDistro
 
 from .conftest import Processes, voicectl

@@ -16,7 +16,7 @@ import pytest
 from harness.client import Client, client_wait_ready
 from harness.wait import async_wait_until
 from voicectl.shared.bus import Bus, json_decoder
-from voicectl.shared.keys import RobotKeys, RobotNames
+from voicectl.shared.keys import RobotKeys
 from voicectl.shared.messages import (
     ControlRequest,
     Done,
@@ -35,6 +35,7 @@ from voicectl.shared.messages import (
     Stopped,
     TargetPose,
 )
+from voicectl.shared.robot.keys import RobotNames
 from voicectl.shared.robot.stop import ExecutorLatch
 from voicectl.shared.ros2 import Odometry, Pose2D, Ros2Codec, RosDistro, new_goal_id
 

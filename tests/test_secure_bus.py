@@ -31,7 +31,7 @@ from voicectl.bus_secrets import (
 )
 from voicectl.shared.bus import Bus, BusOptions, json_decoder
 from voicectl.shared.errors import BusError
-from voicectl.shared.keys import RobotKeys, RobotNames
+from voicectl.shared.keys import RobotKeys
 from voicectl.shared.messages import (
     Done,
     EmergencyStop,
@@ -44,7 +44,7 @@ from voicectl.shared.messages import (
     Release,
     Stopped,
 )
-from voicectl.shared.robot.keys import BRIDGE_TOKENS, BridgeKind, BridgeToken
+from voicectl.shared.robot.keys import BRIDGE_TOKENS, BridgeKind, BridgeToken, RobotNames
 from voicectl.shared.ros2 import Odometry, Ros2Codec
 
 from .conftest import REPO, Processes, voicectl

@@ -15,7 +15,7 @@ import zenoh
 
 from harness.wait import wait_until
 from voicectl.shared.bus import BusOptions
-from voicectl.shared.keys import RobotNames
+from voicectl.shared.robot.keys import RobotNames
 from voicectl.shared.ros2 import (
     CANCEL_ALL,
     CancelCode,

@@ -21,7 +21,7 @@ from harness.speech_set import in_babble
 from harness.wait import async_wait_until
 from voicectl.services.stt.audio import frames, read_wav
 from voicectl.shared.bus import Bus, json_decoder
-from voicectl.shared.keys import ConverterKeys, RobotKeys, RobotNames
+from voicectl.shared.keys import ConverterKeys, RobotKeys
 from voicectl.shared.messages import (
     AudioChunk,
     AudioStart,
@@ -33,6 +33,7 @@ from voicectl.shared.messages import (
     SttStatus,
     Transcript,
 )
+from voicectl.shared.robot.keys import RobotNames
 from voicectl.shared.ros2 import Pose2D, Ros2Codec, RosDistro
 
 from .conftest import REPO, Processes, Speak, Stack

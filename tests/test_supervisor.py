@@ -15,7 +15,7 @@ from harness.wait import async_wait_until
 from voicectl.services.executor.runner import SUPERVISOR_LOST
 from voicectl.services.supervisor.robot import SETTLE
 from voicectl.shared.errors import BusError
-from voicectl.shared.keys import RobotKeys, RobotNames
+from voicectl.shared.keys import RobotKeys
 from voicectl.shared.messages import (
     Cancel,
     Done,
@@ -32,6 +32,7 @@ from voicectl.shared.messages import (
     Submitted,
     TargetPose,
 )
+from voicectl.shared.robot.keys import RobotNames
 from voicectl.shared.ros2 import Odometry, Ros2Codec, RosDistro
 
 from .support import Site, StandIn, order

@@ -17,8 +17,9 @@ from harness.client import Client, client_wait_ready
 from harness.wait import async_wait_until
 from voicectl.services.executor.fence import UNSUPERVISED
 from voicectl.services.executor.runner import SUPERVISOR_LOST
-from voicectl.shared.keys import RobotKeys, RobotNames
+from voicectl.shared.keys import RobotKeys
 from voicectl.shared.messages import Done, Order, OrderStatus, Resume, TargetPose
+from voicectl.shared.robot.keys import RobotNames
 from voicectl.shared.ros2 import Odometry, Pose2D, Ros2Codec
 
 from .conftest import Processes

@@ -46,8 +46,8 @@ from cryptography.hazmat.primitives.asymmetric import ec
 from cryptography.x509.oid import NameOID
 
 from voicectl.shared.errors import VoicectlError
-from voicectl.shared.keys import RobotKeys, RobotNames, check_chunk, check_ros_name
-from voicectl.shared.robot.keys import bridge_tokens
+from voicectl.shared.keys import RobotKeys, check_chunk
+from voicectl.shared.robot.keys import RobotNames, bridge_tokens, check_ros_name
 
 from .cert import certificate_builder, key_pem, server_certificate, write_file
 

@@ -19,7 +19,7 @@ from voicectl.shared.bus import DEFAULT_ROUTER, Bus
 from voicectl.shared.client import Refused, VoicectlClient
 from voicectl.shared.config import data_dir, default_token_file, load_or_create_token
 from voicectl.shared.errors import BusError, OrdersFileError
-from voicectl.shared.keys import ConverterKeys, RobotKeys, RobotNames, check_ros_name
+from voicectl.shared.keys import ConverterKeys, RobotKeys
 from voicectl.shared.kinds import ON_ZENOH, TransportKind
 from voicectl.shared.messages import (
     Cancel,
@@ -34,6 +34,7 @@ from voicectl.shared.messages import (
     StateReply,
 )
 from voicectl.shared.process import add_bus_arguments, bus_options, robot_name
+from voicectl.shared.robot.keys import RobotNames, check_ros_name
 
 from .health import add_health_arguments, check
 from .stack import Child, PanelAddress, port_in_use, run_stack

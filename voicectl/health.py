@@ -22,8 +22,9 @@ import zenoh
 
 from voicectl.shared.bus import Bus
 from voicectl.shared.errors import BusError
-from voicectl.shared.keys import ConverterKeys, RobotKeys, RobotNames, check_ros_name
+from voicectl.shared.keys import ConverterKeys, RobotKeys
 from voicectl.shared.process import add_bus_arguments, argument_type, bus_options, robot_name
+from voicectl.shared.robot.keys import RobotNames, check_ros_name
 
 SERVICES = ("router", "converter", "stt", "supervisor", "executor", "sim", "web")
 PER_ROBOT = ("stt", "supervisor", "executor")

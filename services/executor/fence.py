@@ -7,8 +7,8 @@ import logging
 from collections.abc import Callable
 
 from voicectl.shared.errors import OrderFailed
-from voicectl.shared.keys import RobotNames
 from voicectl.shared.messages import TargetPose
+from voicectl.shared.robot.keys import RobotNames
 from voicectl.shared.ros2 import (
     CdrError,
     CmdVelType,

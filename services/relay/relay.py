@@ -18,11 +18,11 @@ import time
 
 from voicectl.shared.bus import Bus
 from voicectl.shared.errors import BusError
-from voicectl.shared.keys import RobotNames
 from voicectl.shared.process import Service, forever
 from voicectl.shared.robot import TransportKind, open_transport
 from voicectl.shared.robot.action import CANCEL_TIMEOUT
 from voicectl.shared.robot.dds import Ros2Transport
+from voicectl.shared.robot.keys import RobotNames
 from voicectl.shared.ros2 import CANCEL_GOAL, CdrError, CmdVelType, Ros2Codec
 from voicectl.shared.throttle import Throttled
 

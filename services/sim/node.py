@@ -52,9 +52,9 @@ import numpy as np
 from PIL import Image as PilImage
 
 from voicectl.shared.geometry import compose
-from voicectl.shared.keys import RobotNames
 from voicectl.shared.process import Service
 from voicectl.shared.robot import Interface, RobotTransport, Role, TransportKind
+from voicectl.shared.robot.keys import RobotNames
 from voicectl.shared.ros2 import (
     CANCEL_ALL,
     CANCEL_GOAL,

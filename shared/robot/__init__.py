@@ -27,11 +27,11 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from ..kinds import TransportKind
+from .keys import ACTION_MEMBERS, RobotNames
 from .transport import Interface, RobotTransport, Role
 
 if TYPE_CHECKING:  # the messages import this package's kinds; the bus imports the messages
     from ..bus import Bus
-    from ..keys import RobotNames
     from ..ros2 import RosDistro
 
 __all__ = [
@@ -100,8 +100,6 @@ async def detect_transport(
     within `timeout` seconds, the first transport whose graph is not on Zenoh that this
     process can reach (a ROS 2 environment: rclpy), else None."""
     import asyncio
-
-    from ..keys import ACTION_MEMBERS
 
     wanted = {names.cmd_vel, names.odom, names.topic(names.navigate_name)}
     wanted |= {names.navigate(member) for member in ACTION_MEMBERS}

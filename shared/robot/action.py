@@ -23,7 +23,6 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 
 from ..errors import BusError
-from ..keys import action_member
 from ..ros2 import (
     CANCEL_ALL,
     CANCEL_GOAL,
@@ -38,6 +37,7 @@ from ..ros2 import (
     Pose2D,
     Ros2Codec,
 )
+from .keys import action_member
 from .transport import RobotTransport
 
 _LOGGER = logging.getLogger(__name__)

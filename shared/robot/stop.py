@@ -47,7 +47,7 @@ from typing import Any, TypeVar
 
 from ..bus import Bus, Decode
 from ..errors import BusError
-from ..keys import RobotKeys, RobotNames
+from ..keys import RobotKeys
 from ..messages import Done, ExecutorInfo, ExecutorReply, Failed, Latch
 from ..ros2 import (
     CANCEL_ALL,
@@ -58,6 +58,7 @@ from ..ros2 import (
 )
 from . import TransportKind, open_transport, transports
 from .action import CANCEL_TIMEOUT, ActionClient, Cancelled
+from .keys import RobotNames
 from .transport import Interface, RobotTransport, Role
 
 _LOGGER = logging.getLogger(__name__)

@@ -26,8 +26,8 @@ from collections.abc import Awaitable, Callable, Iterable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar, Self, TypeVar
 
-from ..keys import ACTION_MEMBERS, action_member
 from ..kinds import RosDistro, TransportKind
+from .keys import ACTION_MEMBERS, action_member
 
 if TYPE_CHECKING:  # the bus imports the messages, which import this package's kinds
     from ..bus import Bus
