@@ -46,6 +46,8 @@ WAIT_WARNING = 10.0
 """Seconds between two warnings of a service still waiting for its router."""
 OPEN_GRACE = 2.0
 """Seconds a stop signal waits for a session that is being opened, to close it."""
+MATCHING_RECHECK = 1.0
+"""Seconds between two reads of a watched matching status (`Wire._watch_matching`)."""
 JSON = zenoh.Encoding.APPLICATION_JSON
 CDR = zenoh.Encoding.APPLICATION_CDR
 
@@ -481,18 +483,42 @@ class Wire:
         self, declared: zenoh.Publisher | zenoh.Querier, handler: Callable[[bool], None]
     ) -> Callable[[], None]:
         """Call `handler(matching)` on the loop now and whenever `declared` gains its first
-        match or loses its last; the returned function undeclares it."""
+        match or loses its last; the returned function undeclares it. The status is also
+        read again every `MATCHING_RECHECK` seconds: Zenoh's matching listeners have
+        missed changes (eclipse-zenoh/zenoh#2204), and a supervisor that never hears its
+        executor's services come serves nobody."""
+        said: list[bool] = []
+        live = [True]
+
+        def tell(matching: bool) -> None:
+            if said != [matching]:
+                said[:] = [matching]
+                handler(matching)
 
         def on_status(status: zenoh.MatchingStatus) -> None:
-            self.call_soon(handler, status.matching)
+            self.call_soon(tell, status.matching)
+
+        def read_again() -> None:
+            if not live[0]:
+                return
+            try:
+                now: Any = declared.matching_status  # a MatchingStatus, whatever the stubs say
+            except zenoh.ZError:
+                return  # undeclared as the bus closed, on another thread
+            tell(now.matching)
+            self._loop.call_later(MATCHING_RECHECK, read_again)
+
+        def end() -> None:
+            live[0] = False
 
         stop_declared = self._undeclare_once(declared)
         listener = declared.declare_matching_listener(_direct(on_status))
         stop_listening = self._undeclare_once(listener)  # closed first: it lives in `declared`
-        now: Any = declared.matching_status  # a MatchingStatus, whatever the stubs say
-        self.call_soon(handler, now.matching)
+        self._closers.callback(end)  # rechecks end first: closers run last-in, first-out
+        self.call_soon(read_again)
 
         def stop() -> None:
+            end()
             stop_listening()
             stop_declared()
 

@@ -28,6 +28,7 @@ from voicectl.shared.messages import (
     SupervisorRequest,
     Transcript,
 )
+from voicectl.shared.wire import MATCHING_RECHECK
 
 from .support import joined, until_heard
 
@@ -105,6 +106,27 @@ async def test_request_reply_and_errors(router: str) -> None:
         assert isinstance(failed, Failed)
         with pytest.raises(BusError, match="no service answered"):
             await client.request("voice/r2/supervisor/request", GetState(), decode, 1.0)
+
+
+async def test_a_served_watch_tells_each_change_once_though_it_reads_it_again(
+    router: str,
+) -> None:
+    key = "voice/r1/executor/control"
+    served: list[bool] = []
+    with joined(router) as client:
+        client.watch_served(key, served.append)
+        await async_wait_until(lambda: served == [False], 5.0, "the first status")
+        with joined(router) as server:
+
+            async def handle(_request: SupervisorRequest) -> Message:
+                return Done(detail="")
+
+            server.serve(key, json_decoder(SupervisorRequest), handle)
+            await async_wait_until(lambda: served == [False, True], 10.0, "the queryable")
+            # read again every MATCHING_RECHECK seconds, told only when it changes
+            await asyncio.sleep(MATCHING_RECHECK * 2.5)
+            assert served == [False, True]
+        await async_wait_until(lambda: served == [False, True, False], 10.0, "it to go")
 
 
 async def test_liveliness_tokens_come_and_go(router: str) -> None:
