@@ -12,6 +12,7 @@ from collections.abc import AsyncIterator, Callable, Coroutine
 from pathlib import Path
 from typing import Any, TypeVar
 
+from harness.client import Client, client_wait_ready
 from harness.wait import async_wait_until
 from voicectl.shared.bus import Bus, BusOptions, json_decoder
 from voicectl.shared.keys import RobotKeys
@@ -217,6 +218,16 @@ class Site:
 
     def joined(self) -> Bus:
         return joined(self.router)
+
+    @contextlib.asynccontextmanager
+    async def ready(self) -> AsyncIterator[Client]:
+        """A supervisor and r1's executor started, and a client of r1 once it sees both."""
+        self.start_supervisor()
+        self.start_executor()
+        with self.joined() as bus:
+            client = Client(bus, "r1")
+            await client_wait_ready(client)
+            yield client
 
     def log(self) -> str:
         """What the supervisor started last has written so far."""

@@ -44,12 +44,7 @@ async def test_sigkill_with_orders_in_flight_loses_nothing_and_resumes(site: Sit
     ended, and the next steps assume it happened), and another utterance's orders wait,
     paused, and run once resumed."""
     site.processes.start("voicectl.services.sim", "--connect", site.router)
-    site.start_supervisor()
-    site.start_executor()
-
-    with site.joined() as bus:
-        client = Client(bus, "r1")
-        await client_wait_ready(client)
+    async with site.ready() as client:
         (done_before,) = await client.submit(order("mul", first=2, second=2))
         await client.finished(done_before)
         running, then = await client.submit(
@@ -90,12 +85,7 @@ async def test_sigkill_with_orders_in_flight_loses_nothing_and_resumes(site: Sit
 
 
 async def test_running_order_is_interrupted_when_no_executor_runs_it(site: Site) -> None:
-    site.start_supervisor()
-    site.start_executor()
-
-    with site.joined() as bus:
-        client = Client(bus, "r1")
-        await client_wait_ready(client)
+    async with site.ready() as client:
         running, sibling = await client.submit(order("slow"), order("mul", first=1, second=1))
         (other,) = await client.submit(order("mul", first=5, second=5))
         await client.wait_state(lambda s: s.current is not None, "the slow order to run")
@@ -263,12 +253,7 @@ async def test_reorder_is_served_and_survives_a_restart(site: Site) -> None:
 
 
 async def test_cancel_racing_the_end_of_an_order_records_what_happened(site: Site) -> None:
-    site.start_supervisor()
-    site.start_executor()
-
-    with site.joined() as bus:
-        client = Client(bus, "r1")
-        await client_wait_ready(client)
+    async with site.ready() as client:
         ids = []
         for i in range(20):
             (order_id,) = await client.submit(order("slow", seconds=0.2 + 0.01 * i))
@@ -290,12 +275,7 @@ async def test_cancel_racing_the_end_of_an_order_records_what_happened(site: Sit
 
 
 async def test_history_pages(site: Site) -> None:
-    site.start_supervisor()
-    site.start_executor()
-
-    with site.joined() as bus:
-        client = Client(bus, "r1")
-        await client_wait_ready(client)
+    async with site.ready() as client:
         ids = await client.submit(*(order("mul", first=i, second=1) for i in range(25)))
         await client.finished(ids[-1])
         first = await client.history(0, 10)
