@@ -206,3 +206,36 @@ def test_an_old_name_that_never_existed_is_still_not_found() -> None:
     )
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "services.nonexistent"
+
+
+def test_an_executor_written_for_the_old_names_still_loads(tmp_path: Path) -> None:
+    (tmp_path / "old_style.py").write_text(
+        "from services.executor import ExecutionContext, Executor\n"
+        "from shared.messages import Order\n\n\n"
+        "class Hello(Executor):\n"
+        "    labels = ('hello',)\n\n"
+        "    async def execute(self, order: Order, ctx: ExecutionContext) -> str:\n"
+        "        return 'hello'\n"
+    )
+    code = """
+import sys, warnings
+from voicectl.services.executor.framework import load_executor
+with warnings.catch_warnings(record=True) as caught:
+    warnings.simplefilter("always")
+    mine, labels = load_executor("old_style:Hello")
+    shipped, _ = load_executor("services.executor.builtin.pic:TakePhoto", (), {"directory": "."})
+print(labels, type(shipped).__module__)
+print(sorted({str(w.category.__name__) for w in caught}))
+"""
+    done = subprocess.run(
+        [sys.executable, "-c", code],
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.splitlines() == [
+        "('hello',) voicectl.services.executor.builtin.pic",
+        "['FutureWarning']",
+    ]
