@@ -12,7 +12,7 @@ with it blocked.
   arrive (CLOCK_MONOTONIC, shared by every process).
 
 STOP is sent the way the panel and `voicectl stop` send it (VoicectlClient.stop, on a warm
-session). The blocked loop is tests/executors_for_tests.py's BlockingNavigator (4 s), with
+session). The blocked loop is harness/executors.py's BlockingNavigator (4 s), with
 the executor's stall watchdog held off, so that STOP alone is timed.
 """
 
@@ -73,7 +73,7 @@ async def on_dds(distro: str, rounds: dict[str, int], tmp: Path) -> Timings:
     env = ros2_env.find(distro)
     if env is None:
         raise SystemExit(f"ROS 2 {distro} is not made: run scripts/ros2-env")
-    args = ("--executor", "tests.executors_for_tests:BlockingNavigator", "--stall-limit", "30")
+    args = ("--executor", "harness.executors:BlockingNavigator", "--stall-limit", "30")
     timings: Timings = {case: [] for case in CASES}
     (tmp / distro).mkdir()
     processes = Processes(tmp / distro)

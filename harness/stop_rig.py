@@ -1,7 +1,7 @@
 """A robot under every fault STOP must beat, and a stopwatch at the simulator.
 
 One simulated robot with its supervisor and executor as processes on a router; the
-executor also serves the faulty executors of tests/executors_for_tests.py. `run(case)`
+executor also serves the faulty executors of harness/executors.py. `run(case)`
 puts the robot in motion the way the case says (a healthy navigation, an executor that
 blocks its loop, one that commands from a blocked loop, one that swallows its cancel,
 processes killed, a long queue), sends STOP through `VoicectlClient.stop` (what the panel
@@ -60,9 +60,9 @@ WATCH = 1.5
 """Seconds after STOP until which it is watched for motion."""
 WAIT = 30.0
 EXECUTORS = (
-    "tests.executors_for_tests:BlockingNavigator",
-    "tests.executors_for_tests:BlockedDriver",
-    "tests.executors_for_tests:Runaway",
+    "harness.executors:BlockingNavigator",
+    "harness.executors:BlockedDriver",
+    "harness.executors:Runaway",
 )
 CASES = (
     "healthy",

@@ -188,7 +188,7 @@ def start_robot(
     )
 
 
-EXECUTORS = ["--executor", "tests.executors_for_tests:Slow=slow"]
+EXECUTORS = ["--executor", "harness.executors:Slow=slow"]
 """Executors the supervisor tests bind besides the built-in ones."""
 
 

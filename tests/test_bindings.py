@@ -7,11 +7,11 @@ from pathlib import Path
 
 import pytest
 
+from harness.executors import Greeter, Strict
 from voicectl.services.executor.framework import BindingError, load_bindings_file, order_params
 from voicectl.shared.messages import Order
 
 from .conftest import voicectl
-from .executors_for_tests import Greeter, Strict
 
 
 def bindings_file(tmp_path: Path, text: str) -> Path:
@@ -24,9 +24,9 @@ def test_a_file_binds_one_class_twice_with_its_own_arguments(tmp_path: Path) -> 
     path = bindings_file(
         tmp_path,
         "executors:\n"
-        "  - class: tests.executors_for_tests:Greeter\n"
+        "  - class: harness.executors:Greeter\n"
         "    args: {greeting: hi}\n"
-        "  - {class: tests.executors_for_tests:Greeter, labels: [bye, ciao], "
+        "  - {class: harness.executors:Greeter, labels: [bye, ciao], "
         "args: {greeting: bye, times: 3}}\n",
     )
     (first, first_labels), (second, second_labels) = load_bindings_file(path)
@@ -42,7 +42,7 @@ def test_a_file_binds_one_class_twice_with_its_own_arguments(tmp_path: Path) -> 
         ("executors: [}", "executors.yaml: "),
         ("executor: []", "executors.yaml: Object contains unknown field `executor`"),
         (
-            "executors:\n  - {class: tests.executors_for_tests:Greeter, label: [x]}",
+            "executors:\n  - {class: harness.executors:Greeter, label: [x]}",
             "executors.yaml: Object contains unknown field `label` - at `$.executors[0]`",
         ),
         (
@@ -51,13 +51,13 @@ def test_a_file_binds_one_class_twice_with_its_own_arguments(tmp_path: Path) -> 
             "no_such_module: No module named 'no_such_module'",
         ),
         (
-            "executors:\n  - {class: tests.executors_for_tests:Greeter, args: {tone: warm}}",
-            "executors.yaml: executors entry 1: executor 'tests.executors_for_tests:Greeter': "
+            "executors:\n  - {class: harness.executors:Greeter, args: {tone: warm}}",
+            "executors.yaml: executors entry 1: executor 'harness.executors:Greeter': "
             "Greeter() failed: Greeter.__init__() got an unexpected keyword argument 'tone'",
         ),
         (
-            "executors:\n  - {class: tests.executors_for_tests:Speed}",
-            "executors.yaml: executors entry 1: executor 'tests.executors_for_tests:Speed': "
+            "executors:\n  - {class: harness.executors:Speed}",
+            "executors.yaml: executors entry 1: executor 'harness.executors:Speed': "
             "Speed is not an Executor class",
         ),
     ],

@@ -43,7 +43,7 @@ from .support import TURN_LEFT, harness_on, joined, order, start_robot, until_he
 @pytest.fixture
 def robot(router: str, processes: Processes, tmp_path: Path) -> tuple[str, Path]:
     photos = tmp_path / "photos"
-    executor_args = ("--cancel-deadline", "0.5", "--executor", "tests.executors_for_tests:Runaway")
+    executor_args = ("--cancel-deadline", "0.5", "--executor", "harness.executors:Runaway")
     start_robot(processes, router, photos, executor_args=executor_args)
     return router, photos
 
@@ -329,7 +329,7 @@ async def test_speed_limits_are_the_robots_own_and_hold_for_raw_velocity_too(
     """Limits are per robot (the executor's flags), and a user executor that publishes
     its own Twist bytes on cmd_vel is held to them as `drive` is."""
     limits = ("--max-speed", "0.2", "--max-angular-speed", "0.4", "--max-accel", "0.5")
-    binding = ("--executor", "tests.executors_for_tests:RawVelocity")
+    binding = ("--executor", "harness.executors:RawVelocity")
     start_robot(processes, router, tmp_path / "photos", executor_args=(*limits, *binding))
     async with harness_on(router) as harness:
         cmd_vel = CmdVel(harness.bus)

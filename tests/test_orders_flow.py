@@ -28,22 +28,22 @@ from .support import joined, order
 
 USER_EXECUTORS = [
     "--executor",
-    "tests.executors_for_tests:Boom",
+    "harness.executors:Boom",
     "--executor",
-    "tests.executors_for_tests:Refuse",
+    "harness.executors:Refuse",
     "--executor",
-    "tests.executors_for_tests:Slow=slow,slow2",
+    "harness.executors:Slow=slow,slow2",
     "--executor",
-    "tests.executors_for_tests:Stubborn",
+    "harness.executors:Stubborn",
     "--executor",
-    "tests.executors_for_tests:Strict",
+    "harness.executors:Strict",
 ]
 EXECUTORS_FILE = """\
 # One class, two setups: an integrator's executor configured without code changes.
 executors:
-  - class: tests.executors_for_tests:Greeter
+  - class: harness.executors:Greeter
     args: {greeting: hello, times: 2}
-  - class: tests.executors_for_tests:Greeter
+  - class: harness.executors:Greeter
     labels: [welcome]
     args: {greeting: welcome aboard}
 """

@@ -55,7 +55,7 @@ STOP_BOUND = 0.25
 loaded two-core machine, as tests/test_stop.py bounds the other transports: well short of
 any retry or timeout on the way. The issue's 50 ms is a p99, measured by
 bench/stop_transports.py beside the other transports (docs/benchmarks.md)."""
-EXECUTORS = ("--executor", "tests.executors_for_tests:BlockingNavigator", "--stall-limit", "30")
+EXECUTORS = ("--executor", "harness.executors:BlockingNavigator", "--stall-limit", "30")
 """A navigator that blocks its loop; the watchdog held off, so that STOP is timed alone."""
 
 

@@ -1,5 +1,6 @@
-"""User executors loaded by the tests with `--executor tests.executors_for_tests:...`,
-the way an integrator binds their own module."""
+"""User executors, some of them faulty on purpose, that the tests and the STOP
+benchmarks bind with `--executor harness.executors:...`, the way an integrator binds their
+own module."""
 
 from __future__ import annotations
 
