@@ -73,6 +73,8 @@ class Events:
     def __init__(self) -> None:
         self.finals: dict[str, tuple[float, dict[str, object]]] = {}
         self.proposals: dict[str, tuple[float, dict[str, object]]] = {}
+        self.proposal = asyncio.Condition()
+        """Notified as each proposal comes."""
         self.idle = asyncio.Event()
         """Set while the recogniser's last status said no audio session is open."""
         self.idle.set()
@@ -81,6 +83,16 @@ class Events:
         """Until the recogniser has closed every session (each holds a decoder)."""
         with contextlib.suppress(TimeoutError):
             await asyncio.wait_for(self.idle.wait(), timeout)
+
+    async def proposed(self, session: str, timeout: float = 10.0) -> None:
+        """Until `session`'s proposal has come, or `timeout` seconds: an utterance still
+        being decoded when its microphone stopped is finished then, and a loaded machine
+        may take seconds over it."""
+        async with self.proposal:
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(
+                    self.proposal.wait_for(lambda: session in self.proposals), timeout
+                )
 
     async def read(self, client: httpx.AsyncClient) -> None:
         async with client.stream("GET", "/api/events", timeout=None) as response:
@@ -93,6 +105,8 @@ class Events:
                     self.finals[session] = (time.monotonic(), message)
                 elif message.get("type") == "proposal" and session:
                     self.proposals[session] = (time.monotonic(), message)
+                    async with self.proposal:
+                        self.proposal.notify_all()
                 elif message.get("type") == "sttstatus":
                     if message.get("sessions"):
                         self.idle.clear()
@@ -119,6 +133,7 @@ async def stream(
             await socket.send(silence)  # a microphone goes on hearing the room
             await asyncio.sleep(FRAME)
         await socket.send(json.dumps({"type": "stop"}))
+    await events.proposed(session)
     return session, spoken
 
 
