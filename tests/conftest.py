@@ -10,6 +10,7 @@ import subprocess
 import sys
 import threading
 from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -181,14 +182,14 @@ class Stack:
         return voicectl(*args, timeout=60, env=self.env)
 
 
-@pytest.fixture
-def stack(tmp_path: Path, request: pytest.FixtureRequest) -> Iterator[Stack]:
-    """`voicectl up` with the simulator ten times faster than life; parametrize it
-    (indirectly) with a transport to play a robot on rmw_zenoh."""
-    transport: TransportKind = getattr(request, "param", TransportKind.BRIDGE)
+@contextmanager
+def started_stack(data: Path, transport: TransportKind = TransportKind.BRIDGE) -> Iterator[Stack]:
+    """`voicectl up` with its data in `data` and the simulator ten times faster than life,
+    once it says it is ready; stopped with SIGINT, as a person would, and its output
+    printed, on leaving."""
     router_port, port = free_ports(2)
     router = f"tcp/127.0.0.1:{router_port}"
-    env = {**os.environ, "VOICECTL_DATA": str(tmp_path / "data"), "PYTHONUNBUFFERED": "1"}
+    env = {**os.environ, "VOICECTL_DATA": str(data), "PYTHONUNBUFFERED": "1"}
     env.pop("VOICECTL_TOKEN", None)
     process = subprocess.Popen(
         [
@@ -243,3 +244,12 @@ def stack(tmp_path: Path, request: pytest.FixtureRequest) -> Iterator[Stack]:
         if process.stdout is not None:
             process.stdout.close()
         print("\n".join(running.output))
+
+
+@pytest.fixture
+def stack(tmp_path: Path, request: pytest.FixtureRequest) -> Iterator[Stack]:
+    """`voicectl up` with the simulator ten times faster than life; parametrize it
+    (indirectly) with a transport to play a robot on rmw_zenoh."""
+    transport: TransportKind = getattr(request, "param", TransportKind.BRIDGE)
+    with started_stack(tmp_path / "data", transport) as running:
+        yield running
