@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import errno
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -183,10 +184,12 @@ class Stack:
 
 
 @contextmanager
-def started_stack(data: Path, transport: TransportKind = TransportKind.BRIDGE) -> Iterator[Stack]:
-    """`voicectl up` with its data in `data` and the simulator ten times faster than life,
-    once it says it is ready; stopped with SIGINT, as a person would, and its output
-    printed, on leaving."""
+def started_stack(
+    data: Path, transport: TransportKind = TransportKind.BRIDGE, orders: Path = REPO / "orders"
+) -> Iterator[Stack]:
+    """`voicectl up` with its data in `data`, the simulator ten times faster than life and
+    the `orders` (the shipped ones by default), once it says it is ready; stopped with
+    SIGINT, as a person would, and its output printed, on leaving."""
     router_port, port = free_ports(2)
     router = f"tcp/127.0.0.1:{router_port}"
     env = {**os.environ, "VOICECTL_DATA": str(data), "PYTHONUNBUFFERED": "1"}
@@ -206,7 +209,7 @@ def started_stack(data: Path, transport: TransportKind = TransportKind.BRIDGE) -
             "--transport",
             transport.value,
             "--orders",
-            str(REPO / "orders"),
+            str(orders),
         ],
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
@@ -252,4 +255,18 @@ def stack(tmp_path: Path, request: pytest.FixtureRequest) -> Iterator[Stack]:
     (indirectly) with a transport to play a robot on rmw_zenoh."""
     transport: TransportKind = getattr(request, "param", TransportKind.BRIDGE)
     with started_stack(tmp_path / "data", transport) as running:
+        yield running
+
+
+@pytest.fixture
+def photo_at_once_stack(tmp_path: Path) -> Iterator[Stack]:
+    """`stack` with the shipped orders but for the tutorial's countdown before its photo
+    (orders/tutorial.yaml's `wait: 5`, five seconds with nothing to look at): at once."""
+    orders = tmp_path / "orders"
+    shutil.copytree(REPO / "orders", orders)
+    tutorial = orders / "tutorial.yaml"
+    countdown = "      wait: 5\n"
+    assert countdown in tutorial.read_text(), "the tutorial's photo order has changed"
+    tutorial.write_text(tutorial.read_text().replace(countdown, "      wait: 0\n"))
+    with started_stack(tmp_path / "data", orders=orders) as running:
         yield running

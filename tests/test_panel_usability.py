@@ -632,11 +632,13 @@ def shown_x(page: Page) -> float:
 
 
 def test_a_photo_an_order_took_is_shown_in_its_history_row(
-    stack: Stack, subtests: pytest.Subtests
+    photo_at_once_stack: Stack, subtests: pytest.Subtests
 ) -> None:
     """A photo is a file on the robot: its history row shows it, fetched with the token,
     and keeps it when the history is drawn again."""
     from playwright.sync_api import expect
+
+    stack = photo_at_once_stack
 
     with chromium() as browser:
         # The history keeps what the passes before took: each pass's rows are the newest.
