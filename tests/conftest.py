@@ -5,11 +5,13 @@ from __future__ import annotations
 
 import errno
 import os
+import shutil
 import signal
 import subprocess
 import sys
 import threading
 from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -181,14 +183,16 @@ class Stack:
         return voicectl(*args, timeout=60, env=self.env)
 
 
-@pytest.fixture
-def stack(tmp_path: Path, request: pytest.FixtureRequest) -> Iterator[Stack]:
-    """`voicectl up` with the simulator ten times faster than life; parametrize it
-    (indirectly) with a transport to play a robot on rmw_zenoh."""
-    transport: TransportKind = getattr(request, "param", TransportKind.BRIDGE)
+@contextmanager
+def started_stack(
+    data: Path, transport: TransportKind = TransportKind.BRIDGE, orders: Path = REPO / "orders"
+) -> Iterator[Stack]:
+    """`voicectl up` with its data in `data`, the simulator ten times faster than life and
+    the `orders` (the shipped ones by default), once it says it is ready; stopped with
+    SIGINT, as a person would, and its output printed, on leaving."""
     router_port, port = free_ports(2)
     router = f"tcp/127.0.0.1:{router_port}"
-    env = {**os.environ, "VOICECTL_DATA": str(tmp_path / "data"), "PYTHONUNBUFFERED": "1"}
+    env = {**os.environ, "VOICECTL_DATA": str(data), "PYTHONUNBUFFERED": "1"}
     env.pop("VOICECTL_TOKEN", None)
     process = subprocess.Popen(
         [
@@ -205,7 +209,7 @@ def stack(tmp_path: Path, request: pytest.FixtureRequest) -> Iterator[Stack]:
             "--transport",
             transport.value,
             "--orders",
-            str(REPO / "orders"),
+            str(orders),
         ],
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,
@@ -243,3 +247,26 @@ def stack(tmp_path: Path, request: pytest.FixtureRequest) -> Iterator[Stack]:
         if process.stdout is not None:
             process.stdout.close()
         print("\n".join(running.output))
+
+
+@pytest.fixture
+def stack(tmp_path: Path, request: pytest.FixtureRequest) -> Iterator[Stack]:
+    """`voicectl up` with the simulator ten times faster than life; parametrize it
+    (indirectly) with a transport to play a robot on rmw_zenoh."""
+    transport: TransportKind = getattr(request, "param", TransportKind.BRIDGE)
+    with started_stack(tmp_path / "data", transport) as running:
+        yield running
+
+
+@pytest.fixture
+def photo_at_once_stack(tmp_path: Path) -> Iterator[Stack]:
+    """`stack` with the shipped orders but for the tutorial's countdown before its photo
+    (orders/tutorial.yaml's `wait: 5`, five seconds with nothing to look at): at once."""
+    orders = tmp_path / "orders"
+    shutil.copytree(REPO / "orders", orders)
+    tutorial = orders / "tutorial.yaml"
+    countdown = "      wait: 5\n"
+    assert countdown in tutorial.read_text(), "the tutorial's photo order has changed"
+    tutorial.write_text(tutorial.read_text().replace(countdown, "      wait: 0\n"))
+    with started_stack(tmp_path / "data", orders=orders) as running:
+        yield running

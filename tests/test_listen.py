@@ -129,8 +129,11 @@ def descriptions(known: State) -> list[tuple[str, OrderStatus]]:
     return [(record.order.description, record.status) for record in records]
 
 
-def test_a_file_becomes_orders_the_simulator_carries_out(stack: Stack, tmp_path: Path) -> None:
+def test_a_file_becomes_orders_the_simulator_carries_out(
+    photo_at_once_stack: Stack, tmp_path: Path
+) -> None:
     """docs/listen.md's example, run line by line (its /tmp files in the test's own)."""
+    stack = photo_at_once_stack
     block = block_after(REPO / "docs" / "listen.md", "heard through the whole stack", "sh")
     for command in block.strip().splitlines():
         argv = shlex.split(command.replace("/tmp/", f"{tmp_path}/"))

@@ -50,6 +50,19 @@ pytestmark = [
 ]
 
 
+def chromium_flags(microphone: Path | None = None, extra: tuple[str, ...] = ()) -> list[str]:
+    """Chromium's command line flags, with `microphone` (a WAV file, played once from its
+    start by every stream that opens it) as the fake microphone."""
+    flags = [*CHROMIUM_FLAGS, *extra]
+    if microphone is not None:
+        flags += [
+            "--use-fake-ui-for-media-stream",
+            "--use-fake-device-for-media-stream",
+            f"--use-file-for-fake-audio-capture={microphone}%noloop",
+        ]
+    return flags
+
+
 @contextmanager
 def panel(
     stack: Stack, profile: Path, microphone: Path | None = None, extra: tuple[str, ...] = ()
@@ -60,16 +73,12 @@ def panel(
     # What the page shows comes over the bus and an event stream: on a machine running
     # two suites at once, 5 s (Playwright's default) was once too short to connect.
     expect.set_options(timeout=EXPECT_WAIT)
-    flags = [*CHROMIUM_FLAGS, *extra]
-    if microphone is not None:
-        flags += [
-            "--use-fake-ui-for-media-stream",
-            "--use-fake-device-for-media-stream",
-            f"--use-file-for-fake-audio-capture={microphone}%noloop",
-        ]
     with sync_playwright() as playwright:
         browser = playwright.chromium.launch_persistent_context(
-            str(profile), executable_path=CHROMIUM, headless=True, args=flags
+            str(profile),
+            executable_path=CHROMIUM,
+            headless=True,
+            args=chromium_flags(microphone, extra),
         )
         try:
             page = browser.new_page()
@@ -77,6 +86,36 @@ def panel(
             yield page
         finally:
             browser.close()
+
+
+@contextmanager
+def chromium(microphone: Path | None = None) -> Iterator[Any]:
+    """One headless Chromium for several pages (`fresh_page`), each as a person on another
+    device would open the panel; `microphone` is the fake microphone of them all."""
+    from playwright.sync_api import expect, sync_playwright
+
+    expect.set_options(timeout=EXPECT_WAIT)  # as in `panel`
+    with sync_playwright() as playwright:
+        browser = playwright.chromium.launch(
+            executable_path=CHROMIUM, headless=True, args=chromium_flags(microphone)
+        )
+        try:
+            yield browser
+        finally:
+            browser.close()
+
+
+@contextmanager
+def fresh_page(browser: Any, width: int, height: int) -> Iterator[Any]:
+    """A `width` x `height` page of `browser` in a context of its own: a new profile, with
+    no token, storage or cache of any page before it."""
+    context = browser.new_context(viewport={"width": width, "height": height})
+    try:
+        page = context.new_page()
+        page.set_default_timeout(WAIT)
+        yield page
+    finally:
+        context.close()
 
 
 def login(page: Any, stack: Stack) -> None:

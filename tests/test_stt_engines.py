@@ -11,6 +11,7 @@ import multiprocessing
 import re
 import subprocess
 import wave
+from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
@@ -23,6 +24,7 @@ from voicectl.services.converter.grammar import build_grammar
 from voicectl.services.converter.orders import OrderSet
 from voicectl.services.stt.audio import frames, read_wav
 from voicectl.services.stt.engine import (
+    Engine,
     EngineError,
     EngineOptions,
     Final,
@@ -237,7 +239,8 @@ def test_audio_chunks_carry_whole_frames_and_at_most_a_second(size: int) -> None
 def test_transcribe_prints_one_json_line_per_file_in_the_parse_contract(
     speech: Speak, tmp_path: Path
 ) -> None:
-    command = speech("reach the kitchen then take a picture", "flite:slt")
+    said = "reach the kitchen then take a picture"
+    command = speech(said, "flite:slt")
     chat = speech("hello robot how are you")
     silence = tmp_path / "silence.wav"
     with wave.open(str(silence), "wb") as out:
@@ -247,7 +250,15 @@ def test_transcribe_prints_one_json_line_per_file_in_the_parse_contract(
         out.writeframes(b"\x00\x00" * 8000)
     no_audio = tmp_path / "notes.wav"
     no_audio.write_text("not a recording")
-    done = voicectl("transcribe", str(command), str(no_audio), str(chat), str(silence))
+    # Four processes, each loading the recogniser and nothing waiting on another: at once.
+    with ThreadPoolExecutor(4) as pool:
+        together = pool.submit(
+            voicectl, "transcribe", str(command), str(no_audio), str(chat), str(silence)
+        )
+        chat_alone = pool.submit(voicectl, "transcribe", str(chat))
+        command_alone = pool.submit(voicectl, "transcribe", str(command))
+        parsed_said = pool.submit(voicectl, "parse", said)
+    done = together.result()
     assert done.returncode == 1, done.stderr  # one file could not be read, two were rejected
     lines = [json.loads(line) for line in done.stdout.splitlines()]
     assert [line["file"] for line in lines] == [
@@ -271,7 +282,7 @@ def test_transcribe_prints_one_json_line_per_file_in_the_parse_contract(
         "hearings",
         "decision",
     }
-    assert first["transcript"] == "reach the kitchen then take a picture"
+    assert first["transcript"] == said
     assert len(first["word_confidences"]) == len(first["transcript"].split())
     assert first["doubts"] == []
     assert first["rejected"] is False
@@ -280,7 +291,7 @@ def test_transcribe_prints_one_json_line_per_file_in_the_parse_contract(
     assert grammar["accepted"], first["hearings"]
     assert moonshine["accepted"], first["hearings"]
     assert first["decision"].startswith("both heard")
-    parsed = json.loads(voicectl("parse", first["transcript"]).stdout)
+    parsed = json.loads(parsed_said.result().stdout)  # of the transcript: `said`, as above
     assert (first["orders"], first["errors"]) == (parsed["orders"], parsed["errors"])
     assert set(gone) == {"file", "error"}
     assert "cannot read" in gone["error"]
@@ -288,14 +299,27 @@ def test_transcribe_prints_one_json_line_per_file_in_the_parse_contract(
     assert other["reason"]
     assert quiet["transcript"] == ""
     assert quiet["rejected"] is True
-    rejected = voicectl("transcribe", str(chat))
+    rejected = chat_alone.result()
     assert rejected.returncode == 1, rejected.stderr  # no command: nothing would be sent
     assert json.loads(rejected.stdout)["orders"] == []
-    assert voicectl("transcribe", str(command)).returncode == 0
+    assert command_alone.result().returncode == 0
 
 
-def test_the_recogniser_switches_grammars_between_utterances(speech: Speak) -> None:
+@pytest.fixture(scope="module")
+def local_engine() -> Iterator[Engine]:
+    """The default engine in this process, loaded once for the tests that decode with it;
+    each gives it the grammar it needs."""
     engine = load_engine(EngineOptions())
+    try:
+        yield engine
+    finally:
+        engine.close()
+
+
+def test_the_recogniser_switches_grammars_between_utterances(
+    local_engine: Engine, speech: Speak
+) -> None:
+    engine = local_engine
     pcm = read_wav(speech("turn left"))
     texts = []
     for orders in (
@@ -314,10 +338,12 @@ def test_the_recogniser_switches_grammars_between_utterances(speech: Speak) -> N
     assert texts[1][0][1] != ""  # forced towards "reach kitchen" or nothing: either way rejected
 
 
-def test_worker_processes_decode_sessions_at_once_as_one_process_does(speech: Speak) -> None:
+def test_worker_processes_decode_sessions_at_once_as_one_process_does(
+    local_engine: Engine, speech: Speak
+) -> None:
     pcm = read_wav(speech("turn left then reach the kitchen", "flite:slt"))
     grammar = build_grammar(OrderSet.load(ORDERS))
-    local = load_engine(EngineOptions())
+    local = local_engine
     local.use_grammar(grammar)
     [expected] = finals(local, pcm)
     assert expected.text == "turn left then reach the kitchen"
