@@ -34,7 +34,7 @@ from voicectl.shared.messages import Doubt, Proposal
 if TYPE_CHECKING:
     from playwright.sync_api import Browser, Page
 
-from harness.wait import async_wait_until
+from harness.wait import async_wait_until, wait_until
 
 from .conftest import REPO, OnASettledStack, Speak, Stack, on_stack_bus, settle
 from .test_panel_browser import ARTIFACTS, chromium, fresh_page, login, silent_wav
@@ -72,9 +72,18 @@ def shot(page: Page, name: str, screen: str) -> None:
 
 
 def box(page: Page, selector: str) -> dict[str, float]:
-    found = page.locator(selector).bounding_box()
-    assert found is not None, f"{selector} is not shown"
-    return dict(found)
+    """Where `selector` is drawn, once it is: the panel draws some parts anew at every
+    update (the running order's at each step of its progress), and an element measured
+    as it is replaced has no box."""
+    found: list[dict[str, float]] = []
+
+    def measured() -> bool:
+        drawn = page.locator(selector).bounding_box()
+        found[:] = [dict(drawn)] if drawn is not None else []
+        return bool(found)
+
+    wait_until(measured, 20.0, f"{selector} to be shown")
+    return found[0]
 
 
 def on_first_screen(page: Page, selector: str) -> None:
