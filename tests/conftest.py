@@ -10,11 +10,12 @@ import signal
 import subprocess
 import sys
 import threading
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Coroutine, Iterator
+from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import hypothesis
 import pytest
@@ -23,8 +24,10 @@ import zenoh
 from harness.ports import free_port, free_ports
 from harness.processes import Processes
 from harness.speech_set import Voice, real_recordings, speak
-from harness.wait import wait_until
-from voicectl.shared.bus import BusOptions
+from harness.wait import async_wait_until, wait_until
+from voicectl.shared.bus import Bus, BusOptions
+from voicectl.shared.client import VoicectlClient
+from voicectl.shared.messages import CancelAll, GetState, Release, StateReply
 from voicectl.shared.robot import TransportKind
 
 if TYPE_CHECKING:
@@ -39,6 +42,7 @@ hypothesis.settings.load_profile("voicectl")
 
 
 Speak = Callable[..., Path]
+T = TypeVar("T")
 
 
 @pytest.fixture(scope="session")
@@ -270,3 +274,57 @@ def photo_at_once_stack(tmp_path: Path) -> Iterator[Stack]:
     tutorial.write_text(tutorial.read_text().replace(countdown, "      wait: 0\n"))
     with started_stack(tmp_path / "data", orders=orders) as running:
         yield running
+
+
+def on_stack_bus(stack: Stack, body: Callable[[Bus], Coroutine[Any, Any, T]]) -> T:
+    """`body` run with a bus joined to the stack's router, in a thread of its own: a
+    browser test's thread holds the event loop of Playwright's sync API."""
+    from .support import on_bus  # support imports this module
+
+    with ThreadPoolExecutor(1) as thread:
+        return thread.submit(on_bus, stack.router, body).result(timeout=60)
+
+
+def settle(stack: Stack) -> None:
+    """The robot as the stack came up with it, but for its history and pose: the emergency
+    stop released, the queue empty and no order running."""
+
+    async def tidy(bus: Bus) -> None:
+        client = VoicectlClient(bus)
+        await client.ask("robot", Release())  # "was not on" when it was not
+        await client.ask("robot", CancelAll())  # the running order too
+
+        async def idle() -> bool:
+            reply = await client.ask("robot", GetState())
+            assert isinstance(reply, StateReply), reply
+            known = reply.state
+            return not (known.stopped or known.queue or known.current)
+
+        await async_wait_until(idle, 30.0, "the robot released, with nothing to do")
+
+    on_stack_bus(stack, tidy)
+
+
+@pytest.fixture(scope="class")
+def shared_stack(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Stack]:
+    """One stack for the tests of a class (on each worker that runs some of them)."""
+    with started_stack(tmp_path_factory.mktemp("stack") / "data") as running:
+        yield running
+
+
+class OnASettledStack:
+    """For a class of tests that need of the stack only a robot released and idle, all its
+    parts online (none moves the robot, restarts a part or reads the history): `stack` is
+    one stack for them all, settled before each test, instead of one started for each
+    (one on each worker that runs some of them: `--dist loadgroup`, which would keep a
+    class on one worker, groups nothing with pytest 9.2, pytest-xdist issue 1386)."""
+
+    @pytest.fixture
+    def stack(self, shared_stack: Stack, request: pytest.FixtureRequest) -> Iterator[Stack]:
+        assert shared_stack.process.poll() is None, "\n".join(shared_stack.output)
+        settle(shared_stack)
+        seen = len(shared_stack.output)
+        yield shared_stack
+        report = getattr(request.node, "rep_call", None)
+        if report is not None and report.failed:  # what the stack said during the test
+            print("\n".join(shared_stack.output[seen:]))

@@ -1,6 +1,7 @@
 """The panel in a real headless Chromium against the real stack (`voicectl up`): logging
 in from the printed address, typing and speaking through Chromium's fake microphone (a
-WAV made with espeak-ng), staging, sending, watching, reordering, cancelling, stopping."""
+WAV made with espeak-ng), staging, sending, watching, reordering, cancelling, stopping. The
+tests that need only a settled robot share a stack (`OnASettledStack`)."""
 
 from __future__ import annotations
 
@@ -23,7 +24,7 @@ from voicectl.shared.bus import Bus
 from voicectl.shared.keys import RobotKeys, last_chunk
 from voicectl.shared.messages import Doubt, Proposal
 
-from .conftest import REPO, Speak, Stack
+from .conftest import REPO, OnASettledStack, Speak, Stack
 from .support import on_bus
 
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
@@ -183,35 +184,6 @@ def test_log_in_type_stage_edit_suggest_send_and_watch(stack: Stack, tmp_path: P
         expect(page.locator("#history tr").nth(0)).to_contain_text("succeeded")
 
 
-def test_a_send_retried_after_a_lost_answer_queues_once(stack: Stack, tmp_path: Path) -> None:
-    from playwright.sync_api import Route, expect
-
-    with panel(stack, tmp_path / "profile") as page:
-        login(page, stack)
-        page.fill("#text", "wait ten seconds then wait two seconds")
-        page.press("#text", "Enter")
-        sent: list[str] = []
-
-        def lose_the_first_answer(route: Route) -> None:
-            sent.append(route.request.post_data_json["request_id"])
-            if len(sent) == 1:
-                route.fetch()  # the server queues the orders...
-                route.abort()  # ...and its answer is lost on the way back
-            else:
-                route.continue_()
-
-        page.route("**/api/submit*", lose_the_first_answer)
-        page.click("#send")
-        expect(page.locator("#send-note")).to_contain_text("Not sent")
-        expect(page.locator("#staged li")).to_have_count(2)  # still there to send again
-        page.click("#send")
-        expect(page.locator("#staged li")).to_have_count(0)
-        expect(page.locator("#current")).to_contain_text("wait 10 s")
-        expect(page.locator("#queue li .what")).to_have_text(["wait 2 s"])
-        assert len(sent) == 2
-        assert sent[0] == sent[1], sent
-
-
 def test_queue_reorder_cancel_and_stop(stack: Stack, tmp_path: Path) -> None:
     from playwright.sync_api import expect
 
@@ -303,67 +275,99 @@ def test_speak_a_command_and_a_non_command(stack: Stack, speech: Speak, tmp_path
         page.screenshot(path=str(ARTIFACTS / "panel-phone.png"), full_page=False)
 
 
-def test_without_https_the_panel_says_why_there_is_no_microphone(
-    stack: Stack, tmp_path: Path
-) -> None:
-    from playwright.sync_api import expect
+class TestOnASettledStack(OnASettledStack):
+    """What needs only a settled robot: one stack for it all."""
 
-    # panel.test is the stack on loopback, but not "localhost": no secure context
-    mapped = ("--host-resolver-rules=MAP panel.test 127.0.0.1",)
-    with panel(stack, tmp_path / "profile", extra=mapped) as page:
-        token = Path(stack.env["VOICECTL_DATA"], "token").read_text().strip()
-        page.goto(f"http://panel.test:{stack.port}/#token={token}")
-        expect(page.locator("#panel")).to_be_visible()
-        page.click("#mic")
-        expect(page.locator("#mic-note")).to_contain_text("only over HTTPS or on localhost")
-        expect(page.locator("#mic")).to_have_attribute("aria-pressed", "false")
+    def test_a_send_retried_after_a_lost_answer_queues_once(
+        self, stack: Stack, tmp_path: Path
+    ) -> None:
+        from playwright.sync_api import Route, expect
 
+        with panel(stack, tmp_path / "profile") as page:
+            login(page, stack)
+            page.fill("#text", "wait ten seconds then wait two seconds")
+            page.press("#text", "Enter")
+            sent: list[str] = []
 
-def test_a_doubtful_value_is_asked_never_sent(stack: Stack, tmp_path: Path) -> None:
-    """The recogniser's doubt ("ten", or "two"?) reaches the panel as a choice; with
-    auto-send on, nothing is sent until the person picks. The proposal is published on
-    the converter's key by the test (a stand-in for a recogniser that doubted): which
-    speech makes the real one doubt is tests/test_hearing.py's business."""
-    from playwright.sync_api import expect
+            def lose_the_first_answer(route: Route) -> None:
+                sent.append(route.request.post_data_json["request_id"])
+                if len(sent) == 1:
+                    route.fetch()  # the server queues the orders...
+                    route.abort()  # ...and its answer is lost on the way back
+                else:
+                    route.continue_()
 
-    silence = silent_wav(tmp_path / "silence.wav", 20.0)
-    with panel(stack, tmp_path / "doubt", microphone=silence) as page:
-        login(page, stack)
-        page.check("#auto-send")
-        page.click("#mic")
-        expect(page.locator("#mic")).to_have_attribute("aria-pressed", "true")
-        keys = RobotKeys("robot")
+            page.route("**/api/submit*", lose_the_first_answer)
+            page.click("#send")
+            expect(page.locator("#send-note")).to_contain_text("Not sent")
+            expect(page.locator("#staged li")).to_have_count(2)  # still there to send again
+            page.click("#send")
+            expect(page.locator("#staged li")).to_have_count(0)
+            expect(page.locator("#current")).to_contain_text("wait 10 s")
+            expect(page.locator("#queue li .what")).to_have_text(["wait 2 s"])
+            assert len(sent) == 2
+            assert sent[0] == sent[1], sent
 
-        async def doubt(bus: Bus) -> None:
-            sessions: list[str] = []
-            bus.subscribe(
-                keys.stt_audio_any, bytes, lambda key, _raw: sessions.append(last_chunk(key))
-            )
-            await async_wait_until(lambda: sessions, 20.0, "the panel's audio session")
-            said = "go forward ten meters"
-            parsed = Parser(OrderSet.load(REPO / "orders")).parse(said)
-            proposal = Proposal(
-                transcript=said,
-                orders=parsed.orders,
-                session=sessions[-1],
-                doubts=[Doubt(position=2, words="ten", alternatives=["two"], confidence=0.0)],
-            )
-            bus.publish(keys.proposal, proposal)
+    def test_without_https_the_panel_says_why_there_is_no_microphone(
+        self, stack: Stack, tmp_path: Path
+    ) -> None:
+        from playwright.sync_api import expect
 
-        # Playwright's sync API keeps an event loop in this thread: the bus gets its own.
-        with concurrent.futures.ThreadPoolExecutor(1) as thread:
-            thread.submit(on_bus, stack.router, doubt).result(timeout=60)
-        box = page.locator("#doubt")
-        expect(box).to_be_visible()
-        expect(box.locator("mark")).to_have_text("ten")
-        expect(box.locator("button")).to_have_text(["ten", "two", "say again"])
-        expect(page.locator("#staged li")).to_have_count(0)
-        page.wait_for_timeout(500)  # auto-send had its chance: it must not have taken it
-        expect(page.locator("#current")).to_have_text("idle")
-        expect(page.locator("#queue li")).to_have_count(0)
-        box.locator("button", has_text="two").click()
-        expect(box).to_be_hidden()
-        expect(page.locator("#staged li .what")).to_have_text(["move forward 2 m"])
+        # panel.test is the stack on loopback, but not "localhost": no secure context
+        mapped = ("--host-resolver-rules=MAP panel.test 127.0.0.1",)
+        with panel(stack, tmp_path / "profile", extra=mapped) as page:
+            token = Path(stack.env["VOICECTL_DATA"], "token").read_text().strip()
+            page.goto(f"http://panel.test:{stack.port}/#token={token}")
+            expect(page.locator("#panel")).to_be_visible()
+            page.click("#mic")
+            expect(page.locator("#mic-note")).to_contain_text("only over HTTPS or on localhost")
+            expect(page.locator("#mic")).to_have_attribute("aria-pressed", "false")
+
+    def test_a_doubtful_value_is_asked_never_sent(self, stack: Stack, tmp_path: Path) -> None:
+        """The recogniser's doubt ("ten", or "two"?) reaches the panel as a choice; with
+        auto-send on, nothing is sent until the person picks. The proposal is published on
+        the converter's key by the test (a stand-in for a recogniser that doubted): which
+        speech makes the real one doubt is tests/test_hearing.py's business."""
+        from playwright.sync_api import expect
+
+        silence = silent_wav(tmp_path / "silence.wav", 20.0)
+        with panel(stack, tmp_path / "doubt", microphone=silence) as page:
+            login(page, stack)
+            page.check("#auto-send")
+            page.click("#mic")
+            expect(page.locator("#mic")).to_have_attribute("aria-pressed", "true")
+            keys = RobotKeys("robot")
+
+            async def doubt(bus: Bus) -> None:
+                sessions: list[str] = []
+                bus.subscribe(
+                    keys.stt_audio_any, bytes, lambda key, _raw: sessions.append(last_chunk(key))
+                )
+                await async_wait_until(lambda: sessions, 20.0, "the panel's audio session")
+                said = "go forward ten meters"
+                parsed = Parser(OrderSet.load(REPO / "orders")).parse(said)
+                proposal = Proposal(
+                    transcript=said,
+                    orders=parsed.orders,
+                    session=sessions[-1],
+                    doubts=[Doubt(position=2, words="ten", alternatives=["two"], confidence=0.0)],
+                )
+                bus.publish(keys.proposal, proposal)
+
+            # Playwright's sync API keeps an event loop in this thread: the bus gets its own.
+            with concurrent.futures.ThreadPoolExecutor(1) as thread:
+                thread.submit(on_bus, stack.router, doubt).result(timeout=60)
+            box = page.locator("#doubt")
+            expect(box).to_be_visible()
+            expect(box.locator("mark")).to_have_text("ten")
+            expect(box.locator("button")).to_have_text(["ten", "two", "say again"])
+            expect(page.locator("#staged li")).to_have_count(0)
+            page.wait_for_timeout(500)  # auto-send had its chance: it must not have taken it
+            expect(page.locator("#current")).to_have_text("idle")
+            expect(page.locator("#queue li")).to_have_count(0)
+            box.locator("button", has_text="two").click()
+            expect(box).to_be_hidden()
+            expect(page.locator("#staged li .what")).to_have_text(["move forward 2 m"])
 
 
 def silent_wav(path: Path, seconds: float) -> Path:

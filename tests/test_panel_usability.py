@@ -15,31 +15,28 @@ settled robot share a stack, settled before each (`TestOnASettledStack`)."""
 
 from __future__ import annotations
 
-import concurrent.futures
 import os
 import re
 import signal
-from collections.abc import Callable, Coroutine, Iterator
+from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, TypeVar
+from typing import TYPE_CHECKING
 
 import pytest
 
 from voicectl.services.converter.orders import OrderSet
 from voicectl.services.converter.parser import Parser
 from voicectl.shared.bus import Bus
-from voicectl.shared.client import VoicectlClient
 from voicectl.shared.keys import RobotKeys, last_chunk
-from voicectl.shared.messages import CancelAll, Doubt, GetState, Proposal, Release, StateReply
+from voicectl.shared.messages import Doubt, Proposal
 
 if TYPE_CHECKING:
     from playwright.sync_api import Browser, Page
 
-from harness.wait import async_wait_until
+from harness.wait import async_wait_until, wait_until
 
-from .conftest import REPO, Speak, Stack, started_stack
-from .support import on_bus
+from .conftest import REPO, OnASettledStack, Speak, Stack, on_stack_bus, settle
 from .test_panel_browser import ARTIFACTS, chromium, fresh_page, login, silent_wav
 from .test_panel_browser import pytestmark as browser_marks
 
@@ -50,35 +47,6 @@ SCREENS = {"desktop": (1280, 800), "phone": (390, 844)}
 HELD_WHY = "Stopped: the robot is halted and its orders cancelled. Release it to send new orders."
 """What the latched stop's box says."""
 SHOTS = Path(os.environ.get("VOICECTL_ARTIFACTS", str(ARTIFACTS))) / "usability"
-
-T = TypeVar("T")
-
-
-def on_stack_bus(stack: Stack, body: Callable[[Bus], Coroutine[Any, Any, T]]) -> T:
-    """`on_bus` on the stack's router, in a thread of its own: Playwright's sync API keeps
-    an event loop in the test's thread."""
-    with concurrent.futures.ThreadPoolExecutor(1) as thread:
-        return thread.submit(on_bus, stack.router, body).result(timeout=60)
-
-
-def settle(stack: Stack) -> None:
-    """The robot as the stack came up with it, but for its history and pose: the emergency
-    stop released, the queue empty and no order running."""
-
-    async def tidy(bus: Bus) -> None:
-        client = VoicectlClient(bus)
-        await client.ask("robot", Release())  # "was not on" when it was not
-        await client.ask("robot", CancelAll())  # the running order too
-
-        async def idle() -> bool:
-            reply = await client.ask("robot", GetState())
-            assert isinstance(reply, StateReply), reply
-            known = reply.state
-            return not (known.stopped or known.queue or known.current)
-
-        await async_wait_until(idle, 30.0, "the robot released, with nothing to do")
-
-    on_stack_bus(stack, tidy)
 
 
 def screens(stack: Stack, fresh: bool = True) -> Iterator[str]:
@@ -104,9 +72,18 @@ def shot(page: Page, name: str, screen: str) -> None:
 
 
 def box(page: Page, selector: str) -> dict[str, float]:
-    found = page.locator(selector).bounding_box()
-    assert found is not None, f"{selector} is not shown"
-    return dict(found)
+    """Where `selector` is drawn, once it is: the panel draws some parts anew at every
+    update (the running order's at each step of its progress), and an element measured
+    as it is replaced has no box."""
+    found: list[dict[str, float]] = []
+
+    def measured() -> bool:
+        drawn = page.locator(selector).bounding_box()
+        found[:] = [dict(drawn)] if drawn is not None else []
+        return bool(found)
+
+    wait_until(measured, 20.0, f"{selector} to be shown")
+    return found[0]
 
 
 def on_first_screen(page: Page, selector: str) -> None:
@@ -170,27 +147,8 @@ def stop_mid_sentence(page: Page, then: str = "", after: str = "") -> str:
     return said
 
 
-@pytest.fixture(scope="class")
-def shared_stack(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Stack]:
-    """One stack for the tests of a class (on each worker that runs some of them)."""
-    with started_stack(tmp_path_factory.mktemp("stack") / "data") as running:
-        yield running
-
-
-class TestOnASettledStack:
-    """The items that need of the stack only a robot released and idle, all its parts
-    online: they share one stack, settled before each test, instead of starting one each.
-    None of them moves the robot, restarts a part or reads the history."""
-
-    @pytest.fixture
-    def stack(self, shared_stack: Stack, request: pytest.FixtureRequest) -> Iterator[Stack]:
-        assert shared_stack.process.poll() is None, "\n".join(shared_stack.output)
-        settle(shared_stack)
-        seen = len(shared_stack.output)
-        yield shared_stack
-        report = getattr(request.node, "rep_call", None)
-        if report is not None and report.failed:  # what the stack said during the test
-            print("\n".join(shared_stack.output[seen:]))
+class TestOnASettledStack(OnASettledStack):
+    """The items that need only a settled robot: one stack for them all."""
 
     def test_the_first_screen_holds_speak_the_current_order_and_stop(
         self, stack: Stack, subtests: pytest.Subtests
