@@ -28,6 +28,7 @@ from voicectl.shared.messages import (
     Message,
     Order,
     OrderFinished,
+    OrderProgress,
     OrderStatus,
     Release,
     Reorder,
@@ -381,19 +382,30 @@ async def test_a_result_reached_while_the_supervisor_was_down_is_kept(robot: Rob
     robot.start_executor()
 
     async with robot.session() as (bus, client):
-        ended: list[OrderFinished] = []
+        events: list[ExecutorEvent] = []
         bus.subscribe(
             RobotKeys("r1").executor_events,
             json_decoder(ExecutorEvent),
-            lambda _key, event: ended.append(event) if isinstance(event, OrderFinished) else None,
+            lambda _key, event: events.append(event),
         )
         await client_wait_ready(client)
         waiting, after = await client.submit(
             order("wait", seconds=1.0), order("mul", first=2, second=2)
         )
-        await client.wait_state(lambda s: s.current is not None, "the wait to run")
+        # The executor's own progress, not the supervisor's state: the supervisor marks an
+        # order current before its request reaches the executor, and a kill in between
+        # would leave nothing running.
+        await async_wait_until(
+            lambda: any(isinstance(e, OrderProgress) and e.order_id == waiting for e in events),
+            WAIT,
+            "the executor to run the wait",
+        )
         robot.kill(robot.supervisor)
-        await async_wait_until(lambda: ended, WAIT, "the wait to end with no supervisor")
+        await async_wait_until(
+            lambda: any(isinstance(e, OrderFinished) for e in events),
+            WAIT,
+            "the wait to end with no supervisor",
+        )
         robot.start_supervisor()
         await client_wait_ready(client)
         record = await client.finished(waiting)
