@@ -23,6 +23,7 @@ import signal
 import sys
 from collections.abc import AsyncIterator, Awaitable, Callable, Mapping
 from pathlib import Path
+from types import FrameType
 from typing import Self, TypeVar
 
 import zenoh
@@ -240,8 +241,15 @@ async def wait_for_stop(*tasks: Awaitable[object]) -> None:
     the service is up and running: it touches the file (`_heartbeat`)."""
     loop = asyncio.get_running_loop()
     stop = asyncio.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        loop.add_signal_handler(sig, stop.set)
+
+    # Not loop.add_signal_handler: asyncio reads the signal's number from the pipe that
+    # also wakes the loop for every Zenoh callback, and under a storm of them (a flood of
+    # liveliness tokens going at once) the pipe is full and the SIGTERM is lost (the
+    # service then ran until SIGKILL). A Python handler runs whatever the pipe holds.
+    def on_signal(_sig: int, _frame: FrameType | None) -> None:
+        loop.call_soon_threadsafe(stop.set)
+
+    previous = {sig: signal.signal(sig, on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
     beat = os.environ.get("VOICECTL_HEARTBEAT", "")
     running = [asyncio.ensure_future(t) for t in tasks]
     stopper = asyncio.ensure_future(stop.wait())
@@ -252,8 +260,8 @@ async def wait_for_stop(*tasks: Awaitable[object]) -> None:
             if task is not stopper:
                 task.result()
     finally:
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            loop.remove_signal_handler(sig)
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
         for task in [stopper, *running, *beating]:
             task.cancel()
         await asyncio.gather(stopper, *running, *beating, return_exceptions=True)

@@ -191,6 +191,12 @@ def start_robot(
 EXECUTORS = ["--executor", "harness.executors:Slow=slow"]
 """Executors the supervisor tests bind besides the built-in ones."""
 
+ROBOT_GIVEN = ("--transport", "bridge", "--cmd-vel-type", "twist")
+"""How to reach the robot, on the executor's command line as an integrator who knows it
+would write it: an executor left to find out waits for a robot that says nothing (3 s for
+the transport, 2 s for cmd_vel's type) before it is online, where no simulator runs.
+tests/test_robot_dds.py checks that wait once."""
+
 
 class Site:
     """A router, a supervisor with a database that outlives it, executors per robot."""
@@ -211,7 +217,9 @@ class Site:
         self.processes.kill(self.supervisor)
 
     def start_executor(self, robot: str = "r1") -> None:
-        self.executors[robot] = self.processes.executor(self.router, robot, *EXECUTORS)
+        self.executors[robot] = self.processes.executor(
+            self.router, robot, *EXECUTORS, *ROBOT_GIVEN
+        )
 
     def kill_executor(self, robot: str = "r1") -> None:
         self.processes.kill(self.executors[robot])

@@ -24,7 +24,7 @@ from voicectl.shared.messages import (
 )
 
 from .conftest import Processes
-from .support import joined, order
+from .support import ROBOT_GIVEN, joined, order
 
 USER_EXECUTORS = [
     "--executor",
@@ -68,6 +68,7 @@ class Robot:
             *USER_EXECUTORS,
             "--executors",
             str(self.executors_file),
+            *ROBOT_GIVEN,
         )
 
 

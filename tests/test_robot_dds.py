@@ -1,6 +1,7 @@
 """The ros2 transport's place among the others, without real ROS 2 (tests/test_ros2_transport.py
 has the robot): where rclpy is missing it says so in one line before anything waits for a
-router; `auto` does not pick it there; and a process with Zenoh alone stops a robot on
+router; `auto` does not pick it there, and falls back to the bridge when no robot says
+anything; and a process with Zenoh alone stops a robot on
 DDS through the STOP relay's layout, the bridge's keys."""
 
 from __future__ import annotations
@@ -10,7 +11,9 @@ import time
 
 import pytest
 
+from harness.processes import Processes
 from harness.wait import async_wait_until
+from voicectl.shared.keys import RobotKeys
 from voicectl.shared.messages import ExecutorInfo
 from voicectl.shared.robot import TransportKind, detect_transport, transports
 from voicectl.shared.robot.stop import RobotStop
@@ -83,3 +86,29 @@ def test_the_deploy_doc_s_ros2_commands_parse_as_written() -> None:
     for command in commands:
         parse = executor_args if command[0] == "executor" else relay_args
         parse(command[1:])
+
+
+async def test_an_executor_left_to_find_a_silent_robot_falls_back_and_comes_online(
+    router: str, processes: Processes
+) -> None:
+    """No robot on the bus: `auto` waits for the robot to say how it is reached, then for
+    what cmd_vel takes, says each time what it falls back to (the bridge, Twist), stops
+    with that, and comes online. (The other tests that run no robot give the executor
+    both on its command line, `ROBOT_GIVEN`, and skip these waits.)"""
+    executor = processes.executor(router, "r1")
+    online = RobotKeys("r1").alive("executor")
+    with joined(router) as bus:
+
+        def executor_online() -> bool:
+            replies = bus.session.liveliness().get(online, timeout=1)
+            return any(reply.ok is not None for reply in replies)
+
+        await async_wait_until(executor_online, 30.0, "the executor to come online")
+    log = processes.log(executor)
+    said = [
+        log.index("the robot announced nothing in 3 s"),
+        log.index("reaching it through the bridge"),
+        log.index("has still not said what 'cmd_vel' takes; stopping with Twist"),
+        log.index("robot halted at start"),
+    ]
+    assert said == sorted(said), log

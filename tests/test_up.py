@@ -63,6 +63,46 @@ def test_a_service_waiting_for_the_router_stops_on_sigterm(tmp_path: Path) -> No
     assert "stopped (SIGTERM) while waiting for the router" in output
 
 
+STORM = """
+import asyncio, os, signal, threading
+from voicectl.shared.process import wait_for_stop
+
+async def main():
+    loop = asyncio.get_running_loop()
+
+    def storm():  # what Zenoh's threads do when thousands of tokens go at once
+        for _ in range(100_000):
+            loop.call_soon_threadsafe(lambda: None)
+
+    def blocked_through_the_storm():
+        thread = threading.Thread(target=storm)
+        thread.start()
+        thread.join()
+        os.kill(os.getpid(), signal.SIGTERM)  # while the loop's wake-up pipe is full
+
+    loop.call_soon(blocked_through_the_storm)
+    await wait_for_stop()
+    print("stopped", flush=True)
+
+asyncio.run(main())
+"""
+
+
+def test_sigterm_is_not_lost_in_a_storm_of_callbacks() -> None:
+    """A flood of 2,000 made-up robots going at once filled the supervisor's wake-up pipe
+    with Zenoh's callbacks, and the SIGTERM that came then was lost: the supervisor ran
+    on until SIGKILL. The same storm, made here on purpose: the service stops."""
+    done = subprocess.run(
+        [sys.executable, "-c", STORM],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=30,  # under a second, stopped; lost, it never ends
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout == "stopped\n", done.stderr
+
+
 def test_a_second_stack_refuses_to_start_on_a_busy_port(stack: Stack) -> None:
     router_busy = stack.voicectl("up", "--router", stack.router, "--port", str(free_port()))
     assert router_busy.returncode == 2

@@ -28,7 +28,7 @@ from voicectl.shared.keys import RobotKeys
 from voicectl.shared.messages import AudioChunk, AudioMessage, AudioStart, AudioStop
 
 from .conftest import Processes
-from .support import on_bus, until_heard
+from .support import ROBOT_GIVEN, on_bus, until_heard
 
 TOKEN = "test-token-0123456789"
 AUTH = {"Authorization": f"Bearer {TOKEN}"}
@@ -455,7 +455,7 @@ def test_open_panels_learn_the_labels_the_executors_serve(
     executor would take before it is sent."""
     with client.stream("GET", "/api/events?robot=robot", headers=AUTH) as response:
         executor = processes.start(
-            "voicectl.services.executor", "--robot", "robot", "--connect", router
+            "voicectl.services.executor", "--robot", "robot", "--connect", router, *ROBOT_GIVEN
         )
         deadline = time.monotonic() + 30.0
         labels: list[str] = []
