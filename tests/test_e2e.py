@@ -9,6 +9,7 @@ import json
 import signal
 import sqlite3
 import subprocess
+import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -53,9 +54,14 @@ class RobotWatch:
     def __init__(self, router: str, transport: TransportKind = TransportKind.BRIDGE) -> None:
         self.codec = Ros2Codec(RosDistro.JAZZY)
         self.pose: Pose2D | None = None
-        self._poses: collections.deque[tuple[float, Pose2D]] = collections.deque(maxlen=400)
+        self._poses: collections.deque[tuple[float, Pose2D]] = collections.deque(maxlen=4000)
         """Recent odometry by its header stamp (wall-clock seconds, as the sim stamps it)."""
         self.pose_at_finish: dict[str, Pose2D] = {}
+        """Where the robot was when each order ended, once odometry stamped after that end
+        has come: on a loaded host the supervisor's state can overtake the odometry sent
+        before it, and the last pose then is short of where the robot stopped."""
+        self._ending: dict[str, float | None] = {}
+        self._lock = threading.Lock()  # odometry and state come on Zenoh's threads
         self.state: State | None = None
         self._decoder = msgspec.json.Decoder(StateUpdate)
         options = BusOptions(connect=[router])
@@ -66,23 +72,34 @@ class RobotWatch:
 
     def _on_odom(self, sample: zenoh.Sample) -> None:
         odometry = self.codec.read_odometry(sample.payload.to_bytes())
-        self.pose = odometry.pose
-        self._poses.append((odometry.stamp_s, odometry.pose))
+        with self._lock:
+            self.pose = odometry.pose
+            self._poses.append((odometry.stamp_s, odometry.pose))
+            self._settle()
 
     def _on_state(self, sample: zenoh.Sample) -> None:
         state = self._decoder.decode(sample.payload.to_bytes()).state
-        self.state = state
-        for record in state.history:
-            if record.id not in self.pose_at_finish and self.pose is not None:
-                self.pose_at_finish[record.id] = self._pose_at(record.ended_at)
+        with self._lock:
+            self.state = state
+            for record in state.history:
+                if record.id not in self.pose_at_finish:
+                    self._ending.setdefault(record.id, record.ended_at)
+            self._settle()
 
-    def _pose_at(self, when: float | None) -> Pose2D:
-        """The last pose stamped at or before `when`: the state update can come after the
-        next order has set the robot moving (at ten times real speed, a loaded host's
+    def _settle(self) -> None:
+        """Move each ended order whose end the odometry has passed to `pose_at_finish`,
+        with the last pose stamped at or before its end: the state update can come after
+        the next order has set the robot moving (at ten times real speed, a loaded host's
         delay is a large part of a turn)."""
-        assert self.pose is not None
-        before = [pose for stamp, pose in list(self._poses) if when is None or stamp <= when]
-        return before[-1] if before else self.pose
+        if not self._poses:
+            return
+        newest = self._poses[-1][0]
+        for order_id, ended in list(self._ending.items()):
+            if ended is not None and newest <= ended:
+                continue
+            before = [pose for stamp, pose in self._poses if ended is None or stamp <= ended]
+            self.pose_at_finish[order_id] = before[-1] if before else self._poses[0][1]
+            del self._ending[order_id]
 
     def close(self) -> None:
         self.session.close()
