@@ -233,6 +233,12 @@ def main(argv: list[str] | None = None) -> int:
         executor.spin()
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
+    except Exception:
+        # SIGTERM's shutdown can also meet the executor while it builds its wait set, and
+        # rclpy then raises "the given context is not valid" (seen once under load): a
+        # stop like the others. With the context still valid, it is a real error.
+        if rclpy.ok():
+            raise
     finally:
         rclpy.try_shutdown()
     return 0
