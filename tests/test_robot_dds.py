@@ -1,8 +1,8 @@
 """The ros2 transport's place among the others, without real ROS 2 (tests/test_ros2_transport.py
 has the robot): where rclpy is missing it says so in one line before anything waits for a
 router; `auto` does not pick it there, and falls back to the bridge when no robot says
-anything; and a process with Zenoh alone stops a robot on
-DDS through the STOP relay's layout, the bridge's keys."""
+anything; and a process with Zenoh alone stops a robot on DDS through the STOP relay's
+layout, the bridge's keys."""
 
 from __future__ import annotations
 
