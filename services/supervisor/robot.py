@@ -279,9 +279,16 @@ class RobotSupervisor:
         and cancel every navigation goal on the robot's keys (`StopProcedure`), so that
         STOP stops the robot whatever process has died or blocked. Acknowledged after at
         most `CONFIRM_WAIT`, with what answered by then; later answers land in the state."""
+        loop = asyncio.get_running_loop()
+        asked = loop.time()
         stop = StopProcedure.begin(self._robot_stop(), self._executor_latch)
-        cleared = self._latch_queue()
+        cleared, latch_saved = self._latch_queue()
         outcome = await stop.outcome(CONFIRM_WAIT)
+        # The latch on disk before the answer (within the same bound): a supervisor killed
+        # just after answering must come back stopped. A disk that refuses it holds no
+        # answer back; the write is kept and tried again.
+        left = max(0.0, CONFIRM_WAIT - (loop.time() - asked))
+        await asyncio.wait([latch_saved], timeout=left)
         detail = _stop_detail(outcome, cleared)
         self._queue.stop_detail = detail
         self._changed()
@@ -289,14 +296,15 @@ class RobotSupervisor:
             self._tasks.append(asyncio.ensure_future(self._stop_settles(stop, cleared)))
         return Stopped(confirmed=outcome.confirmed, detail=detail)
 
-    def _latch_queue(self) -> int:
+    def _latch_queue(self) -> tuple[int, asyncio.Future[None]]:
         """This supervisor's side of a stop: latched (remembered across restarts), the
-        queue cleared, the robot held still; returns how many orders were cleared."""
+        queue cleared, the robot held still; returns how many orders were cleared, and
+        the latch's commit."""
         self._queue.stopped = True
         cleared = self._queue.clear_queue("emergency stop")
-        self._store.set_stopped(self.robot, True)
+        saved = self._store.set_stopped(self.robot, True)
         self._hold()
-        return cleared
+        return cleared, saved
 
     async def _stop_settles(self, stop: StopProcedure, cleared: int) -> None:
         """The stop's late answers, into the state and the log; an order the executor

@@ -270,9 +270,10 @@ class OrderStore:
 
         return require
 
-    def set_stopped(self, robot: str, stopped: bool) -> None:
+    def set_stopped(self, robot: str, stopped: bool) -> asyncio.Future[None]:
         """Keep `robot`'s emergency stop latched (or released), in the database and in the
-        latch file, whatever it takes (a kept write)."""
+        latch file, whatever it takes (a kept write); the future resolves once it is
+        committed, for a STOP that answers only then."""
         if stopped:
             self._latched_now |= {robot}
         else:
@@ -285,7 +286,12 @@ class OrderStore:
                 (robot, int(stopped)),
             )
 
-        self._send(Call(save, _ignore, kept=True, latched=self._latched_now))
+        loop = asyncio.get_running_loop()
+        future: asyncio.Future[None] = loop.create_future()
+        future.add_done_callback(_said)
+        settle = functools.partial(_settle_soon, loop, future)
+        self._send(Call(save, settle, kept=True, latched=self._latched_now))
+        return future
 
     def save_requests(self, robot: str, requests: list[tuple[str, list[str]]]) -> Operation:
         """Request ids with the ids of the orders they queued, to answer retries."""
@@ -583,10 +589,6 @@ def _report(call: Call, ok: bool, value: Any) -> None:
         call.done(ok, value)
     except Exception:  # one caller's failure must not keep the others waiting
         _LOGGER.exception("order store: reporting a write's outcome failed")
-
-
-def _ignore(_ok: bool, _value: Any) -> None:
-    pass
 
 
 def _said(done: asyncio.Future[None]) -> None:
