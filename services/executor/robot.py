@@ -58,7 +58,7 @@ _LOGGER = logging.getLogger(__name__)
 OCCUPANCY_GRID = "nav_msgs/msg/OccupancyGrid"
 MAP_WAIT = 2.5
 """Seconds a refused goal waits for the robot's map to say why: a latched map comes at
-once, and a map published periodically (the simulator's) at least every 2 s."""
+once, and a map published periodically (the simulator's) every second."""
 OCCUPIED = 65
 """A cell this occupied or more is an obstacle (map_server's default threshold, 0.65)."""
 SEND_GOAL_TIMEOUT = 10.0

@@ -82,9 +82,10 @@ FEEDBACK_EVERY = 2
 """Ticks between feedback messages: 10 Hz."""
 CAMERA_EVERY = 10
 """Ticks between camera frames: 2 Hz."""
-MAP_EVERY = 40
-"""Ticks between two publications of the map: every 2 s (a map server publishes once and
-latches it; publishing again lets whoever subscribes late have it too)."""
+MAP_EVERY = 20
+"""Ticks between two publications of the map: every second (a map server publishes once
+and latches it; publishing again lets whoever subscribes late have it too, and within
+the executor's MAP_WAIT when a loaded host stretches the ticks)."""
 CAMERA_SIZE = (64, 48)
 HISTORY = 16
 """Finished goals remembered for get_result and status."""
