@@ -5,7 +5,6 @@ tests that need only a settled robot share a stack (`OnASettledStack`)."""
 
 from __future__ import annotations
 
-import concurrent.futures
 import os
 import re
 import shutil
@@ -24,8 +23,7 @@ from voicectl.shared.bus import Bus
 from voicectl.shared.keys import RobotKeys, last_chunk
 from voicectl.shared.messages import Doubt, Proposal
 
-from .conftest import REPO, OnASettledStack, Speak, Stack
-from .support import on_bus
+from .conftest import REPO, OnASettledStack, Speak, Stack, on_stack_bus
 
 CHROMIUM = shutil.which("chromium") or "/usr/bin/chromium"
 CHROMIUM_FLAGS = [
@@ -354,9 +352,7 @@ class TestOnASettledStack(OnASettledStack):
                 )
                 bus.publish(keys.proposal, proposal)
 
-            # Playwright's sync API keeps an event loop in this thread: the bus gets its own.
-            with concurrent.futures.ThreadPoolExecutor(1) as thread:
-                thread.submit(on_bus, stack.router, doubt).result(timeout=60)
+            on_stack_bus(stack, doubt)
             box = page.locator("#doubt")
             expect(box).to_be_visible()
             expect(box.locator("mark")).to_have_text("ten")

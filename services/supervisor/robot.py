@@ -279,16 +279,14 @@ class RobotSupervisor:
         and cancel every navigation goal on the robot's keys (`StopProcedure`), so that
         STOP stops the robot whatever process has died or blocked. Acknowledged after at
         most `CONFIRM_WAIT`, with what answered by then; later answers land in the state."""
-        loop = asyncio.get_running_loop()
-        asked = loop.time()
         stop = StopProcedure.begin(self._robot_stop(), self._executor_latch)
         cleared, latch_saved = self._latch_queue()
-        outcome = await stop.outcome(CONFIRM_WAIT)
-        # The latch on disk before the answer (within the same bound): a supervisor killed
+        # The latch on disk before the answer, within the same bound: a supervisor killed
         # just after answering must come back stopped. A disk that refuses it holds no
         # answer back; the write is kept and tried again.
-        left = max(0.0, CONFIRM_WAIT - (loop.time() - asked))
-        await asyncio.wait([latch_saved], timeout=left)
+        outcome, _ = await asyncio.gather(
+            stop.outcome(CONFIRM_WAIT), asyncio.wait([latch_saved], timeout=CONFIRM_WAIT)
+        )
         detail = _stop_detail(outcome, cleared)
         self._queue.stop_detail = detail
         self._changed()

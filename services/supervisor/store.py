@@ -191,10 +191,16 @@ class OrderStore:
         refuses them they are tried again, in order with every other kept write, until
         they commit. For changes of state (an order's end, the stop); the future resolves
         once they are committed, for whoever answers only then (a reorder)."""
+        return self._kept(_all(operations))
+
+    def _kept(
+        self, operation: Operation, latched: frozenset[str] | None = None
+    ) -> asyncio.Future[None]:
         loop = asyncio.get_running_loop()
         future: asyncio.Future[None] = loop.create_future()
         future.add_done_callback(_said)
-        self._send(Call(_all(operations), functools.partial(_settle_soon, loop, future), kept=True))
+        settle = functools.partial(_settle_soon, loop, future)
+        self._send(Call(operation, settle, kept=True, latched=latched))
         return future
 
     def write(self, operations: list[Operation]) -> asyncio.Future[None]:
@@ -286,12 +292,7 @@ class OrderStore:
                 (robot, int(stopped)),
             )
 
-        loop = asyncio.get_running_loop()
-        future: asyncio.Future[None] = loop.create_future()
-        future.add_done_callback(_said)
-        settle = functools.partial(_settle_soon, loop, future)
-        self._send(Call(save, settle, kept=True, latched=self._latched_now))
-        return future
+        return self._kept(save, latched=self._latched_now)
 
     def save_requests(self, robot: str, requests: list[tuple[str, list[str]]]) -> Operation:
         """Request ids with the ids of the orders they queued, to answer retries."""
