@@ -88,6 +88,7 @@ def test_the_deploy_doc_s_ros2_commands_parse_as_written() -> None:
         parse(command[1:])
 
 
+@NO_RCLPY  # with rclpy, `auto` would open a DDS participant here, outside any namespace
 async def test_an_executor_left_to_find_a_silent_robot_falls_back_and_comes_online(
     router: str, processes: Processes
 ) -> None:
