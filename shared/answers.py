@@ -39,7 +39,8 @@ def proposal_words(proposal: Proposal) -> str:
     if proposal.rejected:
         return NOT_CAUGHT
     if proposal.doubts:
-        return doubt_words(proposal.transcript, proposal.doubts[0])
+        asked = [doubt_words(proposal.transcript, doubt) for doubt in proposal.doubts]
+        return ", and ".join(question.removesuffix("?") for question in asked) + "?"
     orders = ", then ".join(spoken(order.description) for order in proposal.orders)
     missed = " and ".join(f"'{problem.text}'" for problem in proposal.errors if problem.text)
     if not orders:

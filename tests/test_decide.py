@@ -6,7 +6,18 @@ from __future__ import annotations
 from hypothesis import given
 from hypothesis import strategies as st
 
-from voicectl.services.converter.decide import Rule, decide, numbers, once, readings
+from voicectl.services.converter.decide import (
+    GRAMMAR,
+    Reading,
+    Rule,
+    decide,
+    numbers,
+    once,
+    readings,
+)
+from voicectl.services.converter.decide import (
+    SHIPPED as SHIPPED_RULE,
+)
 from voicectl.services.converter.orders import OrderSet
 from voicectl.services.converter.parser import Parser
 from voicectl.shared.messages import Doubt, Transcript, Transcription
@@ -23,9 +34,11 @@ def heard(
     rejected: str = "",
     doubts: list[Doubt] | None = None,
     support: float | None = -9.0,
+    whisper: Transcription | None = None,
 ) -> Transcript:
-    """A final transcript: the grammar's words and verdict, and Moonshine's words with how
-    likely it found the grammar's (`support`, nats a token below its own)."""
+    """A final transcript: the grammar's words and verdict, Moonshine's words with how
+    likely it found the grammar's (`support`, nats a token below its own), and perhaps
+    Whisper's."""
     second = (
         None
         if moonshine is None
@@ -38,7 +51,13 @@ def heard(
         reason=rejected,
         doubts=doubts or [],
         transcription=second,
+        third=whisper,
     )
+
+
+def whispered(text: str, support: float | None = None) -> Transcription:
+    """Whisper's transcript, with how likely it found the grammar's words."""
+    return Transcription(engine="whisper", text=text, support=support)
 
 
 def decided(transcript: Transcript, rule: Rule | None = None) -> tuple[list[str], bool, str]:
@@ -57,18 +76,44 @@ def test_both_ears_making_the_same_orders_take_them_and_settle_a_doubt() -> None
     assert all(h.accepted for h in decision.hearings)
 
 
-def test_ears_making_different_orders_take_neither() -> None:
-    orders, rejected, why = decided(heard("turn left", "Turn right."))
+def asked(transcript: Transcript, rule: Rule | None = None) -> list[list[str]]:
+    """The choices a decision asks between, as order descriptions; [] if it asks none."""
+    decision = decide(*readings(transcript, PARSER), rule or Rule())
+    assert not decision.rejected
+    [question] = decision.doubts  # asked, never sent by itself
+    assert (question.position, question.words) == (0, decision.text)
+    return [
+        [o.description for o in PARSER.parse(text).orders]
+        for text in [question.words, *question.alternatives]
+    ]
+
+
+def test_ears_making_different_orders_are_asked_which() -> None:
+    assert asked(heard("turn left", "Turn right.")) == [["turn right"], ["turn left"]]
+    orders, rejected, why = decided(heard("turn left", "Turn right."), Rule(ask=False))
     assert (orders, rejected) == ([], True)
     assert "disagree" in why
 
 
 def test_moonshine_alone_is_taken_when_the_grammar_heard_no_command() -> None:
     said = "Turn right and move forward 1 meter."
-    orders, rejected, _ = decided(heard("turn right", said, rejected="not sure I heard 'right'"))
-    assert (orders, rejected) == (["turn right", "move forward 1 m"], False)
     orders, rejected, _ = decided(heard("", said, rejected="no command heard"))
     assert (orders, rejected) == (["turn right", "move forward 1 m"], False)
+
+
+def test_a_rejected_grammar_reading_and_other_moonshine_orders_take_neither() -> None:
+    """A hole of the two-ear decision: the grammar's judge rejected "turn left 15
+    degrees", Moonshine heard "turn right 15 degrees", and Moonshine's orders were sent. Two
+    ears that heard different things are a question, never a pick."""
+    transcript = heard(
+        "turn left fifteen degrees",
+        "Turn right 15 degrees.",
+        rejected="not sure I heard 'left'",
+        support=-2.0,
+    )
+    assert asked(transcript) == [["turn right 15 degrees"], ["turn left 15 degrees"]]
+    half = heard("turn right", "Turn right and move forward 1 meter.", rejected="not sure")
+    assert asked(half) == [["turn right", "move forward 1 m"], ["turn right"]]
 
 
 def test_moonshine_finding_the_grammars_words_unlikely_rejects_them() -> None:
@@ -83,12 +128,44 @@ def test_moonshine_finding_the_grammars_words_likely_backs_them() -> None:
     transcript = heard("reach the kitchen", "Breach the kitchen.", support=-0.4)
     orders, rejected, why = decided(transcript)
     assert (orders, rejected) == (["reach kitchen"], False)
-    assert why.startswith("both heard")
+    assert why.startswith("grammar and moonshine heard")
     assert decided(transcript, Rule(support=-0.3))[:2] == ([], True)
     assert decided(heard("turn left", "Turn less than we.", support=-1.49))[:2] == ([], True)
-    unheard = heard("turn back", "", support=1.9)  # Moonshine's silence was the unsure one
-    assert decided(unheard)[:2] == (["turn back"], False)
-    assert decided(heard("turn back", "", support=-3.0))[:2] == ([], True)
+
+
+def test_an_ear_that_heard_nothing_backs_nothing() -> None:
+    """A hole of the two-ear decision: a grammar reading its own judge rejected, with an
+    empty Moonshine transcript and a support of -1.0 or more, was sent as "both heard"."""
+    judged_out = heard("turn back", "", rejected="not sure I heard 'back'", support=-0.2)
+    orders, rejected, why = decided(judged_out)
+    assert (orders, rejected) == ([], True)
+    assert "moonshine heard nothing" in why
+    assert "both heard" not in why
+    assert decided(heard("turn back", "", support=1.9))[:2] == ([], True)
+    # A third ear that heard the same words is what takes them.
+    third = heard("turn back", "", support=1.9, whisper=whispered("Turn back.", support=-0.1))
+    orders, rejected, why = decided(third)
+    assert (orders, rejected) == (["turn back"], False)
+    assert why == "grammar and whisper heard 'turn back'"
+
+
+def test_a_doubt_is_never_cleared_by_an_ear_that_heard_no_number() -> None:
+    """A hole of the two-ear decision: the grammar's "fifteen or fifty?" was cleared when
+    Moonshine heard no number, or nothing; hands-free listening and the panel's "send at
+    once" then sent it unasked."""
+    doubt = Doubt(position=2, words="fifteen", alternatives=["fifty"], confidence=0.6)
+    said = "turn left fifteen degrees"
+    no_number = decide(
+        *readings(heard(said, "Turn left degrees.", doubts=[doubt], support=-0.3), PARSER)
+    )
+    assert [o.description for o in no_number.orders] == ["turn left 15 degrees"]
+    assert no_number.doubts == [doubt]
+    nothing = decide(*readings(heard(said, "", doubts=[doubt], support=0.5), PARSER))
+    assert nothing.rejected or nothing.doubts == [doubt]
+    same = decide(
+        *readings(heard(said, "Turn left 15 degrees.", doubts=[doubt], support=-0.3), PARSER)
+    )
+    assert (same.rejected, same.doubts) == (False, [])
 
 
 def test_backed_orders_with_other_numbers_than_moonshine_heard_take_nothing() -> None:
@@ -128,6 +205,24 @@ def test_a_phrase_repeated_by_the_model_counts_once() -> None:
     assert once_("turn left and turn right") == "turn left and turn right"
     orders, rejected, _ = decided(heard("turn right", "Turn right turn right turn right"))
     assert (orders, rejected) == (["turn right"], False)
+
+
+def test_every_teen_or_ty_only_moonshine_heard_is_asked_as_well_as_a_two() -> None:
+    """A hole of the two-ear decision: only the first -teen/-ty number Moonshine alone heard
+    was asked, and a "to -> two" doubt switched the check off."""
+    said = "Turn left 50 degrees then turn right 50 degrees."
+    decision = decide(*readings(heard("", said, rejected="no command heard"), PARSER))
+    words = decision.text.split()
+    assert [(words[d.position], d.alternatives) for d in decision.doubts] == [
+        ("50", ["15"]),
+        ("50", ["15"]),
+    ]
+    both = decide(
+        *readings(
+            heard("", "Turn left 50 degrees then drive back to meters.", rejected="no"), PARSER
+        )
+    )
+    assert sorted(d.words for d in both.doubts) == ["50", "two"]
 
 
 def test_a_teen_or_ty_only_moonshine_heard_is_asked_with_its_twin() -> None:
@@ -199,3 +294,117 @@ def test_no_order_stands_on_words_neither_ear_heard(
     made.append(PARSER.parse(spoken.replace("to meters", "two meters")).orders)
     assert decision.orders in made
     assert decision.orders
+
+
+# --- the written invariants (docs/speech.md, "How the ears decide"), over every kind of
+# reading each ear can give: nothing, words that are no command, orders (vouched for or,
+# for the grammar, rejected by its judge), doubtful orders, and other orders.
+
+SAID = [
+    "turn left",
+    "turn right",
+    "turn left fifteen degrees",
+    "turn left fifty degrees",
+    "go forward two meters",
+]
+ORDERS = {said: PARSER.parse(said).orders for said in SAID}
+
+
+@st.composite
+def a_reading(draw: st.DrawFn, ear: str) -> Reading:
+    kind = draw(st.sampled_from(["nothing", "words", "orders", "rejected"]))
+    if kind == "rejected" and ear != GRAMMAR:
+        kind = "orders"
+    support = draw(st.sampled_from([None, -3.0, -1.0, -0.2, 1.5]))
+    if kind == "nothing":
+        return Reading(ear, "", reason="heard nothing", support=support)
+    if kind == "words":
+        return Reading(ear, "could you pass the salt", reason="not a command", support=support)
+    said = draw(st.sampled_from(SAID))
+    numbered = [i for i, word in enumerate(said.split()) if word in ("fifteen", "fifty", "two")]
+    doubts = []
+    if numbered and draw(st.booleans()):
+        position = numbered[0]
+        doubts = [Doubt(position=position, words=said.split()[position], alternatives=["ten"])]
+    return Reading(
+        ear, said, ORDERS[said], accepted=kind == "orders", doubts=doubts, support=support
+    )
+
+
+@given(
+    a_reading(GRAMMAR),
+    a_reading("moonshine"),
+    st.one_of(st.none(), a_reading("whisper")),
+    st.sampled_from(
+        [SHIPPED_RULE, Rule(majority=False), Rule(lone="unheard"), Rule(overrule=False)]
+    ),
+)
+def test_the_decision_keeps_its_written_invariants(
+    grammar: Reading, moonshine: Reading, whisper: Reading | None, rule: Rule
+) -> None:
+    free = [moonshine] if whisper is None else [moonshine, whisper]
+    decision = decide(grammar, free, rule)
+    ears = [grammar, *free]
+    claims = [r for r in ears if r.orders and (r.accepted or r.ear == GRAMMAR)]
+    if decision.rejected:
+        assert decision.orders == []
+        assert decision.doubts == []
+        return
+    # 1. Orders are only ever one ear's claim, exactly.
+    takers = [r for r in claims if r.orders == decision.orders]
+    assert takers
+    # 2. Against other claims, a question offering each of them, or (only against the
+    #    grammar's rejected words) two free ears' claim.
+    others = [r for r in claims if r.orders != decision.orders]
+    question = [d for d in decision.doubts if d.position == 0 and d.words == decision.text]
+    if others and question:  # asked which, never sent by itself: nothing more to hold
+        assert rule.ask
+        assert {r.text for r in claims} <= {question[0].words, *question[0].alternatives}
+        return
+    if others:
+        assert rule.majority
+        assert all(not r.accepted for r in others)
+        assert len([r for r in takers if r.ear != GRAMMAR]) >= 2
+    # 3. One claim alone: the grammar backed by a free ear that heard words, every free ear
+    #    that heard words backing it; or a free ear whose words are all its own, no other
+    #    free ear having heard words. An ear that heard nothing backs nothing.
+    if len(takers) == 1:
+        (taker,) = takers
+        heard = [r for r in free if r.text]
+        if taker is grammar:
+            assert rule.overrule or grammar.accepted
+            assert heard
+            assert all(r.support is not None and r.support >= rule.support for r in heard)
+        else:
+            assert rule.lone != "never"
+            assert not [r for r in claims if r is not taker]
+            if rule.lone == "unheard":
+                assert not [r for r in free if r is not taker and r.heard]
+    # 4. Absence of evidence never clears a doubt: a value every claimer doubted is asked.
+    for reading in takers:
+        for doubt in reading.doubts:
+            if all(
+                any(d.words == doubt.words for d in r.doubts) for r in takers if r is not reading
+            ):
+                assert doubt.words in [d.words for d in decision.doubts]
+    # 5. A -teen/-ty number the grammar did not claim too is asked.
+    if grammar not in takers or others:
+        for word in decision.text.split():
+            if word in ("fifteen", "fifty"):
+                assert word in [d.words for d in decision.doubts]
+
+
+@given(
+    a_reading(GRAMMAR),
+    a_reading("moonshine"),
+    st.sampled_from([SHIPPED_RULE, Rule(lone="unheard")]),
+)
+def test_an_ear_that_heard_nothing_changes_nothing(
+    grammar: Reading, moonshine: Reading, rule: Rule
+) -> None:
+    silent = Reading("whisper", "", reason="heard nothing")
+    with_it, without = (
+        decide(grammar, [moonshine, silent], rule),
+        decide(grammar, [moonshine], rule),
+    )
+    assert (with_it.rejected, with_it.orders) == (without.rejected, without.orders)

@@ -99,8 +99,8 @@ def type_command(page: Page, text: str) -> None:
     page.press("#text", "Enter")
 
 
-def publish_proposal(stack: Stack, said: str, doubt: Doubt) -> None:
-    """A proposal for the panel's open microphone, with `doubt` (a stand-in for a
+def publish_proposal(stack: Stack, said: str, *doubts: Doubt) -> None:
+    """A proposal for the panel's open microphone, with `doubts` (a stand-in for a
     recogniser that doubted, as in test_panel_browser)."""
     keys = RobotKeys("robot")
 
@@ -110,7 +110,7 @@ def publish_proposal(stack: Stack, said: str, doubt: Doubt) -> None:
         await async_wait_until(lambda: sessions, 20.0, "the panel's audio session")
         parsed = Parser(OrderSet.load(REPO / "orders")).parse(said)
         proposal = Proposal(
-            transcript=said, orders=parsed.orders, session=sessions[-1], doubts=[doubt]
+            transcript=said, orders=parsed.orders, session=sessions[-1], doubts=list(doubts)
         )
         bus.publish(keys.proposal, proposal)
 
@@ -245,6 +245,35 @@ class TestOnASettledStack(OnASettledStack):
                     box_.locator("button", has_text="yes").click()
                     expect(box_).to_be_hidden()
                     expect(page.locator("#staged li .what")).to_have_text(["move forward 1 m"])
+
+    def test_every_doubt_of_a_proposal_is_asked(self, stack: Stack, tmp_path: Path) -> None:
+        """Two values doubted in one sentence: both are marked, each is asked in turn, and
+        only the answered words are staged (the panel once asked the first and staged the
+        second as heard)."""
+        from playwright.sync_api import expect
+
+        silence = silent_wav(tmp_path / "silence.wav", 20.0)
+        said = "turn left fifty degrees then turn right fifty degrees"
+        with chromium(microphone=silence) as browser, screen_page(browser, "desktop") as page:
+            login(page, stack)
+            page.click("#mic")
+            expect(page.locator("#mic")).to_have_attribute("aria-pressed", "true")
+            publish_proposal(
+                stack,
+                said,
+                Doubt(position=2, words="fifty", alternatives=["fifteen"], confidence=0.5),
+                Doubt(position=7, words="fifty", alternatives=["fifteen"], confidence=0.5),
+            )
+            box_ = page.locator("#doubt")
+            expect(box_.locator("mark")).to_have_text(["fifty", "fifty"])
+            expect(box_.locator("button")).to_have_text(["fifty", "fifteen", "say again"])
+            box_.locator("button", has_text="fifteen").click()
+            expect(box_.locator("mark")).to_have_text(["fifty"])
+            expect(page.locator("#staged li")).to_have_count(0)
+            box_.locator("button", has_text="fifty").first.click()
+            expect(box_).to_be_hidden()
+            staged = page.locator("#staged li .what")
+            expect(staged).to_have_text(["turn left 15 degrees", "turn right 50 degrees"])
 
     def test_stop_listening_mid_sentence_finishes_it_or_drops_it(
         self, stack: Stack, speech: Speak, subtests: pytest.Subtests

@@ -1,31 +1,34 @@
-"""Two ears, one decision: whether and which orders an utterance becomes.
+"""Three ears, one decision: whether and which orders an utterance becomes.
 
-The recogniser hears every utterance twice (services/stt/moonshine_engine.py): pocketsphinx
+The recogniser hears every utterance with two ears (services/stt/ears.py): pocketsphinx
 bound to the orders' grammar, with its own verdict (its judge's), and Moonshine, a neural
-model bound to nothing, whose words this module parses. Moonshine also says how likely it
-finds the grammar's words beside its own (`Transcription.support`). Each ear gives a
-`Reading`; `decide` weighs them by `Rule`, chosen on the dev split of harness/speech_set.py
-and reported on its test split (docs/benchmarks.md, docs/speech.md):
+model bound to nothing. When those two leave a doubt, a third, Whisper, hears it too. Each
+ear gives a `Reading`; `decide` weighs them by `Rule`, chosen on the dev split of
+harness/speech_set.py and reported on its test split (docs/benchmarks.md). The rules,
+written down in docs/speech.md ("How the ears decide") and walked by a property test
+(tests/test_decide.py):
 
-- Both make the same orders: taken, and a value the grammar doubted is no longer doubted.
-- They make different orders: nothing, never a guess between them.
-- Only Moonshine's words make orders: taken. It heard the person's words, free of the
-  grammar; on the dev split its orders were never wrong. A number in them that has a
-  -teen or -ty twin ("fifty", "fifteen") is asked, offering the twin.
-- Only the grammar's: taken when Moonshine finds them nearly as likely as its own words
-  ("breach the kitchen" heard for "reach the kitchen"), and Moonshine heard no other
-  numbers. A person saying "front left" is heard as "front left" by Moonshine and as "turn
-  to left" by the grammar, which Moonshine finds far less likely: nothing. The same holds
-  for grammar words its own judge rejected (`Rule.overrule`).
-
-No order stands on a value that neither ear heard, and a doubt only offers what an ear
-heard. Moonshine writing "to" or "too" where a number stands before its unit ("drive back
-to meters") is read as "two", and asked unless the grammar heard "two" there too.
+- An ear *claims* the orders its words make: a free ear (Moonshine, Whisper) when its
+  words make whole orders, the grammar whenever its words do, vouched for by its judge or
+  not. Only claimed orders are ever taken, exactly as an ear made them.
+- Two or more ears claiming the same orders, and no other claim: taken. Two free ears
+  claiming the same orders outweigh the grammar's other orders only when its own judge
+  rejected them (`Rule.majority`). Any other claims that differ are a question offering
+  each of them (`Rule.ask`), never a pick between them.
+- The grammar alone: taken when every free ear that heard words finds them nearly as
+  likely as its own (`Rule.support`) and heard no other numbers, and at least one did.
+  An ear that heard nothing backs nothing.
+- One free ear alone: taken when no other ear claims orders (`Rule.lone`); its words are
+  the person's, free of the grammar.
+- Absence of evidence never clears a doubt: a value an ear doubted stays asked unless
+  another ear that claims the same orders heard it without doubt. Every number of the
+  -teen/-ty pairs ("fifteen", "fifty") that the grammar did not hear too is asked.
 """
 
 from __future__ import annotations
 
 import re
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
 from voicectl.shared.messages import Doubt, Hearing, Order, ParseProblem, Transcript, Transcription
@@ -55,12 +58,22 @@ class Rule:
     """The decision's settings (bench/stt.py sweeps them on the dev split)."""
 
     support: float = -1.0
-    """How much less likely than its own words, in nats a token, Moonshine may find the
+    """How much less likely than its own words, in nats a token, a free ear may find the
     grammar's words and still back orders that its own words do not make. On the dev split
-    the grammar's non-commands were all under -2.6; -1.5 let half a command through ("turn
-    left" for "turn left then reach the kitchen" at -1.49, in pink noise at 5 dB)."""
+    the grammar's non-commands were all under -2.6 for Moonshine; -1.5 let half a command
+    through ("turn left" for "turn left then reach the kitchen" at -1.49, in pink noise at
+    5 dB)."""
     overrule: bool = True
     """Whether that support also stands for grammar words the judge rejected."""
+    majority: bool = True
+    """Whether two free ears claiming the same orders outweigh the grammar's other orders
+    that its own judge rejected."""
+    ask: bool = True
+    """Whether ears claiming different orders are asked which ("'turn left fifteen
+    degrees' or 'turn right 15 degrees'?"), rather than refused; never sent either way."""
+    lone: str = "unclaimed"
+    """When one free ear's orders are taken alone: 'unclaimed' (no other ear claims orders),
+    'unheard' (and no other free ear heard words at all) or 'never'."""
 
 
 SHIPPED = Rule()
@@ -83,17 +96,24 @@ class Reading:
     """What the words may have meant, when they did not parse."""
     doubts: list[Doubt] = field(default_factory=list)
     support: float | None = None
-    """A second ear's likelihood of the grammar's words (`Transcription.support`)."""
+    """This ear's likelihood of the grammar's words (`Transcription.support`)."""
 
     @property
     def heard(self) -> bool:
         """Whether the ear heard words at all."""
         return bool(self.text)
 
+    @property
+    def claims(self) -> bool:
+        """Whether this reading puts orders forward: a free ear's accepted words, or the
+        grammar's words whatever its judge said."""
+        return bool(self.orders) and (self.accepted or self.ear == GRAMMAR)
+
     def hearing(self) -> Hearing:
         if self.accepted:
             made = "; ".join(order.description for order in self.orders)
-            verdict = f"{made} (asks about '{self.doubts[0].words}')" if self.doubts else made
+            asked = ", ".join(f"'{doubt.words}'" for doubt in self.doubts)
+            verdict = f"{made} (asks about {asked})" if asked else made
         else:
             verdict = self.reason or "nothing heard"
         return Hearing(ear=self.ear, text=self.text, accepted=self.accepted, verdict=verdict)
@@ -113,11 +133,15 @@ class Decision:
     hearings: list[Hearing]
 
 
-def readings(transcript: Transcript, parser: Parser) -> tuple[Reading, Reading | None]:
-    """What each ear of a final transcript heard, read by `parser`."""
-    heard = transcript.transcription
-    second = None if heard is None else free_reading(heard, parser)
-    return grammar_reading(transcript, parser), second
+def readings(transcript: Transcript, parser: Parser) -> tuple[Reading, list[Reading]]:
+    """What each ear of a final transcript heard, read by `parser`: the grammar's, and the
+    free ears' that heard the utterance."""
+    free = [
+        free_reading(heard, parser)
+        for heard in (transcript.transcription, transcript.third)
+        if heard is not None
+    ]
+    return grammar_reading(transcript, parser), free
 
 
 def grammar_reading(transcript: Transcript, parser: Parser) -> Reading:
@@ -129,7 +153,7 @@ def grammar_reading(transcript: Transcript, parser: Parser) -> Reading:
         reason = transcript.reason or "not a command"
         if "not a command" not in reason:
             reason = f"not a command: {reason}"
-        return Reading(GRAMMAR, text, made, reason=reason)
+        return Reading(GRAMMAR, text, made, reason=reason, doubts=transcript.doubts)
     if result is None or result.errors or not result.orders:
         return not_a_command(GRAMMAR, text, result.errors if result is not None else [])
     return Reading(GRAMMAR, text, result.orders, accepted=True, doubts=transcript.doubts)
@@ -199,39 +223,165 @@ def spoken(text: str) -> str:
     return _LIST_NUMBER.sub("", text)
 
 
-def decide(grammar: Reading, second: Reading | None, rule: Rule = SHIPPED) -> Decision:
-    """The one decision for an utterance heard by the grammar and perhaps a second ear."""
-    if second is None:
-        return _take(grammar, [grammar.hearing()], "")
-    hearings = [grammar.hearing(), second.hearing()]
-    both = f"'{grammar.text}' or '{second.text}'"
-    if second.accepted:
-        if grammar.accepted and grammar.orders != second.orders:
-            return _refuse(second, hearings, f"the two ears disagree ({both}): say it again")
-        if grammar.orders == second.orders:
-            return _take(replace(second, doubts=[]), hearings, f"both heard {_said(second)}")
-        asked = replace(second, doubts=second.doubts or _teens_or_tens(second.text))
-        return _take(asked, hearings, f"{second.ear} heard {_said(second)}")
-    if not grammar.orders or not (grammar.accepted or rule.overrule):
-        rejected = second if second.heard else grammar
-        return _refuse(rejected, hearings, rejected.reason)
-    if second.support is None or second.support < rule.support:
-        why = second.reason if second.heard else f"{second.ear} heard nothing"
-        return _refuse(second, hearings, f"{why} (the grammar heard '{grammar.text}')")
-    if numbers(second.text) and numbers(grammar.text) != numbers(second.text):
-        return _refuse(second, hearings, f"the two ears heard other numbers ({both}): say it again")
-    backed = replace(grammar, accepted=True, doubts=[])
-    return _take(backed, hearings, f"both heard {_said(grammar)}")
+def decide(grammar: Reading, free: Sequence[Reading] = (), rule: Rule = SHIPPED) -> Decision:
+    """The one decision for an utterance heard by the grammar and the free ears."""
+    ears = [grammar, *free]
+    hearings = [reading.hearing() for reading in ears]
+    if not free:  # an engine with the grammar's ear alone: its judge decides
+        return (
+            _take(grammar, hearings, "")
+            if grammar.accepted
+            else _refuse(grammar, hearings, grammar.reason)
+        )
+    claims = [reading for reading in ears if reading.claims]
+    if not claims:
+        said = [reading for reading in free if reading.text]
+        refused = said[0] if said else grammar
+        return _refuse(refused, hearings, refused.reason or "nothing heard")
+    kinds = _distinct(claims)
+    if len(kinds) > 1:
+        return _majority(grammar, claims, kinds, hearings, rule)
+    if len(claims) >= 2:
+        return _agreed(grammar, claims, hearings)
+    (claim,) = claims
+    if claim is grammar:
+        return _backed(grammar, free, hearings, rule)
+    return _alone(claim, grammar, free, hearings, rule)
+
+
+def _distinct(claims: Sequence[Reading]) -> list[list[Order]]:
+    found: list[list[Order]] = []
+    for reading in claims:
+        if reading.orders not in found:
+            found.append(reading.orders)
+    return found
+
+
+def _majority(
+    grammar: Reading,
+    claims: list[Reading],
+    kinds: list[list[Order]],
+    hearings: list[Hearing],
+    rule: Rule,
+) -> Decision:
+    """Ears that claim different orders: nothing, unless two free ears agree against the
+    grammar's rejected words (`Rule.majority`)."""
+    shown = " or ".join(f"'{reading.text}'" for reading in claims)
+    free = [reading for reading in claims if reading is not grammar]
+    agreeing = [r for r in free if r.orders == free[0].orders] if free else []
+    against = [reading for reading in claims if reading not in agreeing]
+    if (
+        rule.majority
+        and len(kinds) == 2
+        and len(agreeing) >= 2
+        and against == [grammar]
+        and not grammar.accepted
+    ):
+        return _agreed(grammar, agreeing, hearings, outvoted=True)
+    if not rule.ask:
+        return _refuse(claims[-1], hearings, f"the ears disagree ({shown}): say it again")
+    return _asked(grammar, claims, hearings)
+
+
+def _asked(grammar: Reading, claims: list[Reading], hearings: list[Hearing]) -> Decision:
+    """Ears that claim different orders: a question offering each claim, the free ears'
+    words first (the person's), never orders sent by themselves."""
+    ordered = sorted(claims, key=lambda reading: reading is grammar)
+    first, texts = ordered[0], []
+    for reading in ordered[1:]:
+        if reading.orders != first.orders and reading.text not in texts:
+            texts.append(reading.text)
+    question = Doubt(position=0, words=first.text, alternatives=texts, confidence=0.0)
+    said = " or ".join(f"'{text}'" for text in [first.text, *texts])
+    why = f"the ears heard different things ({said}): which?"
+    return _take(replace(first, accepted=True, doubts=[question]), hearings, why)
+
+
+def _agreed(
+    grammar: Reading, claims: list[Reading], hearings: list[Hearing], outvoted: bool = False
+) -> Decision:
+    """Two or more ears claim the same orders: shown in a free ear's words (the person's),
+    each doubt settled only by another claimer that heard that value without doubt."""
+    free = [reading for reading in claims if reading is not grammar]
+    shown = free[0] if free else claims[0]
+    others = [reading for reading in claims if reading is not shown]
+    doubts = [d for d in shown.doubts if not any(_heard_surely(o, d) for o in others)]
+    if grammar not in claims or outvoted:
+        doubts = _merged(doubts, _teens_or_tens(shown.text))
+    why = f"{_named(claims)} heard {_said(shown)}"
+    if outvoted:
+        why += f" (the grammar's '{grammar.text}' was rejected)"
+    return _take(replace(shown, accepted=True, doubts=doubts), hearings, why)
+
+
+def _backed(
+    grammar: Reading, free: Sequence[Reading], hearings: list[Hearing], rule: Rule
+) -> Decision:
+    """Only the grammar claims orders: taken if every free ear that heard words finds them
+    nearly as likely as its own words and heard no other numbers, and one did."""
+    if not grammar.accepted and not rule.overrule:
+        refused = next((reading for reading in free if reading.text), grammar)
+        return _refuse(refused, hearings, refused.reason)
+    heard = [reading for reading in free if reading.text]
+    if not heard:
+        ears = _named(free) if free else "no other ear"
+        return _refuse(
+            grammar, hearings, f"{ears} heard nothing (the grammar heard '{grammar.text}')"
+        )
+    for reading in heard:
+        if reading.support is None or reading.support < rule.support:
+            return _refuse(
+                reading, hearings, f"{reading.reason} (the grammar heard '{grammar.text}')"
+            )
+        if numbers(reading.text) and numbers(reading.text) != numbers(grammar.text):
+            both = f"'{grammar.text}' or '{reading.text}'"
+            return _refuse(
+                reading, hearings, f"the ears heard other numbers ({both}): say it again"
+            )
+    settled = numbers(grammar.text) and any(
+        numbers(reading.text) == numbers(grammar.text) for reading in heard
+    )
+    doubts = [] if settled else grammar.doubts
+    ears = _named([grammar, *heard])
+    return _take(
+        replace(grammar, accepted=True, doubts=doubts), hearings, f"{ears} heard {_said(grammar)}"
+    )
+
+
+def _alone(
+    claim: Reading, grammar: Reading, free: Sequence[Reading], hearings: list[Hearing], rule: Rule
+) -> Decision:
+    """One free ear claims orders, and no other ear claims any."""
+    others = [reading for reading in free if reading is not claim and reading.heard]
+    if rule.lone == "never" or (others and rule.lone == "unheard"):
+        shown = others[0] if others else claim
+        why = f"{claim.ear} heard {_said(claim)}, {shown.ear} heard '{shown.text}': say it again"
+        return _refuse(claim, hearings, why)
+    doubts = _merged(claim.doubts, _teens_or_tens(claim.text))
+    return _take(replace(claim, doubts=doubts), hearings, f"{claim.ear} heard {_said(claim)}")
+
+
+def _heard_surely(reading: Reading, doubt: Doubt) -> bool:
+    """Whether `reading`, which claims the same orders, heard the doubted value without
+    doubting it itself."""
+    return not any(own.words == doubt.words for own in reading.doubts)
+
+
+def _merged(doubts: list[Doubt], more: list[Doubt]) -> list[Doubt]:
+    taken = {doubt.position for doubt in doubts}
+    return sorted(
+        [*doubts, *(d for d in more if d.position not in taken)], key=lambda d: d.position
+    )
 
 
 def _teens_or_tens(text: str) -> list[Doubt]:
-    """A number only Moonshine heard that sounds like its -teen or -ty ("fifty" and
-    "fifteen": in babble it wrote 50 for a person's 15) is asked, offering the other."""
-    for position, word in enumerate(text.split(" ")):
-        other = _PARTNERS.get(word)
-        if other is not None:
-            return [Doubt(position=position, words=word, alternatives=[other], confidence=0.5)]
-    return []
+    """Every number that sounds like its -teen or -ty ("fifty" and "fifteen": in babble
+    Moonshine wrote 50 for a person's 15) is asked, offering the other."""
+    return [
+        Doubt(position=position, words=word, alternatives=[_PARTNERS[word]], confidence=0.5)
+        for position, word in enumerate(text.split(" "))
+        if word in _PARTNERS
+    ]
 
 
 def numbers(text: str) -> list[float]:
@@ -251,8 +401,6 @@ def _spelled(text: str) -> str:
 
 
 def _take(reading: Reading, hearings: list[Hearing], why: str) -> Decision:
-    if not reading.accepted:
-        return _refuse(reading, hearings, reading.reason)
     return Decision(
         text=reading.text,
         orders=reading.orders,
@@ -274,6 +422,12 @@ def _refuse(reading: Reading, hearings: list[Hearing], why: str) -> Decision:
         candidates=reading.candidates,
         hearings=hearings,
     )
+
+
+def _named(readings: Sequence[Reading]) -> str:
+    """The ears of `readings` for a person: "grammar, moonshine and whisper"."""
+    names = [reading.ear for reading in readings]
+    return names[0] if len(names) == 1 else f"{', '.join(names[:-1])} and {names[-1]}"
 
 
 def _said(reading: Reading) -> str:

@@ -29,7 +29,10 @@ window.voicectlAnswers = (() => {
 
   function proposalWords(proposal) {
     if (proposal.rejected) return NOT_CAUGHT;
-    if ((proposal.doubts || []).length) return doubtWords(proposal.transcript, proposal.doubts[0]);
+    if ((proposal.doubts || []).length) {
+      const asked = proposal.doubts.map((doubt) => doubtWords(proposal.transcript, doubt).slice(0, -1));
+      return `${asked.join(", and ")}?`;
+    }
     const orders = (proposal.orders || []).map((order) => spoken(order.description)).join(", then ");
     const missed = (proposal.errors || []).filter((problem) => problem.text)
       .map((problem) => `'${problem.text}'`).join(" and ");

@@ -531,29 +531,48 @@ function propose(proposal) {
 }
 
 function showDoubt(proposal) {
+  // Every doubtful value is asked, one after another: the sentence shows them all marked,
+  // the first still open has its choices, and the words go to the staged orders once each
+  // has been answered.
   const box = $("doubt");
   if (!proposal) { box.hidden = true; box.replaceChildren(); return; }
   const words = proposal.transcript.split(" ");
-  const [doubt] = proposal.doubts;
+  const open = [...proposal.doubts].sort((a, b) => a.position - b.position);
+  const [doubt, ...later] = open;
   const size = doubt.words.split(" ").length;
-  const said = (choice) => [
-    ...words.slice(0, doubt.position), ...choice.split(" "), ...words.slice(doubt.position + size),
-  ].join(" ");
+  const answered = (choice) => {
+    // The words with this doubt answered; later doubts move by the words it added.
+    const text = [...words.slice(0, doubt.position), ...choice.split(" "), ...words.slice(doubt.position + size)];
+    const shift = choice.split(" ").length - size;
+    return { transcript: text.join(" "), doubts: later.map((d) => ({ ...d, position: d.position + shift })) };
+  };
+  const choose = (choice) => {
+    const next = answered(choice);
+    if (next.doubts.length) { showDoubt(next); return; }
+    showDoubt(null);
+    addText(next.transcript);
+  };
+  const marked = new Set(open.flatMap((d) => d.words.split(" ").map((_, i) => d.position + i)));
   const shown = el("span", "", "muted");
-  shown.append(words.slice(0, doubt.position).join(" "), " ",
-    el("mark", doubt.words), " ", words.slice(doubt.position + size).join(" "));
-  box.replaceChildren(el("strong", "Did you say"), " ", shown, " ");
+  words.forEach((word, i) => {
+    if (i) shown.append(" ");
+    if (!marked.has(i)) { shown.append(word); return; }
+    const mark = el("mark", word);
+    if (i >= doubt.position && i < doubt.position + size) mark.className = "asking";
+    shown.append(mark);
+  });
+  const count = open.length > 1 ? ` (${open.length} to answer)` : "";
+  box.replaceChildren(el("strong", "Did you say"), " ", shown, count, " ");
+  const staged = (choice) => `${later.length ? "answer" : "stage"} "${answered(choice).transcript}"; nothing is sent until you send`;
   if (!doubt.alternatives.length) {
     // Nothing to choose between: a yes or a no, not a list of one.
-    box.append("? ", button("yes, add it", "choice", () => { showDoubt(null); addText(said(doubt.words)); },
-      `stage "${said(doubt.words)}"; nothing is sent until you send`), " ");
+    box.append("? ", button(later.length ? "yes" : "yes, add it", "choice", () => choose(doubt.words), staged(doubt.words)), " ");
     box.append(button("say again", "choice", () => showDoubt(null), "drop it and speak again"));
     box.hidden = false;
     return;
   }
   for (const choice of [doubt.words, ...doubt.alternatives]) {
-    box.append(button(choice, "choice", () => { showDoubt(null); addText(said(choice)); },
-      `stage "${said(choice)}"; nothing is sent until you send`), " ");
+    box.append(button(choice, "choice", () => choose(choice), staged(choice)), " ");
   }
   box.append(button("say again", "choice", () => showDoubt(null), "drop it and speak again"));
   box.hidden = false;
