@@ -34,3 +34,8 @@ class AudioError(VoicectlError):
 
 class TtsError(VoicectlError):
     """Speech could not be made: the engine is not installed, failed, or took too long."""
+
+
+class Cancelled(VoicectlError):
+    """Work stopped before its end because nobody waits for its result any more (a
+    transcription of speech that went on, a check whose caller has gone)."""

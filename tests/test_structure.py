@@ -4,6 +4,7 @@ downward, and the old names still answering for a release."""
 from __future__ import annotations
 
 import ast
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -239,3 +240,32 @@ print(sorted({str(w.category.__name__) for w in caught}))
         "('hello',) voicectl.services.executor.builtin.pic",
         "['FutureWarning']",
     ]
+
+
+def test_every_error_is_in_the_one_tree() -> None:
+    """Every exception class voicectl defines derives from shared/errors.py's VoicectlError,
+    so that a caller can catch what voicectl raises on purpose, and nothing else."""
+    import importlib
+    import inspect
+
+    from voicectl.shared.errors import VoicectlError
+
+    outside = []
+    for path in sorted([*REPO.glob("services/**/*.py"), *REPO.glob("shared/**/*.py")]):
+        text = path.read_text()
+        if not re.search(r"^class \w+\(", text, re.MULTILINE):
+            continue
+        module = "voicectl." + ".".join(path.relative_to(REPO).with_suffix("").parts)
+        try:
+            loaded = importlib.import_module(module.removesuffix(".__init__"))
+        except ImportError:  # an optional backend not installed here (rclpy)
+            continue
+        for name, value in vars(loaded).items():
+            if (
+                inspect.isclass(value)
+                and issubclass(value, BaseException)
+                and value.__module__ == loaded.__name__
+                and not issubclass(value, VoicectlError)
+            ):
+                outside.append(f"{loaded.__name__}.{name}")
+    assert outside == []

@@ -18,6 +18,8 @@ from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from voicectl.shared.errors import VoicectlError
+
 _sre: Any = importlib.import_module("re._parser")
 
 MAX_PHRASES = 1000
@@ -63,8 +65,8 @@ class Expansion:
         return not self.problem
 
 
-class _TooMany(Exception):
-    pass
+class _TooMany(VoicectlError):
+    """A pattern with more spellings than an alias may have."""
 
 
 def expand(pattern: str, slot_groups: dict[str, str] | None = None) -> Expansion:

@@ -18,7 +18,7 @@ from typing import Any
 
 import yaml
 
-from voicectl.shared.errors import OrdersFileError
+from voicectl.shared.errors import OrdersFileError, VoicectlError
 from voicectl.shared.messages import ParamValue
 
 from .expand import SlotRef, expand
@@ -118,7 +118,7 @@ def check_file(data: Any, source: str) -> OrdersFile:
     return OrdersFile(tuple(orders), commands, separator, skip_words)
 
 
-class _Problem(Exception):
+class _Problem(VoicectlError):
     """One thing wrong inside an order; the caller adds the file and order names."""
 
     def __init__(self, message: str, line: int | None = None, where: str = "") -> None:

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import regex
 
+from voicectl.shared.errors import VoicectlError
 from voicectl.shared.messages import Order, ParseProblem, ParseResult
 
 from .expand import SlotRef
@@ -44,7 +45,7 @@ does not blow up on the usual backtracking traps, and within this time limit for
 rest: an alias that still takes too long makes an error, and the converter answers."""
 
 
-class _TooSlow(Exception):
+class _TooSlow(VoicectlError):
     """A command's alias took longer than the parse budget allows."""
 
 

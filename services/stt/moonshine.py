@@ -33,6 +33,8 @@ from typing import Any
 
 import numpy as np
 
+from voicectl.shared.errors import Cancelled
+
 from .engine import EngineError
 
 _LOGGER = logging.getLogger(__name__)
@@ -83,10 +85,6 @@ def runtime() -> Any:
 
     onnxruntime.disable_telemetry_events()
     return onnxruntime
-
-
-class Cancelled(Exception):
-    """A transcription stopped before its end because its result is no longer wanted."""
 
 
 def weights_dir() -> Path:
