@@ -38,7 +38,6 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -50,13 +49,14 @@ from harness.ports import free_port
 from harness.processes import REPO, rss_mb
 from harness.speech_set import LEAD_SILENCE, Utterance, generate
 from voicectl.services.converter.decide import (
+    GRAMMAR,
     SHIPPED,
     Decision,
+    Reading,
     Rule,
     decide,
     free_reading,
     grammar_reading,
-    readings,
 )
 from voicectl.services.converter.grammar import build_grammar
 from voicectl.services.converter.orders import OrderSet
@@ -64,11 +64,12 @@ from voicectl.services.converter.parser import Parser
 from voicectl.services.stt import sphinx
 from voicectl.services.stt.audio import NoiseFloor, Suppressor, frames, read_wav
 from voicectl.services.stt.config import add_engine_arguments, engine_options
+from voicectl.services.stt.ears import why_ask
 from voicectl.services.stt.engine import Engine, EngineOptions, Final, finals
 from voicectl.services.stt.judge import OFF
 from voicectl.services.stt.load import load_engine
 from voicectl.services.stt.service import transcript_of
-from voicectl.services.stt.sphinx import SUPPRESSION, PocketsphinxEngine
+from voicectl.services.stt.sphinx import SUPPRESSION, GrammarHeard, PocketsphinxEngine
 from voicectl.shared.bus import Bus, BusOptions, json_decoder
 from voicectl.shared.keys import RobotKeys
 from voicectl.shared.messages import (
@@ -203,7 +204,7 @@ def offline(
 ) -> None:
     options = engine_options(args)
     parser = Parser(orders)
-    if options.name != "moonshine":
+    if options.name not in ("moonshine", "whisper"):
         grammar_only(options, orders, utterances, directory)
         return
     if args.replay:
@@ -239,18 +240,78 @@ def offline(
             args.record.write_bytes(msgspec.json.encode([r for _, r in pairs]))
     cpu = sum(r.cpu for _, r in pairs)
     audio = sum(r.audio for _, r in pairs)
-    print(f"real-time factor, both ears: {cpu / max(audio, 1e-9):.3f} ({audio:.0f} s of audio)")
-    views: list[tuple[str, Callable[[Utterance, Record], Outcome]]] = [
-        ("the grammar's ear alone (its judge)", lambda u, r: grammar_view(u, r, parser)),
-        ("Moonshine's ear alone", lambda u, r: moonshine_view(u, r, parser)),
-        ("the decision (shipped rule)", lambda u, r: decision_view(u, r, parser, SHIPPED)),
-    ]
-    for title, view in views:
-        outcomes = [view(u, r) for u, r in pairs]
+    print(f"real-time factor, every ear: {cpu / max(audio, 1e-9):.3f} ({audio:.0f} s of audio)")
+    asked = [u for u, r in pairs if any(third_asked(f) for f in r.finals)]
+    clean = [u for u, _ in pairs if u.condition == "clean"]
+    print(
+        f"the third ear asked for {len(asked)} of {len(pairs)} utterances "
+        f"({sum(u.condition == 'clean' for u in asked)} of {len(clean)} clean)"
+    )
+    for title, ears in VIEWS:
+        outcomes = [ears_view(u, r, parser, SHIPPED, ears) for u, r in pairs]
         report(f"{options.name}, offline: {title}", outcomes, parser)
         misses(outcomes, parser)
     if args.sweep:
         sweep(pairs, parser)
+
+
+VIEWS = [
+    ("the grammar's ear alone (its judge)", "g"),
+    ("Moonshine's ear alone", "m"),
+    ("Whisper's ear alone", "w"),
+    ("the grammar and Moonshine (the two-ear decision)", "gm"),
+    ("the grammar and Whisper", "gw"),
+    ("Moonshine and Whisper", "mw"),
+    ("the decision: three ears, Whisper when asked", "gm+w"),
+]
+"""Which ears each view hears with: g grammar, m Moonshine, w Whisper (every utterance
+recorded with --whisper-when always), +w Whisper only where the recogniser asks it."""
+
+
+def third_asked(final: Final) -> bool:
+    """Whether the recogniser would have asked the third ear for this utterance."""
+    if final.third is None or final.transcription is None:
+        return False
+    if final.third.asked != "always":
+        return True
+    heard = GrammarHeard(final.text, final.rejection, bool(final.doubts), final.noisy)
+    return bool(why_ask(heard, final.transcription))
+
+
+def ears_view(
+    utterance: Utterance, record: Record, parser: Parser, rule: Rule, ears: str
+) -> Outcome:
+    """What the file becomes when heard by `ears` (`VIEWS`): each utterance the recogniser
+    found in it is decided on its own, as the service decides them, and the file's orders
+    are those of every utterance that became orders (a command cut in two whose halves
+    both make orders is as wrong as any other wrong order)."""
+    outcomes = [_heard_as(utterance, final, parser, rule, ears) for final in record.finals]
+    taken = [outcome for outcome in outcomes if not outcome.rejected]
+    if not taken:
+        return Outcome(utterance, " / ".join(o.text for o in outcomes if o.text))
+    if len(taken) == 1:
+        return taken[0]
+    joined = Outcome(utterance, " / ".join(o.text for o in taken), rejected=False)
+    joined.orders = [order for outcome in taken for order in outcome.orders]
+    joined.doubts = [doubt for outcome in taken for doubt in outcome.doubts]
+    return joined
+
+
+def _heard_as(utterance: Utterance, final: Final, parser: Parser, rule: Rule, ears: str) -> Outcome:
+    transcript = transcript_of(final)
+    grammar = grammar_reading(transcript, parser) if "g" in ears else Reading(GRAMMAR, "")
+    free = []
+    if "m" in ears and final.transcription is not None:
+        free.append(free_reading(final.transcription, parser))
+    wanted = "w" in ears and (not ears.endswith("+w") or third_asked(final))
+    if wanted and final.third is not None:
+        free.append(free_reading(final.third, parser))
+    if ears in ("m", "w"):
+        if not free or not free[0].accepted:
+            return Outcome(utterance, free[0].text if free else "", heard=final.heard)
+        reading = free[0]
+        return Outcome(utterance, reading.text, reading.orders, False, doubts=reading.doubts)
+    return from_decision(utterance, decide(grammar, free, rule), final.heard)
 
 
 class Record(msgspec.Struct):
@@ -260,39 +321,6 @@ class Record(msgspec.Struct):
     finals: list[Final]
     cpu: float
     audio: float
-
-
-def single(record: Record) -> Final | None:
-    """The utterance's one final result; None when the recogniser heard none or several
-    (a command is one utterance: several pieces of it are not taken as the whole)."""
-    return record.finals[0] if len(record.finals) == 1 else None
-
-
-def grammar_view(utterance: Utterance, record: Record, parser: Parser) -> Outcome:
-    final = single(record)
-    if final is None:
-        return Outcome(utterance, " / ".join(f.text for f in record.finals))
-    reading = grammar_reading(transcript_of(final), parser)
-    return from_decision(utterance, decide(reading, None), final.heard)
-
-
-def moonshine_view(utterance: Utterance, record: Record, parser: Parser) -> Outcome:
-    final = single(record)
-    if final is None or final.transcription is None:
-        return Outcome(utterance)
-    reading = free_reading(final.transcription, parser)
-    outcome = Outcome(utterance, reading.text, heard=final.heard)
-    if reading.accepted:
-        outcome.orders, outcome.rejected, outcome.doubts = reading.orders, False, reading.doubts
-    return outcome
-
-
-def decision_view(utterance: Utterance, record: Record, parser: Parser, rule: Rule) -> Outcome:
-    final = single(record)
-    if final is None:
-        return Outcome(utterance, " / ".join(f.text for f in record.finals))
-    first, second = readings(transcript_of(final), parser)
-    return from_decision(utterance, decide(first, second, rule), final.heard)
 
 
 def from_decision(utterance: Utterance, decision: Decision, heard: str) -> Outcome:
@@ -305,14 +333,17 @@ def from_decision(utterance: Utterance, decision: Decision, heard: str) -> Outco
 def sweep(pairs: list[tuple[Utterance, Record]], parser: Parser) -> None:
     """Every rule of a small grid, one line each: what the decision would have been."""
     print("rule sweep: commands right + doubt, wrong orders, non-commands accepted (+ doubt)")
-    for overrule, support in itertools.product((True, False), (-0.5, -1.0, -1.5, -2.0, -2.5, -99)):
-        rule = Rule(support=support, overrule=overrule)
-        n = score([decision_view(u, r, parser, rule) for u, r in pairs], parser)
+    grid = itertools.product(
+        (-0.5, -1.0, -1.5), (True, False), (True, False), ("unclaimed", "unheard")
+    )
+    for support, majority, ask, lone in grid:
+        rule = Rule(support=support, majority=majority, ask=ask, lone=lone)
+        n = score([ears_view(u, r, parser, rule, "gm+w") for u, r in pairs], parser)
         accepted = n["chatter"] - n["chatter_refused"] - n["chatter_doubt"]
         print(
-            f"  overrule {overrule!s:<5} support {support:5.1f}: {n['right']:>4} + "
-            f"{n['doubt']:<3} wrong {n['wrong']:<3} non-commands accepted {accepted} "
-            f"(+ {n['chatter_doubt']})"
+            f"  support {support:5.1f} majority {majority!s:<5} ask {ask!s:<5} lone {lone:<9}: "
+            f"{n['right']:>4} + {n['doubt']:<3} wrong {n['wrong']:<3} "
+            f"non-commands accepted {accepted} (+ {n['chatter_doubt']})"
         )
 
 

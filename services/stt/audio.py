@@ -15,7 +15,9 @@ from __future__ import annotations
 
 import math
 from collections import deque
+from collections.abc import Iterator
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -97,6 +99,39 @@ def read_wav(path: Path) -> bytes:
     if rate != SAMPLE_RATE:
         mono = resample(mono, rate, SAMPLE_RATE)
     return bytes(np.clip(np.rint(mono * 32768.0), -32768, 32767).astype("<i2").tobytes())
+
+
+def read_blocks(path: Path, seconds: float = 1.0) -> Iterator[bytes]:
+    """A sound file's audio as 16 kHz mono 16-bit PCM, `seconds` at a time, so that a file
+    of any length is heard in bounded memory; AudioError saying why not. Resampled by
+    soxr's streaming resampler when the file has another rate."""
+    import soundfile
+
+    try:
+        sound = soundfile.SoundFile(str(path))
+    except (OSError, RuntimeError, soundfile.LibsndfileError) as exc:
+        raise AudioError(f"{path}: cannot read as audio: {exc}") from exc
+    with sound:
+        resampler: Any = None
+        if sound.samplerate != SAMPLE_RATE:
+            import soxr
+
+            resampler = soxr.ResampleStream(sound.samplerate, SAMPLE_RATE, 1, "float32")
+        size = max(1, int(seconds * sound.samplerate))
+        try:
+            while len(block := sound.read(size, dtype="float32", always_2d=True)):
+                last = len(block) < size
+                mono = np.ascontiguousarray(block.mean(axis=1, dtype=np.float32))
+                if resampler is not None:
+                    mono = resampler.resample_chunk(mono, last=last)
+                yield bytes(np.clip(np.rint(mono * 32768.0), -32768, 32767).astype("<i2").tobytes())
+                if last:
+                    return
+            if resampler is not None:
+                tail = resampler.resample_chunk(np.zeros(0, np.float32), last=True)
+                yield bytes(np.clip(np.rint(tail * 32768.0), -32768, 32767).astype("<i2").tobytes())
+        except (RuntimeError, soundfile.LibsndfileError) as exc:
+            raise AudioError(f"{path}: cannot read as audio: {exc}") from exc
 
 
 def resample(samples: np.ndarray, rate: int, target: int) -> np.ndarray:

@@ -1,12 +1,18 @@
-"""Two ears: pocketsphinx bound to the orders' grammar, and Moonshine's free transcript.
+"""Three ears: pocketsphinx bound to the orders' grammar, Moonshine's free transcript of
+every utterance, and Whisper's, asked when the first two leave a doubt.
 
 pocketsphinx does what it is good at, as the pocketsphinx engine alone does: it finds the
 utterances in the stream, gives partial transcripts while the person speaks, and the
 grammar's result with its own verdict. Moonshine transcribes every utterance beside it,
 started on a thread of its own when the speech pauses (`LISTENER_FRAMES` in sphinx.py), so
 that its result is ready when the end is confirmed; if the speech goes on, that run is
-dropped. The two results travel together in one `Final`; the converter, which parses, decides
-from both (services/converter/decide.py).
+dropped. Whisper, stronger and slower, hears an utterance only when the first two leave a
+doubt (`why_ask`), so that clean speech the two agree on pays nothing for it. The
+results travel together in one `Final`; the converter, which parses, decides from all of
+them (services/converter/decide.py).
+
+Two engines of the registry are made here: `moonshine` (the first two ears) and `whisper`
+(all three).
 """
 
 from __future__ import annotations
@@ -20,11 +26,14 @@ from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 
 from voicectl.shared.config import cache_dir
+from voicectl.shared.errors import Cancelled
 from voicectl.shared.messages import Grammar, PhraseCheck, Transcription
 
-from .engine import EngineOptions, Recogniser
-from .moonshine import Cancelled, Moonshine, Transcript, prepare, weights_dir
-from .sphinx import PocketsphinxEngine
+from .engine import EngineError, EngineOptions, Recogniser
+from .moonshine import Moonshine, Transcript, prepare, weights_dir
+from .sphinx import GrammarHeard, PocketsphinxEngine
+from .whisper import Whisper
+from .whisper import weights_dir as whisper_weights
 
 _LOGGER = logging.getLogger(__name__)
 
@@ -35,6 +44,12 @@ PHRASE_SUPPORT = -1.5
 likely than its own words. On the dev split's spotted wake phrases (bench/wake.py), true
 ones scored -0.02 to -2.2, mostly above -1.3; the spotter's false wakes in Asterisk's
 prompts and the chatter, -1.9 to -5.3 ("Hello, robot." -3.4)."""
+AGREED = -0.5
+"""Moonshine finding the grammar's words at least this likely beside its own (nats a
+token) is the two ears agreeing; below it, the third ear is asked."""
+WHEN = ("doubt", "always")
+"""When the third ear hears an utterance: when the first two leave a doubt (`why_ask`), or
+always (bench/stt.py records every ear's reading, to choose the rule on the dev split)."""
 
 
 @dataclass
@@ -47,23 +62,45 @@ class Runs:
     """Started at a pause, then dropped: the speech went on."""
     at_end: int = 0
     """Started only when the utterance ended (it ended without a pause: cut, or stopped)."""
+    third: int = 0
+    """Utterances the third ear heard."""
 
 
-def load(options: EngineOptions) -> MoonshineEngine:
-    """The engine registry's entry point (engine.py's ENGINES)."""
+def load(options: EngineOptions) -> Ears:
+    """The registry's `moonshine` engine: the grammar's ear and Moonshine's."""
     source = weights_dir()
     model = Moonshine.prepared(source, prepare(source, cache_dir()))
-    return MoonshineEngine(PocketsphinxEngine(min_confidence=options.min_confidence), model)
+    return Ears("moonshine", PocketsphinxEngine(min_confidence=options.min_confidence), model)
 
 
-class MoonshineEngine:
-    """pocketsphinx's engine with Moonshine as the second ear of every recogniser."""
+def load_three(options: EngineOptions) -> Ears:
+    """The registry's `whisper` engine: the grammar's ear, Moonshine's and Whisper's."""
+    when = options.settings.get("whisper_when") or WHEN[0]
+    if when not in WHEN:
+        raise EngineError(f"--whisper-when {when!r}: one of {', '.join(WHEN)}")
+    third = Whisper(whisper_weights(cache_dir()))
+    source = weights_dir()
+    model = Moonshine.prepared(source, prepare(source, cache_dir()))
+    grammar = PocketsphinxEngine(min_confidence=options.min_confidence)
+    return Ears("whisper", grammar, model, third, always=when == "always")
 
-    name = "moonshine"
 
-    def __init__(self, grammar: PocketsphinxEngine, model: Moonshine) -> None:
+class Ears:
+    """pocketsphinx's engine with Moonshine, and perhaps Whisper, beside every recogniser."""
+
+    def __init__(
+        self,
+        name: str,
+        grammar: PocketsphinxEngine,
+        model: Moonshine,
+        third: Whisper | None = None,
+        always: bool = False,
+    ) -> None:
+        self.name = name
         self._grammar = grammar
         self._model = model
+        self._third = third
+        self._always = always
         self._pool = ThreadPoolExecutor(RUNS_AT_ONCE, thread_name_prefix="moonshine")
         self.runs = Runs()
 
@@ -71,7 +108,7 @@ class MoonshineEngine:
         return self._grammar.use_grammar(grammar)
 
     def recogniser(self, max_utterance: float, segment: bool = True) -> Recogniser:
-        ear = _Ear(self._model, self._pool, self.runs)
+        ear = _Ear(self._model, self._pool, self.runs, self._third, self._always)
         return self._grammar.recogniser(max_utterance, segment, ear)
 
     def check(self, pcm: bytes, phrase: str) -> PhraseCheck:
@@ -96,13 +133,39 @@ class MoonshineEngine:
         self._pool.shutdown(wait=True, cancel_futures=True)
 
 
-class _Ear:
-    """One stream's second ear (sphinx.py's `Listener`): at most one run in flight."""
+def why_ask(grammar: GrammarHeard, second: Transcription) -> str:
+    """Why the third ear should hear an utterance, or '' when the first two settle it: they
+    heard the same words in a quiet room, or both heard nothing."""
+    if not grammar.text and not second.text:
+        return ""
+    if grammar.noisy:
+        return "a noisy room"
+    if not second.text:
+        return "Moonshine heard nothing"
+    if grammar.doubted:
+        return "the grammar doubted a value"
+    if grammar.rejection or second.support is None or second.support < AGREED:
+        return "the two ears heard different words"
+    return ""
 
-    def __init__(self, model: Moonshine, pool: ThreadPoolExecutor, runs: Runs) -> None:
+
+class _Ear:
+    """One stream's free ears (sphinx.py's `Listener`): at most one Moonshine run in
+    flight, and Whisper at the end when asked."""
+
+    def __init__(
+        self,
+        model: Moonshine,
+        pool: ThreadPoolExecutor,
+        runs: Runs,
+        third: Whisper | None,
+        always: bool,
+    ) -> None:
         self._model = model
         self._pool = pool
         self._runs = runs
+        self._third = third
+        self._always = always
         self._run: Future[Transcript] | None = None
         self._cancel = threading.Event()
 
@@ -112,13 +175,31 @@ class _Ear:
         self._run = self._pool.submit(self._model.transcribe, audio, self._cancel)
         self._runs.at_pause += 1
 
+    def paused_text(self) -> str:
+        run = self._run
+        if run is None or not run.done() or run.cancelled() or run.exception() is not None:
+            return ""
+        return run.result().text
+
     def drop(self) -> None:
         if self._run is not None:
             self._cancel.set()
             self._run = None
             self._runs.dropped += 1
 
-    def result(self, audio: bytes, grammar: str) -> Transcription:
+    def result(
+        self, audio: bytes, grammar: GrammarHeard
+    ) -> tuple[Transcription, Transcription | None]:
+        second = self._second(audio, grammar.text)
+        if self._third is None:
+            return second, None
+        why = why_ask(grammar, second)
+        if not why and not self._always:
+            return second, None
+        self._runs.third += 1
+        return second, self._heard_by_third(audio, grammar.text, why)
+
+    def _second(self, audio: bytes, grammar: str) -> Transcription:
         heard = None
         run, self._run = self._run, None
         if run is not None:
@@ -147,6 +228,22 @@ class _Ear:
             text=heard.text,
             confidence=round(heard.confidence, 3),
             support=None if support is None else round(support, 3),
+        )
+
+    def _heard_by_third(self, audio: bytes, grammar: str, why: str) -> Transcription:
+        assert self._third is not None
+        heard = self._third.transcribe(audio)
+        support = None
+        if grammar and heard.text:
+            own = math.log(max(heard.confidence, 1e-12))
+            support = self._third.likelihood(heard, written(grammar)) - own
+        _LOGGER.debug("whisper heard %r in %.3f s (asked: %s)", heard.text, heard.seconds, why)
+        return Transcription(
+            engine="whisper",
+            text=heard.text,
+            confidence=round(heard.confidence, 3),
+            support=None if support is None else round(support, 3),
+            asked=why or "always",
         )
 
 

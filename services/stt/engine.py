@@ -64,7 +64,11 @@ class Final(Struct, frozen=True, tag=True):
     """Per word of `text`, 0..1: how surely the engine heard it (judge.py's Verdict)."""
     doubts: list[Doubt] = []
     transcription: Transcription | None = None
-    """What a second ear heard of the same utterance (the moonshine engine's)."""
+    """What a second ear heard of the same utterance (Moonshine)."""
+    third: Transcription | None = None
+    """What the third ear heard, when it was asked (Whisper)."""
+    noisy: bool = False
+    """The room was noisy when the utterance ended."""
 
 
 RecognitionEvent = SpeechStarted | Heard | Final
@@ -127,14 +131,31 @@ class EngineKind:
     """The library it runs on, and the pip extra that installs it."""
     extra: str
     flags: tuple[EngineFlag, ...] = ()
+    entry: str = "load"
+    """The function of `module` that loads it."""
 
 
 ENGINES: dict[str, EngineKind] = {
     kind.name: kind
     for kind in (
         EngineKind(
+            "whisper",
+            "voicectl.services.stt.ears",
+            requires="ctranslate2",
+            extra="stt",
+            entry="load_three",
+            flags=(
+                EngineFlag(
+                    "whisper-when",
+                    "WHEN",
+                    "when the third ear hears an utterance: 'doubt' (when the other two leave "
+                    "one) or 'always'",
+                ),
+            ),
+        ),
+        EngineKind(
             "moonshine",
-            "voicectl.services.stt.moonshine_engine",
+            "voicectl.services.stt.ears",
             requires="onnxruntime",
             extra="stt",
         ),
@@ -161,7 +182,7 @@ ENGINES: dict[str, EngineKind] = {
 
 @dataclass(frozen=True)
 class EngineOptions:
-    name: str = "moonshine"
+    name: str = "whisper"
     min_confidence: float = 0.5
     """Utterances whose confidence is lower are rejected."""
     workers: int = 0
@@ -194,7 +215,9 @@ def load_here(options: EngineOptions) -> Engine:
             f"(no module named {kind.requires!r})"
         )
     try:
-        load: Callable[[EngineOptions], Engine] = importlib.import_module(kind.module).load
+        load: Callable[[EngineOptions], Engine] = getattr(
+            importlib.import_module(kind.module), kind.entry
+        )
     except ImportError as exc:
         raise EngineError(
             f"the {kind.name} engine is not installed: pip install 'voicectl[{kind.extra}]' ({exc})"

@@ -434,6 +434,7 @@ def transcript_of(final: Final, session: str = "", refused: str = "") -> Transcr
         word_confidences=final.confidences,
         doubts=[] if reason else final.doubts,
         transcription=None if refused else final.transcription,
+        third=None if refused else final.third,
     )
 
 

@@ -36,13 +36,17 @@ Per utterance, measured on generated speech (bench/stt.py), these choices matter
   pink noise and babble, 4 dB made 7 more right and 3 dB 10 more, none wrong; but at 3 dB
   an utterance in pink noise 12 dB below the voice ended a second after the voice did
   (docs/benchmarks.md). Counting frames 12 to 24 dB below the utterance's own level as
-  silence had cut word endings. Babble, as loud as the room, still runs on.
+  silence had cut word endings. Where other people talk on, the room's quietest tenth
+  lies far below their voices: a frame is speech only if it also stands 3 dB above the
+  median of the frames heard outside utterances (speaker.py's `Background`), so that an
+  utterance ends when the speaker stops, not when the others do.
 """
 
 from __future__ import annotations
 
 import logging
 import math
+import re
 import threading
 from collections import deque
 from dataclasses import dataclass, field, replace
@@ -66,6 +70,7 @@ from .engine import (
 )
 from .judge import Thresholds, Verdict, Vocabulary, Word, filler, judge
 from .lexicon import pronunciations
+from .speaker import Background, level
 from .wordgraph import GrammarError, WordGraph, compile_jsgf
 
 _LOGGER = logging.getLogger(__name__)
@@ -86,7 +91,12 @@ ROOM_WINDOW = 100
 ROOM_NEEDED = 10
 """Frames (0.3 s) heard before the room is known; the pre-roll keeps what came before."""
 END_FRAMES = 8
-"""It ends after this many frames without speech (0.24 s)."""
+"""It ends after this many frames without speech (0.24 s)..."""
+HANG_FRAMES = 17
+"""...or this many (0.51 s) when the words so far are a command that a number may go on
+("turn left" before "forty five degrees", "go forward" before "eight meters"): ended at
+the pause, they made another order than the one said. On the dev split, Kokoro's
+speakers paused up to 0.33 s there."""
 EARLY_FRAMES = 3
 """After this many (0.09 s) the final pass runs already; the end confirms or drops it."""
 LISTENER_FRAMES = 1
@@ -111,9 +121,22 @@ FRAME_BYTES = 320
 """One 10 ms feature frame of 16 kHz 16-bit audio."""
 
 
+@dataclass(frozen=True)
+class GrammarHeard:
+    """What the grammar's ear made of an utterance, for the free ears beside it."""
+
+    text: str
+    rejection: str
+    """Its own verdict: why it rejects its result, or ''."""
+    doubted: bool
+    """It doubts a value of its result."""
+    noisy: bool
+    """The room is noisy (`NOISY_SPREAD`)."""
+
+
 class Listener(Protocol):
-    """A second ear that hears each utterance this recogniser finds (moonshine_engine.py):
-    told when the speech pauses, so that it can start before the end is confirmed."""
+    """Free ears that hear each utterance this recogniser finds (ears.py): told when the
+    speech pauses, so that they can start before the end is confirmed."""
 
     def pause(self, audio: bytes) -> None:
         """The speech paused: `audio` is the utterance so far, perhaps all of it."""
@@ -121,10 +144,16 @@ class Listener(Protocol):
     def drop(self) -> None:
         """The speech went on after the pause, or was no utterance: forget that audio."""
 
-    def result(self, audio: bytes, grammar: str) -> Transcription:
+    def paused_text(self) -> str:
+        """What the run started at the last pause heard, if it has finished; else ''."""
+
+    def result(
+        self, audio: bytes, grammar: GrammarHeard
+    ) -> tuple[Transcription, Transcription | None]:
         """The utterance ended with `audio`, which the grammar heard as `grammar`: what
-        was heard (the paused audio's result if nothing but silence followed it), and how
-        likely the grammar's words are. Blocks until it is known."""
+        the second ear heard (the paused audio's result if nothing but silence followed
+        it) and how likely it finds the grammar's words, and the third ear's, if it was
+        asked. Blocks until they are known."""
 
 
 @dataclass(frozen=True)
@@ -238,6 +267,11 @@ class _Decoder:
         return fsg
 
 
+def _plain_words(text: str) -> list[str]:
+    """A transcript's words as the grammar spells them: "Go forward." -> go, forward."""
+    return re.findall(r"[a-z']+", text.lower())
+
+
 def _numbered(word: str, variant: int) -> str:
     return word if variant == 1 else f"{word}({variant})"
 
@@ -345,6 +379,10 @@ class _Utterance:
         """Where in `audio` the open pass's current decode began (bytes)."""
         self.heard: list[Word] = []
         """What the open pass heard in the decodes that ended, in frames of `audio`."""
+        self.hanging: bool | None = None
+        """Whether the words at the current pause await a number (`HANG_FRAMES`)."""
+        self.held: Final | None = None
+        """The result at the pause, kept back while a number may still come."""
 
 
 @dataclass(frozen=True)
@@ -379,6 +417,7 @@ class SphinxRecogniser:
             mode=pocketsphinx.Vad.STRICT, sample_rate=16000, frame_length=VAD_FRAME
         )
         self._room = Loudness(ROOM_MARGIN, ROOM_WINDOW, ROOM_NEEDED)
+        self._background = Background()
         self._suppressor = Suppressor(SUPPRESSION)
         self._flags: deque[bool] = deque(maxlen=START_WINDOW)
         self._pending = bytearray()
@@ -410,7 +449,10 @@ class SphinxRecogniser:
             self._feed(pcm, self._suppressor.process(pcm), bytes(self._pending_raw), events)
         self._pending.clear()
         self._pending_raw.clear()
-        if self._utterance is not None:
+        if self._utterance is not None and self._utterance.held is not None:
+            events.append(self._utterance.held)
+            self._utterance = None
+        elif self._utterance is not None:
             self._end(self._clock, events)
         return events
 
@@ -442,8 +484,11 @@ class SphinxRecogniser:
             return
         # `&`, not `and`: the room hears every frame, speech or not.
         speech = bool(self._vad.is_speech(frame)) & self._room.stands_out(frame)
+        frame_level = level(raw)
+        speech = speech and self._background.above(frame_level)
         utterance = self._utterance
         if utterance is None:
+            self._background.hear(frame_level)
             self._flags.append(speech)
             if sum(self._flags) >= START_FRAMES:
                 first = len(self._flags) - list(self._flags).index(True)
@@ -451,6 +496,8 @@ class SphinxRecogniser:
             return
         if speech and utterance.quiet and self._listener is not None:
             self._listener.drop()  # the pause was not the end
+        if speech and utterance.held is not None:
+            utterance.held = None  # a number or more words after all: one utterance
         if speech and not utterance.live:
             self._resume(utterance)
         self._feed(frame, suppressed, raw, events)
@@ -458,6 +505,7 @@ class SphinxRecogniser:
             utterance.speech += 1
             utterance.quiet = 0
             utterance.speech_end = self._clock
+            utterance.hanging = None
         else:
             utterance.quiet += 1
             if utterance.speech >= MIN_SPEECH_FRAMES:
@@ -465,8 +513,14 @@ class SphinxRecogniser:
                     self._listener.pause(bytes(utterance.raw))
                 if utterance.quiet == EARLY_FRAMES:
                     utterance.early = self._final_pass(utterance)
-        if utterance.quiet >= END_FRAMES:
-            self._end(utterance.speech_end, events)
+        if utterance.held is not None:
+            if utterance.quiet >= HANG_FRAMES:  # no number came: the held result stands
+                self._utterance = None
+                events.append(utterance.held)
+        elif utterance.quiet >= END_FRAMES and not (
+            utterance.quiet < HANG_FRAMES and self._may_go_on(utterance)
+        ):
+            self._end(utterance.speech_end, events, hold=utterance.quiet < HANG_FRAMES)
         elif len(utterance.audio) >= self._max_bytes:
             _LOGGER.info("utterance %d cut at its maximum length", utterance.number)
             self._end(self._clock, events)
@@ -512,9 +566,13 @@ class SphinxRecogniser:
                 utterance.partial = text
                 events.append(Heard(utterance.number, text))
 
-    def _end(self, speech_end: float, events: list[RecognitionEvent]) -> None:
+    def _end(self, speech_end: float, events: list[RecognitionEvent], hold: bool = False) -> None:
         """The final result: the early pass if the speech ended where it paused, else a
-        final pass now. A blip too short to be a word ends without one."""
+        final pass now. A blip too short to be a word ends without one. With `hold`, a
+        result whose words a free ear heard awaiting a number is kept back until
+        `HANG_FRAMES` have passed without speech (else it is dropped, and the utterance
+        goes on): in babble the grammar and Moonshine may hear nothing at the pause that
+        Whisper, at the end, hears as "turn left"."""
         utterance = self._utterance
         assert utterance is not None
         assert self._decoder is not None
@@ -526,25 +584,55 @@ class SphinxRecogniser:
                 self._listener.drop()
             return
         result = utterance.early or self._final_pass(utterance)
-        transcription = None
+        transcription = third = None
+        noisy = self._room.spread() < NOISY_SPREAD
         if self._listener is not None:
-            transcription = self._listener.result(bytes(utterance.raw), result.text)
+            heard = GrammarHeard(
+                result.text, self._rejected(result), bool(result.verdict.doubts), noisy
+            )
+            transcription, third = self._listener.result(bytes(utterance.raw), heard)
         self._prior = result.mean
         verdict = result.verdict
-        events.append(
-            Final(
-                utterance.number,
-                result.text,
-                round(result.confidence, 3),
-                self._rejected(result),
-                utterance.start,
-                speech_end,
-                heard=verdict.heard,
-                confidences=verdict.confidences,
-                doubts=verdict.doubts,
-                transcription=transcription,
-            )
+        final = Final(
+            utterance.number,
+            result.text,
+            round(result.confidence, 3),
+            self._rejected(result),
+            utterance.start,
+            speech_end,
+            heard=verdict.heard,
+            confidences=verdict.confidences,
+            doubts=verdict.doubts,
+            transcription=transcription,
+            third=third,
+            noisy=noisy,
         )
+        if hold and self._segment and self._awaits_number(final):
+            utterance.held = final
+            self._utterance = utterance
+            return
+        events.append(final)
+
+    def _awaits_number(self, final: Final) -> bool:
+        """Whether an ear's words are a command that a number may go on."""
+        compiled = self._engine.compiled()
+        heard = [final.text, *(t.text for t in (final.transcription, final.third) if t)]
+        return any(
+            compiled.graph.awaits(_plain_words(text), compiled.number_words) for text in heard
+        )
+
+    def _may_go_on(self, utterance: _Utterance) -> bool:
+        """Whether the words heard up to the pause, the grammar's or a free ear's, await a
+        number (`HANG_FRAMES`); asked once per pause."""
+        if utterance.hanging is None:
+            compiled = self._engine.compiled()
+            heard = [utterance.early.text if utterance.early is not None else ""]
+            if self._listener is not None:
+                heard.append(self._listener.paused_text())
+            utterance.hanging = any(
+                compiled.graph.awaits(_plain_words(text), compiled.number_words) for text in heard
+            )
+        return utterance.hanging
 
     def _final_pass(self, utterance: _Utterance) -> _Result:
         """End the open pass, decode the utterance again with the grammar and its own

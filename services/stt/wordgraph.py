@@ -49,6 +49,17 @@ class WordGraph:
             state = table.get((state, word)) if state is not None else None
         return state in self.finals
 
+    def awaits(self, words: Iterable[str], wanted: frozenset[str]) -> bool:
+        """Whether `words` are a path from the start after which one of `wanted` may come:
+        "turn left" awaits a number where "turn left forty five degrees" is a command too."""
+        table = {(source, word): target for source, target, word in self.arcs}
+        state: int | None = 0
+        for word in words:
+            state = table.get((state, word)) if state is not None else None
+        return state is not None and any(
+            source == state and word in wanted for source, _, word in self.arcs
+        )
+
     def out_degree(self) -> dict[int, int]:
         degree = dict.fromkeys(range(self.states), 0)
         for source, _, _ in self.arcs:
