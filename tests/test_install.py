@@ -119,6 +119,15 @@ def test_the_sdist_builds_the_wheel_the_checkout_builds(built: Built) -> None:
     assert _wheel_files(built.wheel) == _wheel_files(built.wheel_from_checkout)
 
 
+def test_the_sdist_ships_no_tests(built: Built) -> None:
+    """The tests need the whole checkout (docs, scripts, compose files, the harness, root,
+    Chromium, Docker): they are run from the repository, and the sdist only builds the
+    wheel. A test file alone would be one that cannot run."""
+    with tarfile.open(built.sdist) as archive:
+        names = [name.split("/", 1)[1] for name in archive.getnames() if "/" in name]
+    assert [name for name in names if name.split("/")[0] in ("tests", "harness", "bench")] == []
+
+
 @pytest.fixture(scope="module")
 def installed(built: Built, tmp_path_factory: pytest.TempPathFactory) -> Path:
     """A fresh venv outside the checkout with the wheel installed, offline: the wheel alone
