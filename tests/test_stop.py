@@ -88,9 +88,12 @@ async def test_stop_stops_the_robot_at_once_and_for_good(
         assert reply.state.stopped
         assert reply.state.queue_length == 0
         if case == "commanding-from-blocked-loop":
-            # Its commands went on, and the robot handle refused every one after the stop.
-            blocked = "the blocked order to end"
-            record = await ended(client, lambda r: r.order.label == "blockdrive", blocked)
+            # Its commands went on, and the robot handle refused every one after the stop:
+            # the executor's word on the order, which the stop ended at once.
+            blocked = "the executor's word on the blocked order"
+            record = await ended(
+                client, lambda r: r.order.label == "blockdrive" and "drove; " in r.message, blocked
+            )
             assert record.status == OrderStatus.CANCELLED, record
             refused = int(record.message.split("drove; ")[1].split()[0])
             assert refused >= 3, record
