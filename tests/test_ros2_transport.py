@@ -45,7 +45,7 @@ from voicectl.shared.messages import (
 from voicectl.shared.ros2 import Ros2Codec
 
 from .conftest import REPO, Processes, voicectl
-from .ros2_support import DISTROS, env_of
+from .ros2_support import DISTROS, env_of, missing_here
 from .support import joined, until_heard
 
 pytestmark = pytest.mark.ros2
@@ -64,9 +64,7 @@ def dds(request: pytest.FixtureRequest, processes: Processes, tmp_path: Path) ->
     env = env_of(request.param)
     missing = netns.unavailable()
     if missing is not None:
-        if os.environ.get("VOICECTL_ROS2") == "required":
-            pytest.fail(missing)
-        pytest.skip(missing)
+        missing_here(missing)
     with dds_robot(env, processes, tmp_path, EXECUTORS) as robot:
         yield robot
 
@@ -77,7 +75,7 @@ def test_every_dds_participant_is_in_a_namespace_no_packet_leaves(tmp_path: Path
     env_of(DISTROS[0])
     missing = netns.unavailable()
     if missing is not None:
-        pytest.skip(missing)
+        missing_here(missing)
     with LoopbackOnly(tmp_path) as space:
         links = [line.split(":")[1].strip() for line in space.run("ip", "-o", "link").splitlines()]
         assert links == ["lo"]
