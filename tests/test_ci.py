@@ -4,7 +4,6 @@ instead of passing with a word about it."""
 from __future__ import annotations
 
 import os
-import re
 import subprocess
 import sys
 from pathlib import Path
@@ -152,14 +151,65 @@ def test_a_step_without_a_report_ran_nothing_and_fails_the_run(tmp_path: Path) -
     )
 
 
-def test_ci_writes_a_report_per_step_and_ends_with_the_skips() -> None:
-    """.ci/run's steps and the reports it judges are the same three."""
-    script = (REPO / ".ci" / "run").read_text()
-    steps = re.findall(r"^bash scripts/(\S+) --junitxml=\"\$reports/(\w+)\.xml\"$", script, re.M)
-    assert steps == [("test", "test"), ("test-ros2", "ros2"), ("test-containers", "containers")]
-    judged = re.search(r"-m harness\.skips \\\n\s+(.+?) \|\|", script)
-    assert judged is not None
-    assert judged.group(1).split() == [f'"$reports/{name}.xml"' for _, name in steps]
+STEPS = ("test", "test-ros2", "test-containers")
+"""The scripts .ci/run runs, in order."""
+
+
+def ci_run(tmp_path: Path, failing: str = "") -> subprocess.CompletedProcess[str]:
+    """.ci/run itself, in a copy of the repository whose steps are stand-ins: each runs
+    TINY with pytest and the arguments .ci/run gives it (the first step as `first`, the
+    others as `second`); the one named `failing` fails instead, writing nothing."""
+    (tmp_path / ".ci").mkdir()
+    (tmp_path / ".ci" / "run").write_text((REPO / ".ci" / "run").read_text())
+    (tmp_path / "scripts").mkdir()
+    (tmp_path / "test_tiny.py").write_text(TINY)
+    for name in STEPS:
+        role = "first" if name == "test" else "second"
+        pytest = f'"{sys.executable}" -m pytest -p no:cacheprovider -q test_tiny.py'
+        body = f'STEP={role} exec {pytest} "$@"'
+        if name == failing:
+            body = "exit 1"
+        (tmp_path / "scripts" / name).write_text(f"#!/usr/bin/env bash\n{body}\n")
+    return subprocess.run(
+        ["bash", str(tmp_path / ".ci" / "run")],
+        cwd=tmp_path,
+        env={
+            **os.environ,
+            "VOICECTL_VENV": sys.prefix,
+            "PYTHONPATH": str(REPO),  # harness.skips, from this checkout
+            "TMPDIR": str(tmp_path),
+        },
+        capture_output=True,
+        text=True,
+        timeout=300,
+        check=False,
+    )
+
+
+def test_ci_ends_with_the_skips_and_fails_on_one_no_step_ran(tmp_path: Path) -> None:
+    done = ci_run(tmp_path)
+    assert done.returncode == 1, done.stdout
+    tail = done.stdout.splitlines()[-5:]
+    assert tail[0] == "== skipped in this run: 4 (3 that CI is meant to run)", done.stdout
+    assert tail[1] == (
+        "test: test_tiny::test_runs_in_the_second_step: the second step runs it [ran in ros2]"
+    )
+    assert tail[2:] == [
+        f"{step}: test_tiny::test_never_runs: nothing to run it with "
+        "[NOT ALLOWED: CI is meant to run it]"
+        for step in ("test", "ros2", "containers")
+    ]
+
+
+def test_ci_that_stops_at_a_failing_step_still_lists_the_skips(tmp_path: Path) -> None:
+    done = ci_run(tmp_path, failing="test-ros2")
+    assert done.returncode == 1, done.stdout
+    lines = done.stdout.splitlines()
+    assert "== skipped in this run: 2 (2 that CI is meant to run)" in lines, done.stdout
+    assert [line.rsplit("/", 1)[-1] for line in lines if line.startswith("NO REPORT: ")] == [
+        "ros2.xml: its step ran none of its tests",
+        "containers.xml: its step ran none of its tests",
+    ]
 
 
 # --- tests that skip for something missing fail under CI --------------------------------------
