@@ -23,10 +23,10 @@ from harness.cross_host import RobotWatch, observer, start_stack
 from harness.netns import LEASE_MS, TwoHosts, impairment_unavailable, unavailable
 from voicectl.shared.messages import EmergencyStop, Order, OrderStatus, Stopped, TargetPose
 
+from .conftest import cannot_run
 from .support import joined, order
 
 WHY_NOT = unavailable()
-pytestmark = pytest.mark.skipif(WHY_NOT is not None, reason=f"two hosts: {WHY_NOT}")
 
 LEASE = LEASE_MS / 1000
 FAR = Order(
@@ -42,6 +42,8 @@ simulator tick is about 0.15 s; lost packets cost TCP retransmissions of 0.2 s a
 
 @pytest.fixture
 def rig(tmp_path: Path, request: pytest.FixtureRequest) -> Iterator[TwoHosts]:
+    if WHY_NOT is not None:
+        cannot_run(f"two hosts: {WHY_NOT}")
     hosts = TwoHosts(tmp_path / "logs")
     try:
         start_stack(hosts, tmp_path / "supervisor.sqlite3")
@@ -115,8 +117,16 @@ async def test_a_link_down_past_the_lease_stops_the_robot_and_loses_no_order(rig
         assert "supervisor back" in log
 
 
-@pytest.mark.skipif(impairment_unavailable() is not None, reason=f"{impairment_unavailable()}")
-async def test_a_slow_lossy_link_still_runs_orders_and_stops_the_robot(rig: TwoHosts) -> None:
+@pytest.fixture
+def impairable() -> None:
+    """The link can be made slow and lossy here (asked before the hosts are made)."""
+    if (why := impairment_unavailable()) is not None:
+        cannot_run(why)
+
+
+async def test_a_slow_lossy_link_still_runs_orders_and_stops_the_robot(
+    impairable: None, rig: TwoHosts
+) -> None:
     async with session(rig) as (client, watch):
         with rig.impaired(delay_ms=100, loss_percent=5):
             ids = await client.submit(

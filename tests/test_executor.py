@@ -85,7 +85,7 @@ async def test_pic_saves_the_next_camera_frame_as_png(robot: tuple[str, Path]) -
         assert progress[0].progress.text == "photo in 1 s"
 
 
-async def test_mbgoal_reports_remaining_distance_and_cancel_stops_the_robot_fast(
+async def test_mbgoal_reports_remaining_distance_and_cancel_stops_the_robot(
     robot: tuple[str, Path],
 ) -> None:
     async with harness_on(robot[0]) as harness:
@@ -117,7 +117,11 @@ async def test_mbgoal_reports_remaining_distance_and_cancel_stops_the_robot_fast
         stopped_at = next(
             t for t, odom in harness.odometry if t > cancelled_at and odom.linear_x == 0.0
         )
-        assert stopped_at - cancelled_at < 0.2  # time scale 1: wall time is sim time
+        # Stopped by the cancel, short of the goal, and for good. (How fast: bench/stop.py
+        # times STOP, which cancels the same way.)
+        await async_wait_until(lambda: len(harness.since(stopped_at)) >= 10, 5.0, "odometry")
+        assert all(odom.linear_x == 0.0 for odom in harness.since(stopped_at))
+        assert harness.pose().pose.x < 5.0
         result = await harness.finished(order_id)
         assert (result.status, result.message) == (OrderStatus.CANCELLED, "cancelled")
 
@@ -158,6 +162,7 @@ def test_a_map_cell_is_read_in_the_grids_own_frame() -> None:
 
 async def test_halt_stops_a_driving_robot_outside_any_order(robot: tuple[str, Path]) -> None:
     async with harness_on(robot[0]) as harness:
+        start = harness.pose().pose
         order_id = await harness.execute(order("drive", distance=5.0))
         await async_wait_until(lambda: harness.pose().linear_x > 0.2, 10.0, "driving")
         halting = asyncio.get_running_loop().time()
@@ -172,9 +177,9 @@ async def test_halt_stops_a_driving_robot_outside_any_order(robot: tuple[str, Pa
         # Odometry arrives in the order the simulator sent it, so what moved before the halt
         # may arrive late on a loaded machine, but never after the first still one.
         stopped_at = next(t for t, odom in harness.odometry if t > halting and odom.linear_x == 0.0)
-        assert stopped_at - halting < 0.25  # time scale 1: wall time is sim time
         await async_wait_until(lambda: len(harness.since(stopped_at)) >= 10, 5.0, "odometry")
         assert all(odom.linear_x == 0.0 for odom in harness.since(stopped_at))
+        assert harness.pose().pose.x - start.x < 4.0  # well short of the 5 m it was driving
 
 
 async def test_executor_announces_its_labels(robot: tuple[str, Path]) -> None:

@@ -113,6 +113,64 @@ def test_cancel_queued_and_clear(queue: RobotQueue) -> None:
     assert all(r.status == OrderStatus.CANCELLED for r in queue.history)
 
 
+def test_a_stop_ends_the_running_order_at_once_and_waits_for_its_executors_word(
+    queue: RobotQueue,
+) -> None:
+    """The state never says stopped beside a running order; no other order starts until
+    the executor has said how the stopped one ended, even once the stop is released."""
+    running, later = queue.submit("req", [order("a"), order("b")], "")
+    queue.start_next()
+    queue.stopped = True
+    queue.clear_queue("emergency stop")
+    ended = queue.stop_current("emergency stop")
+    assert ended is not None
+    assert ended.id == running
+    state = queue.snapshot()
+    assert (state.stopped, state.current) == (True, None)
+    assert [(r.id, r.status, r.message) for r in state.history[:1]] == [
+        (running, OrderStatus.CANCELLED, "emergency stop")
+    ]
+    queue.release()
+    (after,) = queue.submit("req-2", [order("c")], "")
+    assert queue.start_next() is None  # the executor may still be ending it
+    assert queue.finish(running, OrderStatus.CANCELLED, "emergency stop")
+    assert queue.history[0].message == "emergency stop"
+    started = queue.start_next()
+    assert started is not None
+    assert started.id == after
+    assert later in {r.id for r in queue.history}
+
+
+def test_the_executors_word_on_a_stopped_order_is_what_it_keeps(queue: RobotQueue) -> None:
+    """It finished just before the stop reached it: the record says so."""
+    (running,) = queue.submit("req", [order("a")], "")
+    queue.start_next()
+    queue.stopped = True
+    queue.stop_current("emergency stop")
+    queue.take_changes()
+    assert queue.finish(running, OrderStatus.SUCCEEDED, "6")
+    assert (queue.history[0].status, queue.history[0].message) == (OrderStatus.SUCCEEDED, "6")
+    records, _ = queue.take_changes()
+    assert [(r.id, r.status) for r, _ in records] == [(running, OrderStatus.SUCCEEDED)]
+    assert len(queue.history) == 1
+
+
+def test_word_that_never_comes_holds_nothing_back_once_given_up(queue: RobotQueue) -> None:
+    (running,) = queue.submit("req", [order("a")], "")
+    queue.start_next()
+    queue.stopped = True
+    queue.stop_current("emergency stop")
+    queue.release()
+    (after,) = queue.submit("req-2", [order("b")], "")
+    assert queue.start_next() is None
+    assert not queue.stop_waiting("another")
+    assert queue.stop_waiting(running)
+    started = queue.start_next()
+    assert started is not None
+    assert started.id == after
+    assert not queue.finish(running, OrderStatus.CANCELLED)  # late: nothing to change
+
+
 def test_snapshot_lists_history_most_recent_first(queue: RobotQueue) -> None:
     ids = queue.submit("req", [order(str(i)) for i in range(3)], "")
     for order_id in ids:

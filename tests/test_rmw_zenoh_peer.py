@@ -24,12 +24,15 @@ from voicectl.shared.robot import TransportKind, open_transport
 from voicectl.shared.ros2 import CANCEL_GOAL, Ros2Codec
 
 from .conftest import Processes
-from .ros2_support import env_of
+from .ros2_support import env_of, missing_here
 from .support import joined
 
 pytestmark = pytest.mark.ros2
 
-sdk = pytest.importorskip("zenoh_ros2_sdk")
+try:
+    import zenoh_ros2_sdk as sdk
+except ImportError as exc:  # the test extra installs it
+    missing_here(f"zenoh-ros2-sdk does not import: {exc}")
 
 PACKAGES = (
     "builtin_interfaces",

@@ -26,7 +26,7 @@ from harness import netns
 from harness.client import Client
 from harness.netns import LoopbackOnly
 from harness.ros2_rig import ROBOT, WAIT, DdsRobot, dds_robot
-from harness.stop_rig import order
+from harness.stop_rig import FAULT_SECONDS, order
 from harness.wait import async_wait_until
 from voicectl.shared.bus import json_decoder
 from voicectl.shared.client import VoicectlClient
@@ -45,16 +45,17 @@ from voicectl.shared.messages import (
 from voicectl.shared.ros2 import Ros2Codec
 
 from .conftest import REPO, Processes, voicectl
-from .ros2_support import DISTROS, env_of
+from .ros2_support import DISTROS, env_of, missing_here
 from .support import joined, until_heard
 
 pytestmark = pytest.mark.ros2
 
-STOP_BOUND = 0.25
-"""Seconds from STOP to zero velocity and to the goal's cancel at the robot, one STOP on a
-loaded two-core machine, as tests/test_stop.py bounds the other transports: well short of
-any retry or timeout on the way. The issue's 50 ms is a p99, measured by
-bench/stop_transports.py beside the other transports (docs/benchmarks.md)."""
+STOP_BOUND = FAULT_SECONDS / 2
+"""Seconds from STOP to zero velocity and to the goal's cancel at the robot, at most, as
+tests/test_stop.py bounds the other transports: half as long as the blocked loop blocks,
+so a STOP that waited for it fails, and generous on a busy machine. Not a figure: the
+issue's 50 ms is a p99, measured by bench/stop_transports.py beside the other transports
+(docs/benchmarks.md)."""
 EXECUTORS = ("--executor", "harness.executors:BlockingNavigator", "--stall-limit", "30")
 """A navigator that blocks its loop; the watchdog held off, so that STOP is timed alone."""
 
@@ -64,9 +65,7 @@ def dds(request: pytest.FixtureRequest, processes: Processes, tmp_path: Path) ->
     env = env_of(request.param)
     missing = netns.unavailable()
     if missing is not None:
-        if os.environ.get("VOICECTL_ROS2") == "required":
-            pytest.fail(missing)
-        pytest.skip(missing)
+        missing_here(missing)
     with dds_robot(env, processes, tmp_path, EXECUTORS) as robot:
         yield robot
 
@@ -77,7 +76,7 @@ def test_every_dds_participant_is_in_a_namespace_no_packet_leaves(tmp_path: Path
     env_of(DISTROS[0])
     missing = netns.unavailable()
     if missing is not None:
-        pytest.skip(missing)
+        missing_here(missing)
     with LoopbackOnly(tmp_path) as space:
         links = [line.split(":")[1].strip() for line in space.run("ip", "-o", "link").splitlines()]
         assert links == ["lo"]
@@ -176,7 +175,7 @@ async def test_stop_halts_a_real_ros2_robot_and_cancels_its_goal(dds: DdsRobot, 
         )
         far = TargetPose(frame="map", x=8.0)
         if case == "blocked-loop":
-            await client.submit(order("blocknav", seconds=4, x=8.0))
+            await client.submit(order("blocknav", seconds=FAULT_SECONDS, x=8.0))
         else:
             await client.submit(
                 Order(order="goal", label="mbgoal", description="reach x 8", target_pose=far)
@@ -193,7 +192,7 @@ async def test_stop_halts_a_real_ros2_robot_and_cancels_its_goal(dds: DdsRobot, 
         stopped = await stopper.stop(ROBOT)
         await async_wait_until(
             lambda: dds.events("zero", asked) and dds.events("canceled", asked),
-            5.0,
+            WAIT,
             "zero velocity and the cancel at the robot",
         )
         zero = dds.events("zero", asked)[0] - asked
@@ -214,14 +213,17 @@ async def test_stop_halts_a_real_ros2_robot_and_cancels_its_goal(dds: DdsRobot, 
         assert "navigation cancelled" in detail, (detail, stopped)
         if case != "executor-killed":
             assert "executor: latched" in detail, (detail, stopped)
-        # Standing: no pose relayed from a second after the STOP moves.
+        # Standing: of the poses relayed in the STOP_BOUND after the robot was told to stop,
+        # the last half are where it stands.
         if case != "executor-killed":
-            settle = asked + 0.5
+            told = max(dds.events("zero", asked)[0], dds.events("cancel", asked)[0])
             await async_wait_until(
-                lambda: [p for at, p in poses if at > settle + 1.0], 5.0, "poses after STOP"
+                lambda: [at for at, _ in poses if at > told + STOP_BOUND], WAIT, "poses"
             )
-            after = [p for at, p in poses if at > settle]
-            assert math.dist((after[0].x, after[0].y), (after[-1].x, after[-1].y)) < 0.01
+            after = [(at, p) for at, p in poses if at > told]
+            last = after[-1][1]
+            away = [at for at, p in after if math.dist((p.x, p.y), (last.x, last.y)) >= 0.01]
+            assert after[-1][0] - max(away, default=told) >= STOP_BOUND / 2, after
         released = await client.ask(Release())
         assert released is not None
 

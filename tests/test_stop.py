@@ -1,16 +1,18 @@
 """STOP first, whatever the executor is doing: each fault of harness/stop_rig.py, once, with
-real processes on loopback and the simulator. The bounds leave room for a busy machine;
-bench/stop.py measures the same cases many times for the percentiles."""
+real processes on loopback and the simulator. The tests wait for conditions: the robot
+told to stop before any faulty part could have let it, standing, and moved no more. How
+fast is bench/stop.py's figure (the same cases many times, percentiles, docs/benchmarks.md)."""
 
 from __future__ import annotations
 
 import asyncio
+import math
 import time
 from pathlib import Path
 
 import pytest
 
-from harness.stop_rig import CASES, ROBOT, StopRig, ended, order
+from harness.stop_rig import CASES, FAULT_SECONDS, ROBOT, StopRig, ended, order
 from harness.wait import async_wait_until
 from voicectl.shared.bus import json_decoder
 from voicectl.shared.client import Unreachable, VoicectlClient
@@ -42,9 +44,12 @@ from voicectl.shared.ros2 import CmdVelType, RosDistro
 from .conftest import Processes
 from .support import joined
 
-BOUND = 0.25
-"""Seconds from STOP to the robot told to stop, on a loaded two-core machine (the bench's
-p99 on an idle one is in docs/benchmarks.md)."""
+BOUND = FAULT_SECONDS / 2
+"""Seconds from STOP to the robot told to stop, at most: half as long as the faulty
+executors block their loop, and well short of any timeout on the way (the supervisor's 5 s
+for its executor), so a STOP that waited for any of them fails; generous on a busy
+machine, where tens of milliseconds can become hundreds. Not a figure: bench/stop.py
+measures that."""
 
 
 @pytest.mark.parametrize(
@@ -67,8 +72,9 @@ async def test_stop_stops_the_robot_at_once_and_for_good(
         assert outcome.zero_velocity < BOUND, outcome
         if outcome.cancelled is not None:
             assert outcome.cancelled < BOUND, outcome
-        assert outcome.moved < 0.01, outcome
-        assert outcome.fastest_after == 0.0, outcome
+        assert outcome.stood < math.inf, outcome  # it came to a stand, and stayed:
+        assert outcome.moved_standing < 0.01, outcome
+        assert outcome.fastest_standing == 0.0, outcome
         if case == "supervisor-and-executor-killed":
             assert outcome.stopped.detail.startswith("SUPERVISOR DID NOT STOP IT"), outcome
             assert "navigation cancelled every goal" in outcome.stopped.detail
@@ -88,9 +94,12 @@ async def test_stop_stops_the_robot_at_once_and_for_good(
         assert reply.state.stopped
         assert reply.state.queue_length == 0
         if case == "commanding-from-blocked-loop":
-            # Its commands went on, and the robot handle refused every one after the stop.
-            blocked = "the blocked order to end"
-            record = await ended(client, lambda r: r.order.label == "blockdrive", blocked)
+            # Its commands went on, and the robot handle refused every one after the stop:
+            # the executor's word on the order, which the stop ended at once.
+            blocked = "the executor's word on the blocked order"
+            record = await ended(
+                client, lambda r: r.order.label == "blockdrive" and "drove; " in r.message, blocked
+            )
             assert record.status == OrderStatus.CANCELLED, record
             refused = int(record.message.split("drove; ")[1].split()[0])
             assert refused >= 3, record
@@ -178,12 +187,11 @@ async def test_stop_on_rmw_zenoh_goes_to_the_key_the_robot_announced(
             reply = await client.request(ROBOT, EmergencyStop())
             assert isinstance(reply, Stopped), reply
             stopped = reply
+        # Heard there at all: a stop sent to another key never would be.
         await async_wait_until(
-            lambda: rig.first_zero(asked) < BOUND * 4, 2.0, "zero velocity on the robot's key"
+            lambda: rig.first_zero(asked) < math.inf, BOUND, "zero velocity on the robot's key"
         )
-        zero = rig.first_zero(asked)
-        print(case, zero, stopped)
-        assert zero < BOUND, (zero, stopped)
+        print(case, rig.first_zero(asked), stopped)
         assert stopped.confirmed, stopped
 
 
@@ -196,11 +204,12 @@ async def test_a_stalled_event_loop_is_noticed_and_the_robot_halted(
 
     with rig.client() as client:
         await rig.ready(client)
-        (order_id,) = await client.submit(ROBOT, [order("blockdrive", seconds=3)])
+        block = 3 * BOUND  # long past the watchdog's limit, however busy the machine
+        (order_id,) = await client.submit(ROBOT, [order("blockdrive", seconds=block)])
         await rig.driving()
-        # Stopped by the watchdog within its limit and a beat, not after the 3 s block.
+        # Stopped by the watchdog, before the block ends.
         await async_wait_until(
-            lambda: rig.odometry[-1][1].linear_x == 0.0, 2.5, "the watchdog to halt it"
+            lambda: rig.odometry[-1][1].linear_x == 0.0, 2 * BOUND, "the watchdog to halt it"
         )
         halted = rig.odometry[-1][0]
         await asyncio.sleep(0.5)

@@ -4,6 +4,7 @@ downward, and the old names still answering for a release."""
 from __future__ import annotations
 
 import ast
+import os
 import re
 import subprocess
 import sys
@@ -187,10 +188,10 @@ print(*sorted({{f"{{w.category.__name__}}: {{w.message}}" for w in caught}}), se
     assert lines[:2] == ["True True", new]
     top = old.partition(".")[0]
     assert (
-        f"FutureWarning: '{top}' is now 'voicectl.{top}'; the old name goes in the next release"
+        f"FutureWarning: '{top}' is now 'voicectl.{top}'; the old name goes in voicectl 0.3"
         in lines
     )
-    assert f"FutureWarning: '{old}' is now '{new}'; the old name goes in the next release" in lines
+    assert f"FutureWarning: '{old}' is now '{new}'; the old name goes in voicectl 0.3" in lines
 
 
 def test_an_old_name_that_never_existed_is_still_not_found() -> None:
@@ -207,6 +208,68 @@ def test_an_old_name_that_never_existed_is_still_not_found() -> None:
     )
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "services.nonexistent"
+
+
+def test_a_package_of_the_users_own_called_shared_is_never_hidden(tmp_path: Path) -> None:
+    """Theirs on sys.path, found before or after voicectl was imported: theirs, with its
+    own submodules, and no warning; voicectl's old name `services` still aliases."""
+    mine = tmp_path / "shared"
+    mine.mkdir()
+    (mine / "__init__.py").write_text("OWNER = 'user'\n")
+    (mine / "messages.py").write_text("ORDER = 'mine'\n")
+    code = """
+import warnings
+warnings.simplefilter("error")
+import voicectl
+import shared, shared.messages
+print(shared.OWNER, shared.messages.ORDER, shared.messages.__file__)
+with warnings.catch_warnings(record=True) as caught:
+    warnings.simplefilter("always")
+    import services.executor
+print(services.executor is voicectl.services.executor, len(caught))
+"""
+    done = subprocess.run(
+        [sys.executable, "-c", code], cwd=tmp_path, capture_output=True, text=True, timeout=60
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.splitlines() == [
+        f"user mine {mine / 'messages.py'}",
+        "True 2",
+    ]
+
+
+def test_a_module_of_the_users_own_called_services_is_never_hidden(tmp_path: Path) -> None:
+    (tmp_path / "lib").mkdir()
+    (tmp_path / "lib" / "services.py").write_text("OWNER = 'user'\n")
+    code = "import voicectl, services\nprint(services.OWNER)"
+    done = subprocess.run(
+        [sys.executable, "-W", "error", "-c", code],
+        cwd="/",
+        env={**os.environ, "PYTHONPATH": str(tmp_path / "lib")},
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "user"
+
+
+def test_in_a_checkout_the_old_name_is_the_same_module_not_a_second_copy() -> None:
+    """The checkout's `shared/` is the folder `voicectl/shared` links to: aliased, never
+    imported twice (two sets of message classes)."""
+    code = (
+        "import voicectl, voicectl.shared.messages, shared.messages\n"
+        "print(shared.messages is voicectl.shared.messages)"
+    )
+    done = subprocess.run(
+        [sys.executable, "-W", "ignore", "-c", code],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "True"
 
 
 def test_an_executor_written_for_the_old_names_still_loads(tmp_path: Path) -> None:

@@ -14,6 +14,7 @@ from harness.client import Client, client_wait_ready
 from harness.wait import async_wait_until
 from voicectl.services.executor.runner import SUPERVISOR_LOST
 from voicectl.services.supervisor.robot import SETTLE
+from voicectl.shared.bus import json_decoder
 from voicectl.shared.errors import BusError
 from voicectl.shared.keys import RobotKeys
 from voicectl.shared.messages import (
@@ -27,6 +28,8 @@ from voicectl.shared.messages import (
     OrderStatus,
     Reorder,
     Resume,
+    State,
+    StateUpdate,
     Stopped,
     Submit,
     Submitted,
@@ -35,7 +38,7 @@ from voicectl.shared.messages import (
 from voicectl.shared.robot.keys import RobotNames
 from voicectl.shared.ros2 import Odometry, Ros2Codec, RosDistro
 
-from .support import Site, StandIn, order
+from .support import ROBOT_GIVEN, Site, StandIn, order
 
 
 async def test_sigkill_with_orders_in_flight_loses_nothing_and_resumes(site: Site) -> None:
@@ -364,9 +367,55 @@ async def test_emergency_stop_halts_a_moving_robot_at_once(site: Site) -> None:
             next(t for t, odom in odometry if t > stopped_at and odom.linear_x == 0.0) - stopped_at
         )
         print(f"emergency stop to zero velocity on odom: {halt_latency * 1000:.0f} ms")
-        assert halt_latency < 1.0
+        # Stopped well short of the goal (how fast is bench/stop.py's figure).
+        assert odometry[-1][1].pose.x < 7.0
         assert (await client.finished(moving)).status == OrderStatus.CANCELLED
         assert (await client.finished(queued)).message == "emergency stop"
+
+
+async def test_the_state_never_says_stopped_beside_a_running_order(site: Site) -> None:
+    """STOP ends the running order at once: from then on it may not command the robot. An
+    executor slow to end it (this one ignores its cancel, and is ended by the runner's
+    deadline) says how later, and its words are kept; no state, asked for or published,
+    ever showed the order running under a latched stop."""
+    site.start_supervisor()
+    stubborn = ("--executor", "harness.executors:Stubborn")
+    executor = site.processes.executor(site.router, "r1", *stubborn, *ROBOT_GIVEN)
+    with site.joined() as bus:
+        client = Client(bus, "r1")
+        await client_wait_ready(client)
+        published: list[State] = []
+        bus.subscribe(
+            RobotKeys("r1").state,
+            json_decoder(StateUpdate),
+            lambda _key, update: published.append(update.state),
+        )
+        (running,) = await client.submit(order("stubborn", seconds=3))
+        await client.wait_state(lambda s: s.current is not None, "the order to run")
+        assert isinstance(await client.ask(EmergencyStop()), Stopped)
+        state = await client.state()
+        assert (state.stopped, state.current) == (True, None)
+        assert (state.history[0].id, state.history[0].status, state.history[0].message) == (
+            running,
+            OrderStatus.CANCELLED,
+            "emergency stop",
+        )
+        await async_wait_until(
+            lambda: f"order {running} cancelled: emergency stop" in site.processes.log(executor),
+            30.0,
+            "the executor's own word on the order",
+        )
+        said = "emergency stop; it then said: emergency stop; executor did not stop in time"
+
+        async def kept() -> bool:
+            record = (await client.history()).records[0]
+            return (record.id, record.status) == (running, OrderStatus.CANCELLED) and (
+                record.message.startswith(said)
+            )
+
+        await async_wait_until(kept, 10.0, "the executor's words in the history")
+        assert published
+        assert [s for s in published if s.stopped and s.current is not None] == []
 
 
 async def test_a_second_supervisor_on_the_bus_stands_down(site: Site, tmp_path: Path) -> None:

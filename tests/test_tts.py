@@ -18,6 +18,8 @@ from hypothesis import strategies as st
 from voicectl.shared.errors import TtsError
 from voicectl.shared.tts import MAX_TEXT, CommandVoice, Speech, Voice, from_wav, load_voice, to_wav
 
+from .conftest import cannot_run
+
 PHRASE = "turn left, then reach kitchen"
 
 
@@ -34,7 +36,7 @@ def voice(request: pytest.FixtureRequest, monkeypatch: pytest.MonkeyPatch, tmp_p
         monkeypatch.setenv("PATH", str(tmp_path))
         return load_voice("espeak-ng")
     if shutil.which(request.param) is None:
-        pytest.skip(f"{request.param} is not installed (scripts/test installs it)")
+        cannot_run(f"{request.param} is not installed (scripts/test installs it)")
     return load_voice(request.param)
 
 

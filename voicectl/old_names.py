@@ -1,4 +1,4 @@
-"""The import names voicectl had in 0.1, `shared` and `services`, kept for one release.
+"""The import names voicectl had in 0.1, `shared` and `services`: kept in 0.2, gone in 0.3.
 
 Installing voicectl puts one name into site-packages, `voicectl`; its parts are
 `voicectl.shared` and `voicectl.services`. An executor written as `from services.executor
@@ -9,6 +9,13 @@ the import runs voicectl rather than develops it.
 
 The old name is an alias, not a second copy: `shared.messages.Order` *is*
 `voicectl.shared.messages.Order`, so isinstance checks and msgspec's tagged unions agree.
+
+It is an alias only where nothing else answers to the name: a package or module of the
+user's own called `shared` or `services`, anywhere Python would import it from, is imported
+as theirs and never hidden. (Aliasing only while the executor loads user executors would
+still hide theirs from those executors, and break an old name imported later, inside a
+function.) A checkout's own `shared/` folder is not another package: it is the folder
+`voicectl/shared` links to, and is aliased, so that it is never imported twice.
 """
 
 from __future__ import annotations
@@ -20,9 +27,12 @@ import importlib.util
 import sys
 import warnings
 from collections.abc import Sequence
+from pathlib import Path
 from types import ModuleType
 
 OLD = ("shared", "services")
+GOES_IN = "0.3"
+"""The release without the old names (docs/executors.md says so too)."""
 
 
 class _Alias(importlib.abc.Loader):
@@ -49,17 +59,41 @@ class OldNames(importlib.abc.MetaPathFinder):
         path: Sequence[str] | None = None,
         target: ModuleType | None = None,
     ) -> importlib.machinery.ModuleSpec | None:
-        if fullname.partition(".")[0] not in OLD:
+        top = fullname.partition(".")[0]
+        if top not in OLD:
+            return None
+        if top != fullname:
+            # Under the alias only: a submodule of the user's own package is theirs.
+            if sys.modules.get(top) is not importlib.import_module(f"voicectl.{top}"):
+                return None
+        elif self._taken(top):
             return None
         new = f"voicectl.{fullname}"
         if importlib.util.find_spec(new) is None:
             return None
         warnings.warn(
-            f"'{fullname}' is now '{new}'; the old name goes in the next release",
+            f"'{fullname}' is now '{new}'; the old name goes in voicectl {GOES_IN}",
             FutureWarning,
             stacklevel=2,
         )
         return importlib.util.spec_from_loader(fullname, _Alias(importlib.import_module(new)))
+
+    def _taken(self, name: str) -> bool:
+        """Whether the first other finder that finds a top-level `name` finds something
+        other than voicectl's own folder of that name (a checkout's `shared/` is that
+        folder, through the link `voicectl/shared`)."""
+        own = importlib.util.find_spec(f"voicectl.{name}")
+        mine = {Path(p).resolve() for p in (own.submodule_search_locations or ())} if own else set()
+        for finder in sys.meta_path:
+            find = getattr(finder, "find_spec", None)
+            if finder is self or find is None:
+                continue
+            spec = find(name, None)
+            if spec is None:
+                continue
+            places = spec.submodule_search_locations or ([spec.origin] if spec.origin else [])
+            return not places or not {Path(p).resolve() for p in places} <= mine
+        return False
 
 
 def install() -> None:

@@ -77,6 +77,9 @@ class RobotQueue:
         """False while a current order restored from the store awaits the executor's word."""
         self.stopped = False
         """The emergency stop is latched: no order starts, none is accepted."""
+        self.ending: str | None = None
+        """The order an emergency stop ended here whose end its executor has not reported
+        yet: none starts before it does (`finish`), or before `stop_waiting`."""
         self.stop_detail = ""
         """What answered the last emergency stop, as it came in."""
         self.paused = ""
@@ -204,6 +207,8 @@ class RobotQueue:
         """The next order to hand to the executor, now marked running; None if not now."""
         if self.current is not None or not self.queue or not self.executor_online:
             return None
+        if self.ending is not None:
+            return None
         if self.stopped or self.paused:
             return None
         record = self.queue.popleft()
@@ -232,6 +237,10 @@ class RobotQueue:
         one, whichever side was lost."""
         if status not in FINAL:
             raise ValueError(f"{status} is not a final status")
+        if order_id == self.ending:
+            self.ending = None
+            self._amend(order_id, status, message)
+            return True
         if self.current is None or self.current.id != order_id:
             return False
         record = self.current
@@ -248,6 +257,39 @@ class RobotQueue:
                     f"an earlier order of the same command ended {status}: {record.id}",
                 )
         return True
+
+    def stop_current(self, message: str) -> OrderRecord | None:
+        """End the running order for an emergency stop, at once: from the stop on it may
+        not command the robot, so it runs no more, and the state never says stopped
+        beside it. Its executor's word on how it ended, when it comes, is taken
+        (`finish`); until then no other order starts."""
+        record = self.current
+        if record is None:
+            return None
+        self.current = None
+        self.current_verified = True
+        self.ending = record.id
+        self._to_history(record, OrderStatus.CANCELLED, message)
+        return record
+
+    def stop_waiting(self, order_id: str) -> bool:
+        """Start orders again without the executor's word on `order_id`, which an
+        emergency stop ended; False if that was not awaited."""
+        if self.ending != order_id:
+            return False
+        self.ending = None
+        return True
+
+    def _amend(self, order_id: str, status: OrderStatus, message: str) -> None:
+        """An ended order's record as its executor says it ended (it may have finished
+        just before the stop reached it)."""
+        for index, record in enumerate(self.history):
+            if record.id == order_id:
+                if (record.status, record.message) != (status, message):
+                    amended = msgspec.structs.replace(record, status=status, message=message)
+                    self.history[index] = amended
+                    self._changed[order_id] = amended
+                return
 
     def remove_queued(self, order_id: str, message: str) -> bool:
         for record in self.queue:

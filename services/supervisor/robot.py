@@ -300,22 +300,31 @@ class RobotSupervisor:
         the latch's commit."""
         self._queue.stopped = True
         cleared = self._queue.clear_queue("emergency stop")
+        ended = self._queue.stop_current("emergency stop")
+        if ended is not None:
+            # Its executor's word on it comes within milliseconds, after a stubborn
+            # executor's cancel deadline at worst. Word that never comes (an executor out
+            # of reach) holds no order back past this: the executor itself refuses a
+            # second order while it still runs one.
+            loop = asyncio.get_running_loop()
+            loop.call_later(EXECUTOR_TIMEOUT, self._stop_waiting, ended.id)
         saved = self._store.set_stopped(self.robot, True)
         self._hold()
         return cleared, saved
 
     async def _stop_settles(self, stop: StopProcedure, cleared: int) -> None:
-        """The stop's late answers, into the state and the log; an order the executor
-        could not be told to end is ended here, its robot handle being beyond reach."""
+        """The stop's late answers, into the state and the log. (The running order ended
+        with the stop itself: `_latch_queue`.)"""
         outcome = await stop.outcome()
         detail = _stop_detail(outcome, cleared)
         if self._queue.stopped:
             self._queue.stop_detail = detail
         _LOGGER.info("%s: emergency stop: %s", self.robot, detail)
-        current = self._queue.current
-        if current is not None and outcome.executor is not None and outcome.executor.failed:
-            self._finish(current.id, OrderStatus.CANCELLED, f"emergency stop; {detail}")
         self._changed()
+
+    def _stop_waiting(self, order_id: str) -> None:
+        if self._queue.stop_waiting(order_id):
+            self._wake.set()
 
     def _robot_stop(self) -> RobotStop:
         return RobotStop.of(self.executor_info, self._bus, STOP_NODE)
@@ -392,7 +401,10 @@ class RobotSupervisor:
             return False
         current = self._queue.current
         if current is None or current.id != record.id:
-            return False  # cancelled while its start was written
+            # Cancelled, or ended by a stop, while its start was written: never sent, so
+            # no executor will say how it ended.
+            self._queue.stop_waiting(record.id)
+            return False
         if self._queue.stopped:
             self._finish(record.id, OrderStatus.CANCELLED, "emergency stop")
             return False
