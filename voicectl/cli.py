@@ -6,6 +6,7 @@ import argparse
 import asyncio
 import datetime
 import importlib
+import stat
 import sys
 from pathlib import Path
 from typing import NoReturn
@@ -413,7 +414,8 @@ def _cert(args: argparse.Namespace) -> int:
     directory = args.out or data_dir() / "tls"
     certfile, keyfile = directory / "panel.crt", directory / "panel.key"
     write_certificate(args.hosts, certfile, keyfile)
-    print(f"certificate {certfile} for {', '.join(args.hosts)}; key {keyfile} (mode 0600)")
+    mode = stat.S_IMODE(keyfile.stat().st_mode)  # what the file has, not what was meant
+    print(f"certificate {certfile} for {', '.join(args.hosts)}; key {keyfile} (mode {mode:04o})")
     print(f"serve with: voicectl up --host 0.0.0.0 --certfile {certfile} --keyfile {keyfile}")
     return 0
 
