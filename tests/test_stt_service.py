@@ -14,6 +14,7 @@ import wave
 from collections.abc import AsyncIterator
 from pathlib import Path
 
+import msgspec
 import pytest
 
 from harness.client import Client
@@ -23,13 +24,18 @@ from voicectl.services.stt.audio import frames, read_wav
 from voicectl.shared.bus import Bus, json_decoder
 from voicectl.shared.keys import ConverterKeys, RobotKeys
 from voicectl.shared.messages import (
+    MAX_CHECK_SECONDS,
     AudioChunk,
     AudioStart,
     AudioStop,
+    CheckPhrase,
+    Failed,
     Grammar,
     OrderStatus,
     PartialTranscript,
+    PhraseCheck,
     Proposal,
+    SttReply,
     SttStatus,
     Transcript,
 )
@@ -438,3 +444,32 @@ async def test_memory_goes_back_when_the_sessions_close(
         await async_wait_until(
             lambda: rss_mb(stt.pid) < peak - 80, 10.0, f"RSS to fall from {peak:.0f} MB"
         )
+
+
+CHECKED = json_decoder(SttReply)
+
+
+def check_request(pcm: bytes, phrase: str, **fields: object) -> bytes:
+    """A phrase check as JSON, built by hand: a client need not be voicectl's, and
+    `CheckPhrase` itself refuses what the recogniser must refuse."""
+    request = {"type": "checkphrase", "pcm": base64.b64encode(pcm).decode(), "phrase": phrase}
+    return msgspec.json.encode({**request, **fields})
+
+
+async def test_a_phrase_to_check_is_a_few_words(
+    router: str, processes: Processes, speech: Speak
+) -> None:
+    """Issue 43: a check of "hey robot " * 800 took 7.9 CPU-seconds and 0.7 GB. A phrase
+    is a few words: a longer one is refused at the edge, at once, and checks go on."""
+    pcm = read_wav(speech("hey robot"))[: int(MAX_CHECK_SECONDS * 32000)]
+    async with scenario(router, processes) as listener:
+        bus = listener.bus
+        for phrase in ("hey robot " * 40, "one two three four five six seven eight nine"):
+            raw = await bus.request_bytes(KEYS.stt_check, check_request(pcm, phrase), WAIT)
+            reply = CHECKED(raw)
+            assert isinstance(reply, Failed), reply
+            assert "undecodable request" in reply.reason
+            assert "64" in reply.reason or "8 words" in reply.reason, reply.reason
+        reply = await bus.request(KEYS.stt_check, CheckPhrase(pcm=pcm, phrase="hey robot"), CHECKED)
+        assert isinstance(reply, PhraseCheck), reply
+        assert reply.checked
