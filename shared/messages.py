@@ -220,6 +220,8 @@ class SessionEnded(Message):
 
 
 MAX_CHECK_SECONDS = 4.0
+CHECK_WAIT = 5.0
+MAX_CHECK_WAIT = 30.0
 MAX_PHRASE_WORDS = 8
 MAX_PHRASE_CHARACTERS = 64
 """A wake phrase is a few words: the cost of checking one grows with its length (a check
@@ -247,6 +249,8 @@ class CheckPhrase(Message):
     """16 kHz mono 16-bit PCM around the phrase, at most `MAX_CHECK_SECONDS`."""
     phrase: Annotated[str, msgspec.Meta(max_length=MAX_PHRASE_CHARACTERS)]
     """At most `MAX_PHRASE_WORDS` words (`check_phrase`)."""
+    wait: Annotated[float, msgspec.Meta(gt=0.0, le=MAX_CHECK_WAIT)] = CHECK_WAIT
+    """Seconds the asker waits for the answer: a check not begun in time is dropped."""
 
     def __post_init__(self) -> None:
         if len(self.pcm) > MAX_CHECK_SECONDS * SAMPLE_RATE * 2 or len(self.pcm) % 2:

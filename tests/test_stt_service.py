@@ -35,6 +35,7 @@ from voicectl.shared.messages import (
     PartialTranscript,
     PhraseCheck,
     Proposal,
+    SessionEnded,
     SttReply,
     SttStatus,
     Transcript,
@@ -473,3 +474,55 @@ async def test_a_phrase_to_check_is_a_few_words(
         reply = await bus.request(KEYS.stt_check, CheckPhrase(pcm=pcm, phrase="hey robot"), CHECKED)
         assert isinstance(reply, PhraseCheck), reply
         assert reply.checked
+
+
+async def test_phrase_checks_wait_in_a_short_queue_and_none_runs_for_nobody(
+    router: str, processes: Processes, speech: Speak
+) -> None:
+    """Issue 43: 300 checks asked at once with a 5 s timeout kept the recogniser busy 12 s
+    after every asker had gone. Checks now wait in a short queue, past which the asker
+    hears at once that the recogniser is busy, and one whose asker would be gone by its
+    turn is dropped, never run."""
+    pcm = read_wav(speech("hey robot"))[: int(MAX_CHECK_SECONDS * 32000)]
+    async with scenario(router, processes) as listener:
+        bus = listener.bus
+
+        async def ask(wait: float) -> object:
+            request = CheckPhrase(pcm=pcm, phrase="hey robot", wait=wait)
+            return await bus.request(KEYS.stt_check, request, CHECKED, WAIT)
+
+        replies = await asyncio.gather(*(ask(5.0) for _ in range(20)))
+        busy = [r for r in replies if isinstance(r, Failed) and "busy" in r.reason]
+        checked = [r for r in replies if isinstance(r, PhraseCheck) and r.checked]
+        assert busy, replies
+        assert len(busy) + len(checked) == len(replies), replies
+        # Askers that wait 10 ms: none can be answered in time, so none is checked.
+        replies = await asyncio.gather(*(ask(0.01) for _ in range(5)))
+        assert all(isinstance(r, Failed) and "not checked" in r.reason for r in replies), replies
+        assert isinstance(await ask(5.0), PhraseCheck)  # and the next asker is answered
+
+
+async def test_a_session_whose_sender_went_quiet_is_dropped_not_recognised(
+    router: str, processes: Processes, speech: Speak
+) -> None:
+    """A session's sender gone (nothing for `--idle` seconds) in the middle of speech:
+    what it said is dropped, not made into a transcript nobody waits for."""
+    said = read_wav(speech("turn left then reach the kitchen then turn right"))
+    async with scenario(router, processes, stt_args=("--idle", "2")) as listener:
+        bus = listener.bus
+        ended: list[SessionEnded] = []
+        bus.subscribe(
+            KEYS.stt_session("cut"), json_decoder(SessionEnded), lambda _k, m: ended.append(m)
+        )
+        sender = bus.stream(KEYS.stt_audio("cut"))
+        assert await sender.matched(WAIT)
+        sender.send(AudioStart())
+        half = _chunks(said[: len(said) // 2])  # mid-sentence: the utterance is open
+        for seq, pcm in enumerate(half):
+            sender.send(AudioChunk(seq=seq, pcm=pcm))
+        await async_wait_until(lambda: ended, WAIT, "the quiet session to be ended")
+        assert "no audio for 2 s" in ended[0].reason
+        # A session after it: its transcript comes after any of the first one's would.
+        await stream(bus, "after", speech("turn right"))
+        await listener.final("after")
+        assert [t for _, t in listener.finals if t.session == "cut"] == []

@@ -28,7 +28,6 @@ from voicectl.shared.messages import (
     AudioStart,
     AudioStop,
     CheckPhrase,
-    Failed,
     Grammar,
     Message,
     PartialTranscript,
@@ -40,6 +39,7 @@ from voicectl.shared.messages import (
 from voicectl.shared.process import Service
 
 from .audio import BYTES_PER_SECOND
+from .checks import PhraseChecks
 from .engine import Engine, EngineError, Final, Heard, Recogniser, RecognitionEvent, SpeechStarted
 
 _LOGGER = logging.getLogger(__name__)
@@ -120,10 +120,15 @@ class Session:
             self.stopping = True
         self._inbox.put(None)
 
-    def abort(self) -> None:
-        """The service is stopping: drop what is queued and end the thread now."""
+    def drop(self) -> None:
+        """Any thread: end the session without recognising what it still holds: its
+        sender has gone, and nobody would act on a transcript made now."""
         self._aborted = True
         self.stop()
+
+    def abort(self) -> None:
+        """The service is stopping: drop what is queued and end the thread now."""
+        self.drop()
         self._thread.join(timeout=5.0)
         if self._publisher is not None:
             self._publisher.cancel()
@@ -228,6 +233,7 @@ class SttService(Service):
         self._status: Latest | None = None
         self._unpronounceable: list[str] = []
         self._detail = ""
+        self._checks = PhraseChecks(engine.check)
         self._refused = _Recent(256)
         """Sessions refused or unknown, so that their audio is dropped without a line
         per chunk (the last few hundred names)."""
@@ -263,17 +269,16 @@ class SttService(Service):
             for session in sessions:
                 if not session.stopping and now - session.last_heard > self.limits.idle_seconds:
                     _LOGGER.info(
-                        "session %s idle for %g s: stopped", session.name, self.limits.idle_seconds
+                        "session %s idle for %g s: stopped, what it held dropped",
+                        session.name,
+                        self.limits.idle_seconds,
                     )
-                    self._stop(session)
+                    self._stop(session, drop=True)
                     idle = f"no audio for {self.limits.idle_seconds:g} s: the microphone closed"
                     self._tell(session.name, SessionEnded(reason=idle))
 
     async def _on_check(self, request: CheckPhrase) -> Message:
-        try:
-            return await asyncio.to_thread(self.engine.check, request.pcm, request.phrase)
-        except EngineError as exc:
-            return Failed(reason=str(exc))
+        return await self._checks.ask(request)
 
     # --- grammar ---------------------------------------------------------------------------
 
@@ -367,9 +372,13 @@ class SttService(Service):
                 else:
                     self._stop(session)
 
-    def _stop(self, session: Session) -> None:
-        """Any thread: end the session; it is forgotten once its last event is out."""
-        session.stop()
+    def _stop(self, session: Session, drop: bool = False) -> None:
+        """Any thread: end the session (`drop`: without recognising what it holds); it is
+        forgotten once its last event is out."""
+        if drop:
+            session.drop()
+        else:
+            session.stop()
         assert self._loop is not None
         with contextlib.suppress(RuntimeError):  # the loop is closing
             self._loop.call_soon_threadsafe(session.finished.add_done_callback, self._forget)
