@@ -7,6 +7,7 @@ from __future__ import annotations
 import asyncio
 import base64
 import contextlib
+import itertools
 import os
 import shutil
 import time
@@ -18,12 +19,14 @@ import msgspec
 import pytest
 
 from harness.client import Client
+from harness.processes import Process
 from harness.speech_set import in_babble
 from harness.wait import async_wait_until
 from voicectl.services.stt.audio import frames, read_wav
-from voicectl.shared.bus import Bus, json_decoder
+from voicectl.shared.bus import Bus, Stream, json_decoder
 from voicectl.shared.keys import ConverterKeys, RobotKeys
 from voicectl.shared.messages import (
+    FRAME_BYTES,
     MAX_CHECK_SECONDS,
     AudioChunk,
     AudioStart,
@@ -526,3 +529,61 @@ async def test_a_session_whose_sender_went_quiet_is_dropped_not_recognised(
         await stream(bus, "after", speech("turn right"))
         await listener.final("after")
         assert [t for _, t in listener.finals if t.session == "cut"] == []
+
+
+async def test_trickling_sessions_are_closed_and_a_microphone_gets_in(
+    router: str, processes: Processes
+) -> None:
+    """Issue 43: sessions sending a 20 ms chunk every 10 s were never idle long enough to
+    be closed, and kept every microphone out ("busy"). A session that sends far less audio
+    than time passes is closed, and told why; so is one open past the longest allowed."""
+    limits = ("--max-sessions", "2", "--audio-window", "2", "--max-session", "4")
+    async with scenario(router, processes, stt_args=limits) as listener:
+        bus = listener.bus
+        ended: dict[str, list[SessionEnded]] = {}
+
+        def opened(name: str) -> Stream:
+            ended[name] = []
+            bus.subscribe(
+                KEYS.stt_session(name),
+                json_decoder(SessionEnded),
+                lambda _k, m: ended[name].append(m),
+            )
+            sender = bus.stream(KEYS.stt_audio(name))
+            sender.send(AudioStart())
+            return sender
+
+        async def send(sender: Stream, every: float) -> None:
+            for seq in itertools.count():
+                sender.send(AudioChunk(seq=seq, pcm=bytes(FRAME_BYTES * 5)))  # 100 ms
+                await asyncio.sleep(every)
+
+        assert await bus.stream(KEYS.stt_audio("probe")).matched(WAIT)
+        tricklers = [asyncio.create_task(send(opened(n), 2.0)) for n in ("t1", "t2")]
+        try:
+            await async_wait_until(
+                lambda: "session t2 started" in processes.log(stt_process(processes)),
+                WAIT,
+                "the tricklers' sessions",
+            )
+            opened("refused")
+            await async_wait_until(lambda: ended["refused"], WAIT, "the third to be refused")
+            assert ended["refused"][0].refused
+            await async_wait_until(
+                lambda: ended["t1"] and ended["t2"], WAIT, "the tricklers to be closed"
+            )
+            assert "of audio in 2 s" in ended["t1"][0].reason, ended["t1"]
+            assert not ended["t1"][0].refused
+        finally:
+            for task in tricklers:
+                task.cancel()
+        talker = asyncio.create_task(send(opened("mic"), 0.1))  # as a microphone sends
+        try:
+            await async_wait_until(lambda: ended["mic"], WAIT, "the long session to be closed")
+        finally:
+            talker.cancel()
+        assert "open for 4 s, the longest a session may be" in ended["mic"][0].reason
+
+
+def stt_process(processes: Processes) -> Process:
+    return next(p for name, p, _ in processes.started if name == "stt")

@@ -57,6 +57,15 @@ class SessionLimits:
     """A session that sends nothing for this long is stopped."""
     max_backlog: float = 5.0
     """Seconds of audio waiting to be decoded before a session's new audio is dropped."""
+    max_session: float = 300.0
+    """Seconds a session may stay open: sessions held open lock everyone else out. Past
+    it the session ends (its utterance in progress is finished); a person opens another."""
+    min_audio: float = 0.25
+    """Seconds of audio a session must send per second, over each `audio_window`: a
+    microphone sends one, and a session that trickles far less holds a place nobody
+    speaks in (eight such kept every microphone out, never idle long enough to close)."""
+    audio_window: float = 10.0
+    """Seconds over which `min_audio` is measured."""
 
 
 class Session:
@@ -78,6 +87,9 @@ class Session:
         """Bytes in the inbox, not yet decoded (updated on both threads under the lock)."""
         self._lock = threading.Lock()
         self.last_heard = time.monotonic()
+        self.opened = self.last_heard
+        self._window = (self.opened, 0)
+        """Since when audio is counted, and how many bytes came since (under the lock)."""
         self.stopping = False
         self.finished = loop.create_future()
         """Done once the last event of the session is published."""
@@ -104,6 +116,8 @@ class Session:
             )
         self._next_seq = chunk.seq + 1
         with self._lock:
+            since, received = self._window
+            self._window = (since, received + len(chunk.pcm))
             if self._backlog + len(chunk.pcm) > self._service.limits.max_backlog * BYTES_PER_SECOND:
                 _LOGGER.warning(
                     "session %s falls behind: %d ms dropped", self.name, len(chunk.pcm) // 32
@@ -119,6 +133,16 @@ class Session:
                 return
             self.stopping = True
         self._inbox.put(None)
+
+    def audio_sent(self, now: float, window: float) -> float | None:
+        """Seconds of audio received over the last `window` seconds, once that much time
+        has passed since the count began (a new count begins then); None before."""
+        with self._lock:
+            since, received = self._window
+            if now - since < window:
+                return None
+            self._window = (now, 0)
+        return received / BYTES_PER_SECOND
 
     def drop(self) -> None:
         """Any thread: end the session without recognising what it still holds: its
@@ -267,15 +291,32 @@ class SttService(Service):
             with self._sessions_lock:
                 sessions = list(self._sessions.values())
             for session in sessions:
-                if not session.stopping and now - session.last_heard > self.limits.idle_seconds:
-                    _LOGGER.info(
-                        "session %s idle for %g s: stopped, what it held dropped",
-                        session.name,
-                        self.limits.idle_seconds,
-                    )
-                    self._stop(session, drop=True)
-                    idle = f"no audio for {self.limits.idle_seconds:g} s: the microphone closed"
-                    self._tell(session.name, SessionEnded(reason=idle))
+                ending = None if session.stopping else self._ending(session, now)
+                if ending is not None:
+                    reason, drop = ending
+                    _LOGGER.info("session %s closed: %s", session.name, reason)
+                    self._stop(session, drop)
+                    self._tell(session.name, SessionEnded(reason=reason))
+
+    def _ending(self, session: Session, now: float) -> tuple[str, bool] | None:
+        """Why `session` must end now, and whether what it holds is dropped (nobody
+        speaks in it); None while it may go on."""
+        limits = self.limits
+        if now - session.last_heard > limits.idle_seconds:
+            return f"no audio for {limits.idle_seconds:g} s: the microphone closed", True
+        if now - session.opened > limits.max_session:
+            return (
+                f"open for {limits.max_session:g} s, the longest a session may be: start a new one",
+                False,
+            )
+        sent = session.audio_sent(now, limits.audio_window)
+        if sent is not None and sent < limits.min_audio * limits.audio_window:
+            return (
+                f"{sent:.1f} s of audio in {limits.audio_window:g} s: a microphone sends "
+                "as much audio as time passes",
+                True,
+            )
+        return None
 
     async def _on_check(self, request: CheckPhrase) -> Message:
         return await self._checks.ask(request)
