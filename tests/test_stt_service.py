@@ -587,3 +587,36 @@ async def test_trickling_sessions_are_closed_and_a_microphone_gets_in(
 
 def stt_process(processes: Processes) -> Process:
     return next(p for name, p, _ in processes.started if name == "stt")
+
+
+async def test_a_flood_of_bad_audio_messages_logs_a_line_per_kind(
+    router: str, processes: Processes
+) -> None:
+    """Issue 43: every refused start, chunk out of order, chunk for no session and chunk
+    dropped logged a line (200 chunks, 200 lines). Now each kind is said at most once
+    every 10 s, as undecodable messages are (shared/throttle.py)."""
+    async with scenario(router, processes, stt_args=("--max-sessions", "1")) as listener:
+        bus = listener.bus
+        good = bus.stream(KEYS.stt_audio("good"))
+        assert await good.matched(WAIT)
+        good.send(AudioStart())
+        log = lambda: processes.log(stt_process(processes))  # noqa: E731
+        await async_wait_until(lambda: "session good started" in log(), WAIT, "the session")
+        second = bytes(FRAME_BYTES * 50)
+        for n in range(50):
+            bus.publish(KEYS.stt_audio(f"more{n}"), AudioStart())  # refused: one is open
+            bus.publish(KEYS.stt_audio(f"none{n}"), AudioChunk(seq=0, pcm=bytes(FRAME_BYTES)))
+            bus.publish(KEYS.stt_audio(f"none{n}"), AudioStop())
+        for seq in range(0, 100, 2):  # every other chunk missing, and 50 s at once
+            good.send(AudioChunk(seq=seq, pcm=second))
+        good.send(AudioStop())
+        await async_wait_until(lambda: "session good ended" in log(), WAIT, "the session's end")
+    said = log()
+    for line in (
+        "refused: 1 sessions open already",
+        "not started: dropped",
+        "which was not started: ignored",
+        "audio was lost or reordered",
+        "falls behind",
+    ):
+        assert 1 <= said.count(line) <= 2, (line, said.count(line))

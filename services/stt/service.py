@@ -37,6 +37,7 @@ from voicectl.shared.messages import (
     excerpt,
 )
 from voicectl.shared.process import Service
+from voicectl.shared.throttle import Throttled
 
 from .audio import BYTES_PER_SECOND
 from .checks import PhraseChecks
@@ -108,7 +109,8 @@ class Session:
         """On Zenoh's thread: queue the audio for the recogniser."""
         self.last_heard = time.monotonic()
         if chunk.seq != self._next_seq:
-            _LOGGER.warning(
+            self._service.noise.warning(
+                "order",
                 "session %s: chunk %d arrived, %d expected; audio was lost or reordered",
                 self.name,
                 chunk.seq,
@@ -119,8 +121,11 @@ class Session:
             since, received = self._window
             self._window = (since, received + len(chunk.pcm))
             if self._backlog + len(chunk.pcm) > self._service.limits.max_backlog * BYTES_PER_SECOND:
-                _LOGGER.warning(
-                    "session %s falls behind: %d ms dropped", self.name, len(chunk.pcm) // 32
+                self._service.noise.warning(
+                    "behind",
+                    "session %s falls behind: %d ms dropped",
+                    self.name,
+                    len(chunk.pcm) // 32,
                 )
                 return
             self._backlog += len(chunk.pcm)
@@ -258,6 +263,9 @@ class SttService(Service):
         self._unpronounceable: list[str] = []
         self._detail = ""
         self._checks = PhraseChecks(engine.check)
+        self.noise = Throttled(_LOGGER)
+        """Warnings a sender can cause once per message (refused sessions, chunks out of
+        order, for no session or dropped): at most one of a kind every 10 s."""
         self._refused = _Recent(256)
         """Sessions refused or unknown, so that their audio is dropped without a line
         per chunk (the last few hundred names)."""
@@ -378,8 +386,11 @@ class SttService(Service):
             session = self._sessions.get(name)
             if isinstance(message, AudioStart) and session is None:
                 if len(self._sessions) >= self.limits.max_sessions:
-                    _LOGGER.warning(
-                        "session %s refused: %d sessions open already", name, len(self._sessions)
+                    self.noise.warning(
+                        "refused",
+                        "session %s refused: %d sessions open already",
+                        name,
+                        len(self._sessions),
                     )
                     self._refused.add(name)
                     self._tell(
@@ -404,12 +415,16 @@ class SttService(Service):
                 if session is None:
                     if name not in self._refused:  # said once, not once per chunk
                         self._refused.add(name)
-                        _LOGGER.warning("audio for session %s, not started: dropped", name)
+                        self.noise.warning(
+                            "unknown", "audio for session %s, not started: dropped", name
+                        )
                 elif not session.stopping:
                     session.feed(message)
             case AudioStop():
                 if session is None:
-                    _LOGGER.warning("stop for session %s, which was not started: ignored", name)
+                    self.noise.warning(
+                        "unknown-stop", "stop for session %s, which was not started: ignored", name
+                    )
                 else:
                     self._stop(session)
 
