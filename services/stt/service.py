@@ -55,7 +55,8 @@ class SessionLimits:
     max_sessions: int = 8
     """Open sessions per robot; each holds a decoder (about 30 MB for pocketsphinx)."""
     idle_seconds: float = 30.0
-    """A session that sends nothing for this long is stopped."""
+    """A session that sends nothing for this long is ended, what it holds dropped: its
+    sender has gone."""
     max_backlog: float = 5.0
     """Seconds of audio waiting to be decoded before a session's new audio is dropped."""
     max_session: float = 300.0
