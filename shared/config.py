@@ -43,7 +43,21 @@ def load_or_create_token(path: Path) -> str:
             return token
     path.parent.mkdir(parents=True, exist_ok=True)
     token = secrets.token_urlsafe(24)
-    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
-    with os.fdopen(fd, "w", encoding="utf-8") as file:
-        file.write(token + "\n")
+    write_secret(path, (token + "\n").encode())
     return token
+
+
+def write_secret(path: Path, content: bytes) -> Path:
+    """Write `content` to a file only its owner reads (0600), whatever mode a file of that
+    name had: a new file takes the old one's place, so no byte is ever in a file others
+    read, nor reaches a descriptor opened on the old one."""
+    fresh = path.with_name(f".{path.name}.{secrets.token_hex(4)}")
+    descriptor = os.open(fresh, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+    try:
+        with os.fdopen(descriptor, "wb") as out:
+            out.write(content)
+        os.replace(fresh, path)
+    except BaseException:
+        fresh.unlink(missing_ok=True)
+        raise
+    return path

@@ -21,6 +21,10 @@ ANY = "*"
 MAX_CHUNK = 64
 """The longest robot name or other key chunk: a name is for people, and every one a
 service meets costs it memory."""
+MAX_ROBOTS = 256
+"""Robots a service follows at most besides those it was told to (`--max-robots` of the
+supervisor and the panel): every name costs memory and bus declarations, and anyone on
+the bus can make names up."""
 
 
 def robot_of(key: str) -> str:

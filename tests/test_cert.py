@@ -29,6 +29,26 @@ def test_cert_names_every_host_and_keeps_the_key_private(tmp_path: Path) -> None
     assert "--certfile" in done.stdout
 
 
+def test_secrets_are_0600_whatever_mode_an_old_file_had(tmp_path: Path) -> None:
+    """A key or a token file that exists readable by others (0644) is rewritten 0600, and
+    the output says the mode the file has."""
+    (tmp_path / "panel.key").write_text("old key")
+    (tmp_path / "token").write_text("")
+    for old in ("panel.key", "token"):
+        os.chmod(tmp_path / old, 0o644)
+    done = voicectl("cert", "robot.local", "--out", str(tmp_path))
+    assert done.returncode == 0, done.stderr
+    assert stat.S_IMODE(os.stat(tmp_path / "panel.key").st_mode) == 0o600
+    assert "(mode 0600)" in done.stdout
+    assert "PRIVATE KEY" in (tmp_path / "panel.key").read_text()
+    environment = {k: v for k, v in os.environ.items() if k != "VOICECTL_TOKEN"}
+    made = voicectl("token", "--token-file", str(tmp_path / "token"), env=environment)
+    assert made.returncode == 0, made.stderr
+    assert stat.S_IMODE(os.stat(tmp_path / "token").st_mode) == 0o600
+    assert (tmp_path / "token").read_text().strip() == made.stdout.strip() != ""
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["panel.crt", "panel.key", "token"]
+
+
 def test_the_panel_serves_https_with_it(tmp_path: Path, router: str, processes: Processes) -> None:
     assert voicectl("cert", "127.0.0.1", "--out", str(tmp_path)).returncode == 0
     port = free_port()

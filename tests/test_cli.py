@@ -299,3 +299,10 @@ async def test_cancel_all_says_what_it_cancelled_and_partial_say_exits_0(
 
     both = await asyncio.to_thread(cancel_all)
     assert both == "cancelled 1 queued order and the running order (move forward 5 m)"
+
+
+def test_a_wake_phrase_longer_than_a_few_words_is_refused_in_one_line() -> None:
+    done = voicectl("listen", "-", "--wake", "hey robot " * 5)
+    assert done.returncode == 2
+    (line,) = done.stderr.strip().splitlines()[-1:]
+    assert "argument --wake: a phrase is at most 8 words and 64 characters" in line, done.stderr

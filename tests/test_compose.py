@@ -1,6 +1,6 @@
-"""compose.yaml, the Dockerfile and the router's configuration, checked statically (no
-Docker engine runs here), and the images built and run with testcontainers where an
-engine does run.
+"""compose.yaml (the secured bus), compose.open.yaml (the open bus of a lab), the
+Dockerfile and the routers' configurations, checked statically (no Docker engine runs
+here), and the images built and run with testcontainers where an engine does run.
 
 Compose files are read as `docker compose` reads them: `${VAR:-default}` becomes its
 default (nothing set in the environment), profiles enable services, .env sets the
@@ -39,11 +39,13 @@ from .containers import base_image, images_unavailable, skip_unless
 
 VARIABLE = re.compile(r"\$\{(\w+)(?:(:?[-?])([^}]*))?\}")
 ROLES = {
-    "host": {"router", "converter", "stt", "supervisor", "web"},
-    "sim": {"sim-router", "sim", "executor"},
+    "host": {"bus-secrets", "router", "converter", "stt", "supervisor", "web"},
+    "sim": {"sim", "executor"},
     "robot": {"robot-router", "robot-executor", "robot-listen", "bridge"},
+    "open": {"sim-router"},
 }
-"""Which containers each profile runs (compose.yaml's header and docs/deploy.md)."""
+"""Which containers each profile runs (compose.yaml's header and docs/deploy.md); `open`
+is no role: the simulated robot's own router, which compose.open.yaml puts in `sim`."""
 
 
 def interpolate(value: Any, env: dict[str, str]) -> Any:
@@ -71,13 +73,15 @@ def interpolate(value: Any, env: dict[str, str]) -> Any:
 
 def load(*files: str, env: dict[str, str] | None = None) -> dict[str, dict[str, Any]]:
     """The services of `files` merged as `docker compose -f ... -f ...` merges them
-    (mappings merged, a command replaced, volumes added)."""
+    (mappings merged, a command replaced, volumes added, networks joined)."""
     merged: dict[str, dict[str, Any]] = {}
     for name in files:
         document = yaml.safe_load((REPO / name).read_text())
         for service, settings in document["services"].items():
             base = merged.setdefault(service, {})
             for key, value in settings.items():
+                if key == "networks" and isinstance(value, list):
+                    value = dict.fromkeys(value)
                 if isinstance(value, dict) and isinstance(base.get(key), dict):
                     base[key] = {**base[key], **value}
                 elif key == "volumes" and key in base:
@@ -89,11 +93,16 @@ def load(*files: str, env: dict[str, str] | None = None) -> dict[str, dict[str, 
 
 
 SERVICES_COMPOSED = load("compose.yaml")
+OPEN = load("compose.yaml", "compose.open.yaml")
+"""The stack on the open bus, as a lab runs it."""
 VOICECTL = {
     name: service
     for name, service in SERVICES_COMPOSED.items()
     if service["image"].startswith("voicectl")
 }
+RUNNING = {name: service for name, service in VOICECTL.items() if name != "bus-secrets"}
+"""voicectl's containers that run a service (bus-secrets runs once at each start)."""
+CONTAINER_DIR_RO = f"bus-secrets:{CONTAINER_DIR}:ro"
 DOCKERFILE = (REPO / "Dockerfile").read_text()
 ROUTER_CONFIG = REPO / "deploy" / "zenoh" / "router.json5"
 ROBOT_ROUTER_CONFIG = REPO / "deploy" / "zenoh" / "robot-router.json5"
@@ -131,7 +140,7 @@ def test_each_container_has_one_role() -> None:
 def test_compose_up_runs_the_whole_stack_with_the_simulator() -> None:
     assert default_profiles() == {"host", "sim"}
     running = enabled(default_profiles())
-    commands = {SERVICES_COMPOSED[name]["command"][0] for name in running & set(VOICECTL)}
+    commands = {SERVICES_COMPOSED[name]["command"][0] for name in running & set(RUNNING)}
     # Every voicectl service but the router, which is zenohd's, the STOP relay, which runs
     # on a robot on DDS beside its executor (the simulator is on Zenoh), and the listener,
     # which needs a robot's sound device (the robot profile runs it).
@@ -166,6 +175,9 @@ def test_every_required_dependency_runs_on_the_same_machine(profiles: set[str]) 
 @pytest.mark.parametrize("name", sorted(VOICECTL))
 def test_each_command_is_valid_for_its_service(name: str) -> None:
     command = VOICECTL[name]["command"]
+    if name == "bus-secrets":
+        build_parser().parse_args(command)  # a voicectl command, not a service
+        return
     assert command[0] in SERVICES
     module = importlib.import_module(f"voicectl.services.{command[0]}.__main__")
     module.parse_args(command[1:])  # argparse exits (fails the test) on an unknown flag
@@ -287,42 +299,70 @@ def test_the_image_is_built_from_what_it_needs() -> None:
     assert allowed == copied
 
 
-ROBOT_ROUTERS = {"sim": "sim-router", "robot": "robot-router"}
-"""The robot's own router, by profile."""
+USER_OF = {
+    "converter": "converter",
+    "stt": "stt",
+    "supervisor": "supervisor",
+    "web": "panel",
+    "executor": "executor",
+    "sim": "robot",
+}
+"""Whose credentials each container of the stack starts with (voicectl bus-secrets)."""
 
 
-def test_clients_connect_to_their_machines_router() -> None:
-    """The host's services to the host's router; the robot's to the robot's router, which
-    connects to the host's (on its network, or through the published port)."""
-    router = SERVICES_COMPOSED["router"]
-    port = json5.loads(ROUTER_CONFIG.read_text())["listen"]["endpoints"][0].rsplit(":", 1)[1]
-    (published,) = router["ports"]
-    address, _, inside = published.rpartition(":")
-    assert inside == port
-    sim_router = SERVICES_COMPOSED["sim-router"]["command"]
-    assert flag(sim_router, "--connect") == f"tcp/router:{port}"
+def test_on_the_secured_bus_the_host_and_the_simulated_robot_join_the_router() -> None:
+    """compose.yaml: each service of the host and of the simulated robot connects to the
+    secured router with its own credentials (the file names the router); a real robot's
+    services to the robot's own router, which connects to the host's published port."""
+    for name in (*ROLES["host"] - {"bus-secrets", "router"}, *ROLES["sim"]):
+        command = SERVICES_COMPOSED[name]["command"]
+        assert flag(command, "--config") == f"{CONTAINER_DIR}/{USER_OF[name]}.json5", name
+        assert "--connect" not in command, name
+        assert SERVICES_COMPOSED[name]["depends_on"]["router"] == {"condition": "service_started"}
     robot_router = SERVICES_COMPOSED["robot-router"]["command"]
-    assert flag(robot_router, "--connect") == f"tcp/{address}"
-    listens = {
-        "router": f"tcp/router:{port}",
-        "sim-router": "tcp/sim-router:" + flag(sim_router, "--listen").rsplit(":", 1)[1],
-        "robot-router": flag(robot_router, "--listen"),
-    }
-    for name, service in [*VOICECTL.items(), ("bridge", SERVICES_COMPOSED["bridge"])]:
-        (profile,) = service["profiles"]
-        mine = ROBOT_ROUTERS.get(profile, "router")
-        assert flag(service["command"], "--connect") == listens[mine], name
-        assert service["depends_on"][mine] == {"condition": "service_started"}, name
+    (published,) = SERVICES_COMPOSED["router"]["ports"]
+    assert flag(robot_router, "--connect") == f"tcp/{published.rpartition(':')[0]}"
+    for name in ("bridge", "robot-executor", "robot-listen"):
+        service = SERVICES_COMPOSED[name]
+        assert flag(service["command"], "--connect") == flag(robot_router, "--listen"), name
+        assert service["depends_on"]["robot-router"] == {"condition": "service_started"}
 
 
-def test_the_robots_router_is_on_both_networks_and_its_services_on_the_robots_alone() -> None:
+def test_on_the_open_bus_each_machine_joins_its_own_router() -> None:
+    """compose.open.yaml: the host's services to the host's router; the robot's to the
+    robot's router (by its name on the robot's network alone), which connects to the
+    host's (on its network, or through the published port)."""
+    port = json5.loads(ROUTER_CONFIG.read_text())["listen"]["endpoints"][0].rsplit(":", 1)[1]
+    (published,) = OPEN["router"]["ports"]
+    assert published.rpartition(":")[2] == port
+    sim_router = OPEN["sim-router"]
+    assert sim_router["profiles"] == ["sim"]
+    assert flag(sim_router["command"], "--connect") == f"tcp/router:{port}"
+    (alias,) = sim_router["networks"]["robot"]["aliases"]
+    inside = "tcp/" + alias + ":" + flag(sim_router["command"], "--listen").rsplit(":", 1)[1]
+    for name in ROLES["host"] - {"bus-secrets", "router"}:
+        assert flag(OPEN[name]["command"], "--connect") == f"tcp/router:{port}", name
+        assert "--config" not in OPEN[name]["command"], name
+    for name in ROLES["sim"]:
+        assert flag(OPEN[name]["command"], "--connect") == inside, name
+        assert OPEN[name]["depends_on"]["sim-router"] == {"condition": "service_started"}
+    assert OPEN["web"]["environment"]["ZENOH_CONFIG"] == ""  # commands typed: no file
+    for name in ROLES["host"] | ROLES["sim"]:  # every command still parses
+        command = OPEN[name]["command"]
+        if OPEN[name]["image"].startswith("voicectl") and name != "bus-secrets":
+            importlib.import_module(f"voicectl.services.{command[0]}.__main__").parse_args(
+                command[1:]
+            )
+
+
+def test_the_robots_router_is_on_both_networks_and_its_services_reach_it_on_the_robots() -> None:
     """So that cutting the robot's link (its router off the site's network) leaves the
     executor with the robot, as on a real robot (tests/test_compose_up.py cuts it)."""
-    assert SERVICES_COMPOSED["sim-router"]["networks"] == ["robot", "site"]
-    for name in ("sim", "executor"):
-        assert SERVICES_COMPOSED[name]["networks"] == ["robot"], name
-    for name in enabled({"host"}):
-        assert SERVICES_COMPOSED[name]["networks"] == ["site"], name
+    assert set(OPEN["sim-router"]["networks"]) == {"robot", "site"}
+    assert set(SERVICES_COMPOSED["sim-router"]["networks"]) == {"robot", "site"}
+    assert SERVICES_COMPOSED["sim-router"]["profiles"] == ["open"]  # not on the secured bus
+    for name in enabled({"host", "sim"}) - {"bus-secrets"}:
+        assert set(SERVICES_COMPOSED[name]["networks"]) == {"site"}, name
     for name in enabled({"robot"}):
         assert SERVICES_COMPOSED[name]["network_mode"] == "host", name
     assert json5.loads(ROBOT_ROUTER_CONFIG.read_text())["mode"] == "router"
@@ -338,7 +378,11 @@ def test_the_router_is_published_on_loopback_unless_chosen() -> None:
 def test_the_panel_keeps_a_token_of_its_own_unless_given_one() -> None:
     document = yaml.safe_load((REPO / "compose.yaml").read_text())
     web = document["services"]["web"]
-    assert web["environment"] == {"VOICECTL_TOKEN": "${VOICECTL_TOKEN:-}"}
+    assert web["environment"] == {
+        "VOICECTL_TOKEN": "${VOICECTL_TOKEN:-}",
+        # What a person types in it (`docker compose exec web voicectl ...`): the operator.
+        "ZENOH_CONFIG": f"{CONTAINER_DIR}/operator.json5",
+    }
     assert "web-data:/data" in web["volumes"]
     assert "VOICECTL_DATA=/data" in DOCKERFILE
 
@@ -346,7 +390,8 @@ def test_the_panel_keeps_a_token_of_its_own_unless_given_one() -> None:
 def test_the_converter_reads_a_mounted_orders_directory() -> None:
     converter = SERVICES_COMPOSED["converter"]
     orders = flag(converter["command"], "--orders")
-    (mount,) = converter["volumes"]
+    mount, secrets = converter["volumes"]
+    assert secrets == CONTAINER_DIR_RO
     source, target, mode = mount.split(":")
     assert (target, mode) == (orders, "ro")
     assert (REPO / source).is_dir()
@@ -358,11 +403,11 @@ def test_the_converter_reads_a_mounted_orders_directory() -> None:
 HEARTBEAT = "/tmp/voicectl/alive"
 
 
-@pytest.mark.parametrize("name", sorted(VOICECTL))
+@pytest.mark.parametrize("name", sorted(RUNNING))
 def test_each_container_is_healthy_while_its_service_beats(name: str) -> None:
     """Every voicectl container checks its service's heartbeat file, often (the check
     costs nothing) and with no start_interval (Docker Engine 25 and later only)."""
-    check = VOICECTL[name]["healthcheck"]
+    check = RUNNING[name]["healthcheck"]
     assert check["test"][0] == "CMD-SHELL"
     assert (
         "$$VOICECTL_HEARTBEAT"
@@ -409,13 +454,27 @@ def test_the_check_passes_while_a_service_runs_and_fails_once_it_stopped(tmp_pat
 
 
 def test_depends_on_names_existing_services_and_waits_for_health() -> None:
-    for name, service in SERVICES_COMPOSED.items():
-        for needed, how in service.get("depends_on", {}).items():
-            assert needed in SERVICES_COMPOSED, f"{name} depends on unknown {needed}"
-            assert how["condition"] in ("service_started", "service_healthy"), name
-            if how["condition"] == "service_healthy":
-                assert "healthcheck" in SERVICES_COMPOSED[needed], f"{needed} has no check"
+    for services in (SERVICES_COMPOSED, OPEN):
+        for name, service in services.items():
+            for needed, how in service.get("depends_on", {}).items():
+                assert needed in services, f"{name} depends on unknown {needed}"
+                condition = how["condition"]
+                assert condition in ("service_started", "service_healthy", *DONE), name
+                if condition == "service_healthy":
+                    assert "healthcheck" in services[needed], f"{needed} has no check"
+                if condition in DONE:  # a step that runs once and ends: the secrets
+                    assert needed == "bus-secrets", name
     assert "healthcheck" not in SERVICES_COMPOSED["router"]
+    assert "restart" not in SERVICES_COMPOSED["bus-secrets"]
+
+
+DONE = ("service_completed_successfully",)
+
+
+def test_every_service_of_the_host_and_the_simulator_waits_for_the_secrets() -> None:
+    for name in (ROLES["host"] | ROLES["sim"]) - {"bus-secrets"}:
+        depends = SERVICES_COMPOSED[name]["depends_on"]
+        assert depends["bus-secrets"] == {"condition": "service_completed_successfully"}, name
 
 
 def test_the_panel_starts_after_the_services_it_shows() -> None:
@@ -436,8 +495,9 @@ def test_the_router_is_zenohd_with_the_repositorys_config() -> None:
     assert image == "eclipse/zenoh"
     # Zenoh 1.x routers and clients speak the same protocol.
     assert version.split(".")[0] == importlib.metadata.version("eclipse-zenoh")[0] == "1"
-    config = flag(router["command"], "--config")
-    assert f"./deploy/zenoh/router.json5:{config}:ro" in router["volumes"]
+    # The open bus: the repository's plain configuration.
+    config = flag(OPEN["router"]["command"], "--config")
+    assert f"./deploy/zenoh/router.json5:{config}:ro" in OPEN["router"]["volumes"]
 
 
 def test_the_router_config_is_a_router_with_explicit_endpoints_and_timestamps() -> None:
@@ -514,6 +574,7 @@ def test_vosk_with_a_mounted_model() -> None:
     stt = services["stt"]
     args = importlib.import_module("voicectl.services.stt.__main__").parse_args(stt["command"][1:])
     assert (args.engine, args.vosk_model) == ("vosk", Path("/models/small-en"))
+    assert args.config == Path(f"{CONTAINER_DIR}/stt.json5")  # on the secured bus too
     assert "./models:/models:ro" in stt["volumes"]
     assert stt["build"] == {
         "context": ".",
@@ -529,48 +590,43 @@ def test_vosk_with_a_mounted_model() -> None:
 
 # --- the secured bus ----------------------------------------------------------------------------
 
-SECURED = load("compose.yaml", "compose.secure.yaml")
-USER_OF = {
-    "converter": "converter",
-    "stt": "stt",
-    "supervisor": "supervisor",
-    "web": "panel",
-    "executor": "executor",
-    "sim": "robot",
-}
-"""Whose credentials each container of the stack starts with (voicectl bus-secrets)."""
-
 
 @pytest.mark.parametrize("name", sorted(USER_OF))
 def test_on_the_secured_bus_each_service_has_its_own_credentials(name: str) -> None:
-    service = SECURED[name]
+    service = SERVICES_COMPOSED[name]
     command = service["command"]
     importlib.import_module(f"voicectl.services.{command[0]}.__main__").parse_args(command[1:])
     assert flag(command, "--config") == f"{CONTAINER_DIR}/{USER_OF[name]}.json5"
-    assert "--connect" not in command  # the file names the router (TLS)
-    assert f"bus-secrets:{CONTAINER_DIR}:ro" in service["volumes"]
+    assert CONTAINER_DIR_RO in service["volumes"]
     assert USER_OF[name] in client_files([BusRobot(DEFAULT_ROBOT)])
     if "--robot" in command:  # the robot those files are for
         assert flag(command, "--robot") == DEFAULT_ROBOT
-    # What the plain stack mounts stays mounted.
-    for volume in SERVICES_COMPOSED[name].get("volumes", []):
-        assert volume in service["volumes"], name
 
 
-def test_the_secured_router_runs_the_shipped_secure_configuration() -> None:
-    router = SECURED["router"]
-    assert flag(router["command"], "--config") == f"{CONTAINER_DIR}/router.json5"
-    assert f"bus-secrets:{CONTAINER_DIR}:ro" in router["volumes"]
-    maker = SECURED["bus-secrets"]
-    assert maker["profiles"] == ["secrets"]  # run once, by hand, never by `up`
-    # The first command of the docs on a machine without images: it builds its own.
+def test_the_secrets_are_made_on_the_first_start_and_kept_after() -> None:
+    """`bus-secrets` runs before the router and every service at each start, and makes
+    nothing when the volume holds secrets: the running services' passwords stay good."""
+    maker = SERVICES_COMPOSED["bus-secrets"]
+    assert maker["profiles"] == ["host"]
     assert maker["build"] == SERVICES_COMPOSED["converter"]["build"]
     assert maker["command"][:2] == ["bus-secrets", CONTAINER_DIR]
+    assert "--if-missing" in maker["command"]
     assert flag(maker["command"], "--host") == "router"
     # The robot every service of the stack names, with users of its own.
     assert flag(maker["command"], "--robot") == DEFAULT_ROBOT
-    assert f"bus-secrets:{CONTAINER_DIR}" in maker["volumes"]
+    assert maker["volumes"] == [f"bus-secrets:{CONTAINER_DIR}"]  # the only one writing
+    assert maker["network_mode"] == "none"
     assert f"mkdir -p /data {CONTAINER_DIR}" in DOCKERFILE
+    document = yaml.safe_load((REPO / "compose.yaml").read_text())
+    assert "bus-secrets" in document["volumes"]
+
+
+def test_the_secured_router_runs_the_shipped_secure_configuration() -> None:
+    router = SERVICES_COMPOSED["router"]
+    assert flag(router["command"], "--config") == f"{CONTAINER_DIR}/router.json5"
+    assert router["volumes"] == [CONTAINER_DIR_RO]
+    assert router["depends_on"]["bus-secrets"] == {"condition": "service_completed_successfully"}
+    assert "ports" in router  # the published port speaks TLS
 
 
 # --- the documentation --------------------------------------------------------------------------
@@ -619,7 +675,7 @@ def test_the_docs_commands_name_what_exists() -> None:
             *_, service = arguments
             assert service in load(*(files or ["compose.yaml"]), env={"VOSK_MODEL": "m"}), service
         if verb == "exec":
-            service, program, *args = arguments
+            service, program, *args = [a for a in arguments if a != "-T"]
             assert service in SERVICES_COMPOSED
             assert program == "voicectl"
             build_parser().parse_args(args)

@@ -6,8 +6,10 @@ from __future__ import annotations
 
 import contextlib
 import ctypes.util
+import io
 import logging
 import os
+import struct
 import subprocess
 import sys
 import threading
@@ -211,6 +213,124 @@ def test_closing_wakes_a_read_on_a_silent_pipe(stdin_pipe: int) -> None:
     source = open_source("-")
     threading.Timer(0.1, source.close).start()
     assert source.read() is None
+
+
+def encoded(speech: Path, kind: str) -> bytes:
+    """`speech` in a format standard input cannot decode (or not audio at all)."""
+    match kind:
+        case "random":
+            return np.random.default_rng(7).integers(0, 256, 32000, dtype=np.uint8).tobytes()
+        case "text":
+            return ("voicectl listen - reads audio, and this is a sentence. " * 100).encode()
+        case "mp3":  # libsndfile writes it without ID3 tags: a bare frame comes first
+            out = io.BytesIO()
+            soundfile.write(out, soundfile.read(str(speech))[0], SAMPLE_RATE, format="MP3")
+            return out.getvalue()
+    return subprocess.run(
+        ["sox", "-D", str(speech), "-t", kind, "-"], capture_output=True, check=True
+    ).stdout
+
+
+def fed(stdin_pipe: int, data: bytes, close: bool = True) -> threading.Thread:
+    """A writer of `data` into standard input (closed after it unless `close` is False)."""
+
+    def write() -> None:
+        # The reader may refuse the stream before it is all written: the pipe breaks.
+        with contextlib.suppress(OSError):
+            _write_all(stdin_pipe, data)
+            if close:
+                os.close(stdin_pipe)
+
+    writer = threading.Thread(target=write, daemon=True)
+    writer.start()
+    return writer
+
+
+def _write_all(fd: int, data: bytes) -> None:
+    while data:
+        data = data[os.write(fd, data) :]
+
+
+@pytest.mark.parametrize(
+    ("kind", "said"),
+    [
+        ("ogg", "an Ogg stream"),
+        ("flac", "a FLAC stream"),
+        ("mp3", "an MP3 stream"),
+        ("aiff", "an AIFF stream"),
+        ("au", "an AU stream"),
+        ("random", "not audio"),
+        ("text", "not audio"),
+    ],
+)
+def test_what_standard_input_cannot_decode_is_named_and_refused(
+    stdin_pipe: int, speech: Path, kind: str, said: str
+) -> None:
+    """Issue 43: Ogg, MP3, FLAC or random bytes on standard input were read as raw PCM,
+    without a word. What a stream names itself is named; what is no microphone's is
+    refused, in one line."""
+    fed(stdin_pipe, encoded(speech, kind))
+    source = open_source("-")
+    with pytest.raises(AudioError) as raised:
+        source.read()
+    assert str(raised.value).startswith(f"standard input: {said}"), raised.value
+    assert "\n" not in str(raised.value)
+
+
+def test_raw_pcm_on_standard_input_is_said_to_be_taken_as_raw(
+    stdin_pipe: int, speech: Path, caplog: pytest.LogCaptureFixture
+) -> None:
+    """Headerless speech, and the silence a muted microphone sends, are raw PCM: read,
+    and the log says so."""
+    raw = subprocess.run(
+        ["sox", "-D", str(speech), "-t", "raw", "-"], capture_output=True, check=True
+    ).stdout
+    fed(stdin_pipe, bytes(3200) + raw)
+    with caplog.at_level(logging.INFO):
+        heard = read_all(open_source("-"))
+    assert len(heard) >= len(raw)
+    assert "standard input has no WAV header: read as raw" in caplog.text
+
+
+def test_a_wav_chunk_that_declares_4_gb_is_refused_unread(stdin_pipe: int) -> None:
+    """Issue 43: a chunk before the audio that declares 4 GB was read into memory. Chunks
+    are read past, a piece at a time, and refused past 1 MiB before the audio."""
+    header = b"RIFF" + struct.pack("<I", 0xFFFFFFFF) + b"WAVE"
+    header += b"LIST" + struct.pack("<I", 0xFFFFFFF0)
+    fed(stdin_pipe, header + bytes(32768), close=False)  # and the stream goes on
+    source = open_source("-")
+    outcome: list[BaseException | bytes | None] = []
+
+    def read() -> None:
+        try:
+            outcome.append(source.read())
+        except BaseException as exc:  # what the reader ended with
+            outcome.append(exc)
+
+    reader = threading.Thread(target=read, daemon=True)
+    reader.start()
+    reader.join(30.0)
+    source.close()
+    assert outcome, "the reader is still reading the 4 GB chunk"
+    (error,) = outcome
+    assert isinstance(error, AudioError), error
+    assert "'LIST' declares 4294967280 bytes" in str(error)
+
+
+def test_a_broken_wav_on_standard_input_is_one_line_and_exit_2(tmp_path: Path, router: str) -> None:
+    """Issue 43: a broken WAV header on standard input printed a traceback and exited 0;
+    the same file named as the source said one line and exited 2. Both do now."""
+    broken = b"RIFF" + struct.pack("<I", 100) + b"WAVEfmt " + struct.pack("<I", 16) + b"\x01\x00"
+    (tmp_path / "broken.wav").write_bytes(broken)
+    command = [sys.executable, "-m", "voicectl", "listen", "--connect", router]
+    for source, given in ((str(tmp_path / "broken.wav"), b""), ("-", broken)):
+        done = subprocess.run(
+            [*command, source], input=given, capture_output=True, timeout=120, check=False
+        )
+        said = done.stderr.decode()
+        assert done.returncode == 2, said
+        (line,) = said.splitlines()
+        assert line.startswith("voicectl listen: "), line
 
 
 # --- a real sound device ----------------------------------------------------------------------

@@ -104,6 +104,9 @@ def test_each_command_prints_what_the_readme_says(stack: Stack, tmp_path: Path) 
         ("cert HOST...", ["cert", "localhost", "--out", str(tmp_path / "tls")], 0),
         ("bus-secrets", ["bus-secrets", str(tmp_path / "bus")], 0),
         ("bus-secrets", ["bus-secrets", str(tmp_path / "bus")], 1),
+        ("bus-secrets", ["bus-secrets", str(tmp_path / "bus"), "--if-missing"], 0),
+        ("bus-secrets", ["bus-secrets", str(tmp_path / "bus"), "--client", "operator"], 0),
+        ("bus-secrets", ["bus-secrets", str(tmp_path / "bus"), "--client", "nobody"], 1),
         ("up", ["up", "--router", stack.router, "--port", str(stack.port)], 2),
     ]
     for command, argv, expected in runs:

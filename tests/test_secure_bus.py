@@ -457,3 +457,35 @@ async def test_the_documented_observer_watches_the_order_stream(site: SecureSite
                 await asyncio.sleep(0.1)
         await asyncio.sleep(0.5)
         assert received == []
+
+
+def test_secrets_are_made_once_and_a_client_config_travels(
+    site: SecureSite, tmp_path: Path
+) -> None:
+    """What compose.yaml's first start needs: `--if-missing` keeps the secrets there (the
+    running services' passwords stay good), and `--client USER` prints a user's config
+    with its CA inside, which works from anywhere (a host command, outside the volume)."""
+    before = (site.secrets / "passwords").read_bytes()
+    kept = voicectl("bus-secrets", str(site.secrets), "--if-missing", "--host", "other")
+    assert (kept.returncode, kept.stdout) == (
+        0,
+        f"bus secrets in {site.secrets} kept: made before\n",
+    )
+    assert (site.secrets / "passwords").read_bytes() == before
+    made = voicectl("bus-secrets", str(tmp_path / "new"), "--if-missing")
+    assert made.returncode == 0
+    assert (tmp_path / "new" / "passwords").is_file()
+    printed = voicectl(
+        "bus-secrets", str(site.secrets), "--client", "operator", "--endpoint", site.endpoint
+    )
+    assert printed.returncode == 0, printed.stderr
+    elsewhere = tmp_path / "elsewhere" / "operator.json5"
+    elsewhere.parent.mkdir()
+    elsewhere.write_text(printed.stdout)
+    assert str(site.secrets) not in printed.stdout  # no path into the secrets' directory
+    reached = voicectl("state", "--robot", "r1", "--config", str(elsewhere))
+    assert reached.returncode == 3  # connected; only no supervisor serves r1 here
+    assert "no service answered" in reached.stderr, reached.stderr
+    unknown = voicectl("bus-secrets", str(site.secrets), "--client", "nobody")
+    assert unknown.returncode == 1
+    assert unknown.stderr.startswith("voicectl bus-secrets: no client 'nobody' in ")

@@ -7,6 +7,7 @@ from __future__ import annotations
 import asyncio
 import base64
 import contextlib
+import itertools
 import os
 import shutil
 import time
@@ -14,22 +15,31 @@ import wave
 from collections.abc import AsyncIterator
 from pathlib import Path
 
+import msgspec
 import pytest
 
 from harness.client import Client
+from harness.processes import Process
 from harness.speech_set import in_babble
 from harness.wait import async_wait_until
 from voicectl.services.stt.audio import frames, read_wav
-from voicectl.shared.bus import Bus, json_decoder
+from voicectl.shared.bus import Bus, Stream, json_decoder
 from voicectl.shared.keys import ConverterKeys, RobotKeys
 from voicectl.shared.messages import (
+    FRAME_BYTES,
+    MAX_CHECK_SECONDS,
     AudioChunk,
     AudioStart,
     AudioStop,
+    CheckPhrase,
+    Failed,
     Grammar,
     OrderStatus,
     PartialTranscript,
+    PhraseCheck,
     Proposal,
+    SessionEnded,
+    SttReply,
     SttStatus,
     Transcript,
 )
@@ -438,3 +448,175 @@ async def test_memory_goes_back_when_the_sessions_close(
         await async_wait_until(
             lambda: rss_mb(stt.pid) < peak - 80, 10.0, f"RSS to fall from {peak:.0f} MB"
         )
+
+
+CHECKED = json_decoder(SttReply)
+
+
+def check_request(pcm: bytes, phrase: str, **fields: object) -> bytes:
+    """A phrase check as JSON, built by hand: a client need not be voicectl's, and
+    `CheckPhrase` itself refuses what the recogniser must refuse."""
+    request = {"type": "checkphrase", "pcm": base64.b64encode(pcm).decode(), "phrase": phrase}
+    return msgspec.json.encode({**request, **fields})
+
+
+async def test_a_phrase_to_check_is_a_few_words(
+    router: str, processes: Processes, speech: Speak
+) -> None:
+    """Issue 43: a check of "hey robot " * 800 took 7.9 CPU-seconds and 0.7 GB. A phrase
+    is a few words: a longer one is refused at the edge, at once, and checks go on."""
+    pcm = read_wav(speech("hey robot"))[: int(MAX_CHECK_SECONDS * 32000)]
+    async with scenario(router, processes) as listener:
+        bus = listener.bus
+        for phrase in ("hey robot " * 40, "one two three four five six seven eight nine"):
+            raw = await bus.request_bytes(KEYS.stt_check, check_request(pcm, phrase), WAIT)
+            reply = CHECKED(raw)
+            assert isinstance(reply, Failed), reply
+            assert "undecodable request" in reply.reason
+            assert "64" in reply.reason or "8 words" in reply.reason, reply.reason
+        reply = await bus.request(KEYS.stt_check, CheckPhrase(pcm=pcm, phrase="hey robot"), CHECKED)
+        assert isinstance(reply, PhraseCheck), reply
+        assert reply.checked
+
+
+async def test_phrase_checks_wait_in_a_short_queue_and_none_runs_for_nobody(
+    router: str, processes: Processes, speech: Speak
+) -> None:
+    """Issue 43: 300 checks asked at once with a 5 s timeout kept the recogniser busy 12 s
+    after every asker had gone. Checks now wait in a short queue, past which the asker
+    hears at once that the recogniser is busy, and one whose asker would be gone by its
+    turn is dropped, never run."""
+    pcm = read_wav(speech("hey robot"))[: int(MAX_CHECK_SECONDS * 32000)]
+    async with scenario(router, processes) as listener:
+        bus = listener.bus
+
+        async def ask(wait: float) -> object:
+            request = CheckPhrase(pcm=pcm, phrase="hey robot", wait=wait)
+            return await bus.request(KEYS.stt_check, request, CHECKED, WAIT)
+
+        replies = await asyncio.gather(*(ask(5.0) for _ in range(20)))
+        busy = [r for r in replies if isinstance(r, Failed) and "busy" in r.reason]
+        checked = [r for r in replies if isinstance(r, PhraseCheck) and r.checked]
+        assert busy, replies
+        assert len(busy) + len(checked) == len(replies), replies
+        # Askers that wait 10 ms: none can be answered in time, so none is checked.
+        replies = await asyncio.gather(*(ask(0.01) for _ in range(5)))
+        assert all(isinstance(r, Failed) and "not checked" in r.reason for r in replies), replies
+        assert isinstance(await ask(5.0), PhraseCheck)  # and the next asker is answered
+
+
+async def test_a_session_whose_sender_went_quiet_is_dropped_not_recognised(
+    router: str, processes: Processes, speech: Speak
+) -> None:
+    """A session's sender gone (nothing for `--idle` seconds) in the middle of speech:
+    what it said is dropped, not made into a transcript nobody waits for."""
+    said = read_wav(speech("turn left then reach the kitchen then turn right"))
+    async with scenario(router, processes, stt_args=("--idle", "2")) as listener:
+        bus = listener.bus
+        ended: list[SessionEnded] = []
+        bus.subscribe(
+            KEYS.stt_session("cut"), json_decoder(SessionEnded), lambda _k, m: ended.append(m)
+        )
+        sender = bus.stream(KEYS.stt_audio("cut"))
+        assert await sender.matched(WAIT)
+        sender.send(AudioStart())
+        half = _chunks(said[: len(said) // 2])  # mid-sentence: the utterance is open
+        for seq, pcm in enumerate(half):
+            sender.send(AudioChunk(seq=seq, pcm=pcm))
+        await async_wait_until(lambda: ended, WAIT, "the quiet session to be ended")
+        assert "no audio for 2 s" in ended[0].reason
+        # A session after it: its transcript comes after any of the first one's would.
+        await stream(bus, "after", speech("turn right"))
+        await listener.final("after")
+        assert [t for _, t in listener.finals if t.session == "cut"] == []
+
+
+async def test_trickling_sessions_are_closed_and_a_microphone_gets_in(
+    router: str, processes: Processes
+) -> None:
+    """Issue 43: sessions sending a 20 ms chunk every 10 s were never idle long enough to
+    be closed, and kept every microphone out ("busy"). A session that sends far less audio
+    than time passes is closed, and told why; so is one open past the longest allowed."""
+    limits = ("--max-sessions", "2", "--audio-window", "2", "--max-session", "4")
+    async with scenario(router, processes, stt_args=limits) as listener:
+        bus = listener.bus
+        ended: dict[str, list[SessionEnded]] = {}
+
+        def opened(name: str) -> Stream:
+            ended[name] = []
+            bus.subscribe(
+                KEYS.stt_session(name),
+                json_decoder(SessionEnded),
+                lambda _k, m: ended[name].append(m),
+            )
+            sender = bus.stream(KEYS.stt_audio(name))
+            sender.send(AudioStart())
+            return sender
+
+        async def send(sender: Stream, every: float) -> None:
+            for seq in itertools.count():
+                sender.send(AudioChunk(seq=seq, pcm=bytes(FRAME_BYTES * 5)))  # 100 ms
+                await asyncio.sleep(every)
+
+        assert await bus.stream(KEYS.stt_audio("probe")).matched(WAIT)
+        tricklers = [asyncio.create_task(send(opened(n), 2.0)) for n in ("t1", "t2")]
+        try:
+            await async_wait_until(
+                lambda: "session t2 started" in processes.log(stt_process(processes)),
+                WAIT,
+                "the tricklers' sessions",
+            )
+            opened("refused")
+            await async_wait_until(lambda: ended["refused"], WAIT, "the third to be refused")
+            assert ended["refused"][0].refused
+            await async_wait_until(
+                lambda: ended["t1"] and ended["t2"], WAIT, "the tricklers to be closed"
+            )
+            assert "of audio in 2 s" in ended["t1"][0].reason, ended["t1"]
+            assert not ended["t1"][0].refused
+        finally:
+            for task in tricklers:
+                task.cancel()
+        talker = asyncio.create_task(send(opened("mic"), 0.1))  # as a microphone sends
+        try:
+            await async_wait_until(lambda: ended["mic"], WAIT, "the long session to be closed")
+        finally:
+            talker.cancel()
+        assert "open for 4 s, the longest a session may be" in ended["mic"][0].reason
+
+
+def stt_process(processes: Processes) -> Process:
+    return next(p for name, p, _ in processes.started if name == "stt")
+
+
+async def test_a_flood_of_bad_audio_messages_logs_a_line_per_kind(
+    router: str, processes: Processes
+) -> None:
+    """Issue 43: every refused start, chunk out of order, chunk for no session and chunk
+    dropped logged a line (200 chunks, 200 lines). Now each kind is said at most once
+    every 10 s, as undecodable messages are (shared/throttle.py)."""
+    async with scenario(router, processes, stt_args=("--max-sessions", "1")) as listener:
+        bus = listener.bus
+        good = bus.stream(KEYS.stt_audio("good"))
+        assert await good.matched(WAIT)
+        good.send(AudioStart())
+        log = lambda: processes.log(stt_process(processes))  # noqa: E731
+        await async_wait_until(lambda: "session good started" in log(), WAIT, "the session")
+        second = bytes(FRAME_BYTES * 50)
+        for n in range(50):
+            bus.publish(KEYS.stt_audio(f"more{n}"), AudioStart())  # refused: one is open
+            bus.publish(KEYS.stt_audio(f"none{n}"), AudioChunk(seq=0, pcm=bytes(FRAME_BYTES)))
+            bus.publish(KEYS.stt_audio(f"none{n}"), AudioStop())
+        for seq in range(0, 100, 2):  # every other chunk missing, and 50 s at once
+            good.send(AudioChunk(seq=seq, pcm=second))
+        good.send(AudioStop())
+        await async_wait_until(lambda: "session good ended" in log(), WAIT, "the session's end")
+    said = log()
+    for line in (
+        "refused: 1 sessions open already",
+        "not started: dropped",
+        "which was not started: ignored",
+        "audio was lost or reordered",
+        "falls behind",
+    ):
+        assert 1 <= said.count(line) <= 2, (line, said.count(line))

@@ -21,7 +21,7 @@ from starlette.websockets import WebSocketDisconnect
 
 from harness.ports import free_port
 from harness.processes import Process
-from harness.wait import wait_until
+from harness.wait import async_wait_until, wait_until
 from voicectl.services.web.app import MAX_BODY, Access, Panel, create_app
 from voicectl.shared.bus import BusOptions
 from voicectl.shared.keys import RobotKeys
@@ -632,3 +632,54 @@ def test_made_up_robots_are_not_listed_and_the_panel_stays_quick(
     started = time.monotonic()
     assert client.get("/api/health").status_code == 200
     assert time.monotonic() - started < 0.5
+
+
+async def test_a_flood_of_made_up_robots_is_forgotten_past_the_cap(router: str) -> None:
+    """Issue 43: every made-up robot name grew the hub's last frames and labels without
+    bound. Now it follows at most `max_robots` besides the default one, as the supervisor
+    does (`--max-robots`): the one heard from longest ago that no page shows makes room."""
+    from voicectl.services.web.hub import Hub
+    from voicectl.shared.messages import RobotPose, SttStatus
+    from voicectl.shared.process import running
+
+    from .support import joined
+
+    cap, flood = 20, 300
+    encode = msgspec.json.encode
+    with joined(router) as bus, zenoh.open(BusOptions(connect=[router]).zenoh_config()) as other:
+        hub = Hub(bus, "robot", max_robots=cap)
+        async with running(hub):
+            with hub.listen("shown"):  # a page shows this robot: it stays, flood or not
+                for robot in ("robot", "shown"):
+                    other.put(RobotKeys(robot).stt_status, encode(SttStatus(engine="real")))
+                # The hub's watch on the labels reached the router: tokens are heard now.
+                tokens = [other.liveliness().declare_token(RobotKeys("shown").label("wave"))]
+                await async_wait_until(
+                    lambda: hub.labels("shown").labels == ["wave"], 30.0, "the hub's watch"
+                )
+                # Samples, then tokens: each path keeps its own order, not the other's, so
+                # each ends with a robot of its own that the test waits for.
+                for i in range(flood):
+                    keys = RobotKeys(f"fake{i}")
+                    other.put(keys.pose, encode(RobotPose(x=1.0, y=2.0, yaw=0.0)))
+                    other.put(keys.stt_status, encode(SttStatus(engine="made-up")))
+                other.put(RobotKeys("last").stt_status, encode(SttStatus(engine="made-up")))
+                await async_wait_until(lambda: hub.knows("last", "SttStatus"), 30.0, "samples")
+                for i in range(flood):
+                    tokens.append(
+                        other.liveliness().declare_token(RobotKeys(f"tok{i}").label("go"))
+                    )
+                tokens.append(other.liveliness().declare_token(RobotKeys("last").label("go")))
+                await async_wait_until(lambda: hub.labels("last").labels == ["go"], 30.0, "tokens")
+                held = hub.held
+                assert len(held - {"robot", "shown"}) <= cap, len(held)
+                assert {"robot", "shown", "last"} <= held
+                # What a page opened now is primed with is still there for those kept.
+                with hub.listen("robot") as queue:
+                    frames = [queue.get_nowait() for _ in range(queue.qsize())]
+                assert any(b'"engine":"real"' in frame for frame in frames)
+                assert hub.labels("tok0").labels == []
+                assert not hub.knows("fake0", "SttStatus")
+                assert hub.knows("shown", "SttStatus")
+                for token in tokens:
+                    token.undeclare()

@@ -32,6 +32,7 @@ only.
 
 from __future__ import annotations
 
+import base64
 import ipaddress
 import json
 import secrets
@@ -130,7 +131,7 @@ def write_bus_secrets(
     if not robots or len(set(names)) != len(names):
         raise ValueError(f"robots must be named once each, at least one; got {names}")
     directory = directory.expanduser().resolve()
-    if (directory / "passwords").exists():
+    if holds_secrets(directory):
         raise SecretsExist(
             f"{directory} already holds bus secrets; remove it or choose another directory"
         )
@@ -169,6 +170,29 @@ def write_bus_secrets(
         text = json.dumps(client, indent=2) + "\n"
         written.append(write_file(directory / f"{file}.json5", text.encode(), private=True))
     return written
+
+
+def holds_secrets(directory: Path) -> bool:
+    """Whether `directory` holds a deployment's bus secrets already."""
+    return (directory.expanduser() / "passwords").exists()
+
+
+def portable_client(directory: Path, name: str, endpoint: str = "") -> str:
+    """The client configuration `directory/<name>.json5` made to work anywhere: the CA's
+    certificate inside it rather than a path into `directory`, and connecting to
+    `endpoint` when given (the router's published port, as another machine reaches it).
+    ValueError naming the files there if there is none of that name."""
+    path = directory / f"{name}.json5"
+    if name == "router" or not path.is_file():
+        names = sorted(p.stem for p in directory.glob("*.json5") if p.stem != "router")
+        raise ValueError(f"no client '{name}' in {directory}; clients: {', '.join(names)}")
+    client = json.loads(path.read_text())
+    tls = client["transport"]["link"]["tls"]
+    authority = Path(tls.pop("root_ca_certificate"))
+    tls["root_ca_certificate_base64"] = base64.b64encode(authority.read_bytes()).decode()
+    if endpoint:
+        client["connect"]["endpoints"] = [endpoint]
+    return json.dumps(client, indent=2) + "\n"
 
 
 def router_configuration(directory: Path, robots: Iterable[BusRobot]) -> str:

@@ -17,6 +17,8 @@ from cryptography.hazmat.primitives import hashes, serialization
 from cryptography.hazmat.primitives.asymmetric import ec
 from cryptography.x509.oid import NameOID
 
+from voicectl.shared.config import write_secret
+
 VALID_DAYS = 825
 """The longest validity Apple's and Google's browsers accept for a TLS certificate."""
 
@@ -85,8 +87,11 @@ def key_pem(key: ec.EllipticCurvePrivateKey) -> bytes:
 
 
 def write_file(path: Path, content: bytes, private: bool = False) -> Path:
-    """Write `content`; a private file is created 0600 before a byte is in it."""
-    descriptor = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600 if private else 0o644)
+    """Write `content`; a private file is 0600 before a byte is in it, even where a file
+    of that name was readable by others (`write_secret`)."""
+    if private:
+        return write_secret(path, content)
+    descriptor = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
     with os.fdopen(descriptor, "wb") as out:
         out.write(content)
     return path

@@ -6,6 +6,7 @@ import argparse
 import asyncio
 import datetime
 import importlib
+import stat
 import sys
 from pathlib import Path
 from typing import NoReturn
@@ -196,6 +197,26 @@ def build_parser() -> argparse.ArgumentParser:
     )
     secrets.add_argument("--port", type=int, default=7447, help="the router's TLS port")
     secrets.add_argument(
+        "--if-missing",
+        action="store_true",
+        help="when the directory holds secrets already, keep them and exit 0 (a step run "
+        "at every start, as compose.yaml runs it)",
+    )
+    secrets.add_argument(
+        "--client",
+        metavar="USER",
+        default=None,
+        help="write nothing: print USER's client config from the directory, its CA inside, "
+        "for a command run elsewhere (save it mode 0600: it holds a password)",
+    )
+    secrets.add_argument(
+        "--endpoint",
+        default="",
+        metavar="ENDPOINT",
+        help="with --client: the router's endpoint as seen from where the config is used "
+        "(tls/127.0.0.1:7447 for the port compose.yaml publishes)",
+    )
+    secrets.add_argument(
         "--robot",
         action="append",
         type=robot_name,
@@ -374,7 +395,26 @@ def _robot_namespace(text: str) -> tuple[str, str]:
 
 
 def _bus_secrets(args: argparse.Namespace) -> int:
-    from .bus_secrets import DEFAULT_ROBOT, BusRobot, SecretsExist, write_bus_secrets
+    from .bus_secrets import (
+        DEFAULT_ROBOT,
+        BusRobot,
+        SecretsExist,
+        holds_secrets,
+        portable_client,
+        write_bus_secrets,
+    )
+
+    directory = (args.directory or data_dir() / "bus").expanduser().resolve()
+    if args.client is not None:
+        try:
+            print(portable_client(directory, args.client, args.endpoint), end="")
+        except (OSError, ValueError) as exc:
+            print(f"voicectl bus-secrets: {exc}", file=sys.stderr)
+            return 1
+        return 0
+    if args.if_missing and holds_secrets(directory):
+        print(f"bus secrets in {directory} kept: made before")
+        return 0
 
     names = list(dict.fromkeys(args.robot or [DEFAULT_ROBOT]))
     namespaces = dict(args.namespace)
@@ -387,7 +427,6 @@ def _bus_secrets(args: argparse.Namespace) -> int:
         )
         return 2
     robots = [BusRobot(name, namespaces.get(name, "")) for name in names]
-    directory = (args.directory or data_dir() / "bus").expanduser().resolve()
     try:
         written = write_bus_secrets(directory, args.host, args.port, robots)
     except SecretsExist as exc:
@@ -413,7 +452,8 @@ def _cert(args: argparse.Namespace) -> int:
     directory = args.out or data_dir() / "tls"
     certfile, keyfile = directory / "panel.crt", directory / "panel.key"
     write_certificate(args.hosts, certfile, keyfile)
-    print(f"certificate {certfile} for {', '.join(args.hosts)}; key {keyfile} (mode 0600)")
+    mode = stat.S_IMODE(keyfile.stat().st_mode)  # what the file has, not what was meant
+    print(f"certificate {certfile} for {', '.join(args.hosts)}; key {keyfile} (mode {mode:04o})")
     print(f"serve with: voicectl up --host 0.0.0.0 --certfile {certfile} --keyfile {keyfile}")
     return 0
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import asyncio
 import contextlib
 import sys
 from collections.abc import Iterator
@@ -22,6 +23,9 @@ async def main(args: argparse.Namespace) -> None:
         try:
             source = open_source(args.source)
             stack.callback(source.close)
+            # Standard input's first bytes say what it is: told here, in one line, not
+            # once the listener runs. Off the loop, so that Ctrl-C closes it meanwhile.
+            await asyncio.to_thread(source.ready)
             speak = _voice(args, stack)
         except AudioError as exc:
             raise ServiceError(str(exc)) from exc

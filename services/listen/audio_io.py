@@ -8,9 +8,12 @@ Sources, `open_source(spec)`, one string:
 
 - ``-``: standard input, read as it arrives. A stream that starts with a RIFF header is a WAV
   (integer PCM of 8 to 32 bits or float, any rate and channels; its sizes are ignored, so a
-  pipe of unknown length works); anything else is raw 16 kHz mono signed 16-bit
-  little-endian PCM. Both ``arecord -f S16_LE -r 16000 -c 1 | voicectl listen -`` and
-  ``arecord -f S16_LE -r 16000 -c 1 -t wav | voicectl listen -`` work.
+  pipe of unknown length works); a stream without a header is raw 16 kHz mono signed
+  16-bit little-endian PCM (said in the log). Both ``arecord -f S16_LE -r 16000 -c 1 |
+  voicectl listen -`` and ``arecord -f S16_LE -r 16000 -c 1 -t wav | voicectl listen -``
+  work. Other formats a pipe cannot be decoded from (Ogg, FLAC, MP3, AIFF, AU) are named
+  and refused, and so is a stream whose first 0.1 s, read as raw PCM, is noise near full
+  scale (random bytes, text, compressed audio): no microphone sends that.
 - ``mic``, ``mic:NAME``, ``mic:INDEX``: the default input device, the input device whose
   name holds NAME (space-separated pieces, in order, any case, as sounddevice matches), or
   the one with that index in ``voicectl listen --list-devices``. Through PortAudio
@@ -90,6 +93,11 @@ class AudioSource(Protocol):
 
     name: str
     """What error and log messages call it ('microphone 'USB Audio'', 'speech.wav')."""
+
+    def ready(self) -> None:
+        """Block until the source's format is known (a stream's first bytes read); raise
+        AudioError, one line, if it is not audio it can read. At once for a file or a
+        microphone (open already); returns without a word once closed."""
 
     def read(self) -> bytes | None:
         """Block until one or more whole 20 ms frames of 16 kHz mono s16le are here (at most
@@ -188,6 +196,9 @@ class _FileSource:
         self._start: float | None = None
         self._sent = 0
 
+    def ready(self) -> None:
+        """Open already: libsndfile read its header."""
+
     def read(self) -> bytes | None:
         pcm = self._next()
         if pcm is None:
@@ -232,6 +243,38 @@ class _Format:
 
 
 RAW = _Format(SAMPLE_RATE, 1, lambda b: np.frombuffer(b, "<i2").astype(np.float32) / 32768.0, 2)
+REFUSED = (
+    (b"OggS", "an Ogg stream"),
+    (b"fLaC", "a FLAC stream"),
+    (b"ID3", "an MP3 stream"),
+    (b"FORM", "an AIFF stream"),
+    (b".snd", "an AU stream"),
+    (b"RIFX", "a big-endian WAV"),
+    (b"RF64", "an RF64 WAV"),
+)
+"""Formats a stream starts by saying, which standard input does not decode: (magic, name)."""
+RAW_CHECK = 3200
+"""Bytes (0.1 s) of a headerless stream looked at before it is taken for raw PCM."""
+RAW_NOISE = 0.35
+"""The mean level, of full scale, above which a headerless start is not a microphone's:
+speech averages under a tenth; random bytes a half, text more."""
+MAX_HEADER = 1 << 20
+"""Bytes of a WAV stream's chunks before its audio that are read past, at most."""
+MAX_FMT = 256
+"""Bytes of a WAV's 'fmt ' chunk, at most (40 with every extension)."""
+MAX_CHANNELS = 64
+MAX_RATE = 384000
+
+
+def _mpeg_frame(head: bytes) -> bool:
+    """Whether `head` is an MPEG audio frame's header (an MP3 without ID3 tags): its sync
+    bits, and a version, layer, bitrate and rate that exist. Raw PCM starting with the
+    samples -1 or 0 (FF FF, 00 00) is none."""
+    if len(head) < 3 or head[0] != 0xFF or head[1] & 0xE0 != 0xE0:
+        return False
+    version, layer = head[1] >> 3 & 3, head[1] >> 1 & 3
+    bitrate, rate = head[2] >> 4, head[2] >> 2 & 3
+    return version != 1 and layer != 0 and bitrate not in (0, 15) and rate != 3
 
 
 def _decoder(tag: int, bits: int) -> Callable[[bytes], np.ndarray[Any, np.dtype[np.float32]]]:
@@ -274,6 +317,14 @@ class _PipeSource:
         self._framer: _Framer | None = None
         self._carry = b""
 
+    def ready(self) -> None:
+        if self._framer is None:
+            try:
+                self._start()
+            except AudioError:
+                if not self._closed.is_set():
+                    raise
+
     def read(self) -> bytes | None:
         while not self._closed.is_set():
             if self._framer is None:
@@ -291,33 +342,88 @@ class _PipeSource:
         return None
 
     def _start(self) -> None:
-        """Tell a WAV from raw PCM by its first bytes, and read the WAV's header."""
+        """Tell a WAV from raw PCM by its first bytes, and read the WAV's header; refuse
+        what is neither."""
         head = self._gather(4)
         if head == b"RIFF":
             self._format = self._wav_header()
         else:
+            named = next((name for magic, name in REFUSED if head.startswith(magic)), None)
+            if named is None and _mpeg_frame(head):
+                named = "an MP3 stream"
+            if named:
+                raise AudioError(
+                    f"{self.name}: {named}, which cannot be decoded from a pipe; give the "
+                    "file's name instead (voicectl listen FILE), or pipe WAV or raw PCM"
+                )
+            head += self._gather(RAW_CHECK - len(head))
+            self._check_raw(head)
+            _LOGGER.info(
+                "%s has no WAV header: read as raw 16 kHz mono signed 16-bit PCM", self.name
+            )
             self._format = RAW
             self._carry = head
         self._framer = _Framer(self._format.rate, self._format.channels)
 
+    def _check_raw(self, head: bytes) -> None:
+        """Refuse a headerless stream that is no microphone's: read as 16-bit samples, its
+        start is noise near full scale (random bytes, text, compressed audio)."""
+        samples = np.frombuffer(head[: len(head) - len(head) % 2], "<i2")
+        if len(samples) < RAW_CHECK // 4:
+            return  # too short to judge
+        level = float(np.mean(np.abs(samples.astype(np.float32)))) / 32768.0
+        if level > RAW_NOISE:
+            raise AudioError(
+                f"{self.name}: not audio this can read: no WAV header, and as raw 16-bit PCM "
+                f"its start is noise at {level:.0%} of full scale (random bytes, text or a "
+                "compressed format?); pipe WAV or raw 16 kHz mono 16-bit PCM"
+            )
+
     def _wav_header(self) -> _Format:
         """The format of a WAV stream, read up to the start of its samples (RIFF chunks:
-        'fmt ' gives the layout, 'data' is the audio; others are skipped)."""
+        'fmt ' gives the layout, 'data' is the audio; others are skipped, unread into
+        memory, up to `MAX_HEADER` bytes in all)."""
         if self._exactly(8)[4:] != b"WAVE":
             raise AudioError(f"{self.name}: starts with RIFF but is not a WAV")
         found: _Format | None = None
+        skipped = 0
         while True:
             chunk, size = struct.unpack("<4sI", self._exactly(8))
             if chunk == b"data":
                 if found is None:
                     raise AudioError(f"{self.name}: a WAV without a 'fmt ' chunk")
                 return found
-            body = self._exactly(size + size % 2)
-            if chunk == b"fmt ":
-                tag, channels, rate, _, _, bits = struct.unpack_from("<HHIIHH", body)
-                if tag == 0xFFFE and len(body) >= 26:  # WAVE_FORMAT_EXTENSIBLE: the real tag
-                    (tag,) = struct.unpack_from("<H", body, 24)
-                found = _Format(rate, channels, _decoder(tag, bits), bits // 8)
+            size += size % 2
+            skipped += size + 8
+            if skipped > MAX_HEADER:
+                raise AudioError(
+                    f"{self.name}: a WAV whose chunk {chunk!r} declares {size} bytes before "
+                    f"the audio; at most {MAX_HEADER} are read"
+                )
+            if chunk != b"fmt ":
+                self._skip(size)
+                continue
+            if not 16 <= size <= MAX_FMT:
+                raise AudioError(f"{self.name}: a WAV whose 'fmt ' chunk is {size} bytes")
+            found = self._layout(self._exactly(size))
+
+    def _layout(self, body: bytes) -> _Format:
+        """A 'fmt ' chunk's layout; AudioError for one no microphone or file has."""
+        tag, channels, rate, _, _, bits = struct.unpack_from("<HHIIHH", body)
+        if tag == 0xFFFE and len(body) >= 26:  # WAVE_FORMAT_EXTENSIBLE: the real tag
+            (tag,) = struct.unpack_from("<H", body, 24)
+        if not 1 <= channels <= MAX_CHANNELS or not 1000 <= rate <= MAX_RATE:
+            raise AudioError(
+                f"{self.name}: a WAV of {channels} channels at {rate} Hz; 1 to "
+                f"{MAX_CHANNELS} channels at 1000 to {MAX_RATE} Hz are read"
+            )
+        return _Format(rate, channels, _decoder(tag, bits), bits // 8)
+
+    def _skip(self, size: int) -> None:
+        """Read past `size` bytes of the stream, a piece at a time."""
+        while size > 0:
+            data = self._exactly(min(size, 65536))
+            size -= len(data)
 
     def _feed(self, data: bytes) -> None:
         assert self._format is not None
@@ -522,6 +628,9 @@ class _Microphone:
         if index is None:
             raise AudioError(f"{self.name} not found ({LIST_HINT})")
         self._open(index)
+
+    def ready(self) -> None:
+        """Open already: PortAudio started the device."""
 
     def read(self) -> bytes | None:
         while True:

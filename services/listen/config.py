@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 
+from voicectl.shared.messages import check_phrase
 from voicectl.shared.process import add_bus_arguments, robot_name
 
 from .listener import ListenConfig
@@ -27,6 +28,7 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument("--robot", type=robot_name, default="robot")
     parser.add_argument(
         "--wake",
+        type=_wake_phrase,
         default="",
         metavar="PHRASE",
         help="hear commands only after this phrase ('hey robot'); default: every utterance",
@@ -61,6 +63,16 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     )
     add_bus_arguments(parser)
     return parser.parse_args(argv)
+
+
+def _wake_phrase(text: str) -> str:
+    """A wake phrase the recogniser will check (`check_phrase`); '' for none."""
+    if not text.strip():
+        return ""
+    try:
+        return check_phrase(text)
+    except ValueError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from exc
 
 
 def listen_config(args: argparse.Namespace) -> ListenConfig:

@@ -309,7 +309,9 @@ class Listener(Service):
         """Whether the recogniser's neural ear hears the wake phrase in `pcm` too: the
         spotter alone wakes about 25 times an hour on speech that never says it
         (docs/benchmarks.md). A recogniser without such an ear leaves it to the spotter."""
-        request = CheckPhrase(pcm=pcm[-int(MAX_CHECK_SECONDS * 32000) :], phrase=self._config.wake)
+        request = CheckPhrase(
+            pcm=pcm[-int(MAX_CHECK_SECONDS * 32000) :], phrase=self._config.wake, wait=CHECK_TIMEOUT
+        )
         try:
             reply = await self._bus.request(
                 self._keys.stt_check, request, self._check_decoder, CHECK_TIMEOUT

@@ -30,6 +30,9 @@ class SttConfig:
                 max_utterance=args.max_utterance,
                 max_sessions=args.max_sessions,
                 idle_seconds=args.idle,
+                max_session=args.max_session,
+                min_audio=args.min_audio,
+                audio_window=args.audio_window,
             ),
         )
 
@@ -98,6 +101,15 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         ("--max-utterance", float, limits.max_utterance, "SECONDS", "cut longer utterances"),
         ("--max-sessions", int, limits.max_sessions, "N", "audio sessions open at once"),
         ("--idle", float, limits.idle_seconds, "SECONDS", "end a session silent this long"),
+        ("--max-session", float, limits.max_session, "SECONDS", "end a session open this long"),
+        (
+            "--min-audio",
+            float,
+            limits.min_audio,
+            "RATIO",
+            "end a session that sends less audio than this, in seconds per second",
+        ),
+        ("--audio-window", float, limits.audio_window, "SECONDS", "over this long (--min-audio)"),
     ):
         help_text = f"{text} (default %(default)s)"
         parser.add_argument(flag, type=kind, default=default, metavar=metavar, help=help_text)

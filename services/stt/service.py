@@ -28,7 +28,6 @@ from voicectl.shared.messages import (
     AudioStart,
     AudioStop,
     CheckPhrase,
-    Failed,
     Grammar,
     Message,
     PartialTranscript,
@@ -38,8 +37,10 @@ from voicectl.shared.messages import (
     excerpt,
 )
 from voicectl.shared.process import Service
+from voicectl.shared.throttle import Throttled
 
 from .audio import BYTES_PER_SECOND
+from .checks import PhraseChecks
 from .engine import Engine, EngineError, Final, Heard, Recogniser, RecognitionEvent, SpeechStarted
 
 _LOGGER = logging.getLogger(__name__)
@@ -54,9 +55,19 @@ class SessionLimits:
     max_sessions: int = 8
     """Open sessions per robot; each holds a decoder (about 30 MB for pocketsphinx)."""
     idle_seconds: float = 30.0
-    """A session that sends nothing for this long is stopped."""
+    """A session that sends nothing for this long is ended, what it holds dropped: its
+    sender has gone."""
     max_backlog: float = 5.0
     """Seconds of audio waiting to be decoded before a session's new audio is dropped."""
+    max_session: float = 300.0
+    """Seconds a session may stay open: sessions held open lock everyone else out. Past
+    it the session ends (its utterance in progress is finished); a person opens another."""
+    min_audio: float = 0.25
+    """Seconds of audio a session must send per second, over each `audio_window`: a
+    microphone sends one, and a session that trickles far less holds a place nobody
+    speaks in (eight such kept every microphone out, never idle long enough to close)."""
+    audio_window: float = 10.0
+    """Seconds over which `min_audio` is measured."""
 
 
 class Session:
@@ -78,6 +89,9 @@ class Session:
         """Bytes in the inbox, not yet decoded (updated on both threads under the lock)."""
         self._lock = threading.Lock()
         self.last_heard = time.monotonic()
+        self.opened = self.last_heard
+        self._window = (self.opened, 0)
+        """Since when audio is counted, and how many bytes came since (under the lock)."""
         self.stopping = False
         self.finished = loop.create_future()
         """Done once the last event of the session is published."""
@@ -96,7 +110,8 @@ class Session:
         """On Zenoh's thread: queue the audio for the recogniser."""
         self.last_heard = time.monotonic()
         if chunk.seq != self._next_seq:
-            _LOGGER.warning(
+            self._service.noise.warning(
+                "order",
                 "session %s: chunk %d arrived, %d expected; audio was lost or reordered",
                 self.name,
                 chunk.seq,
@@ -104,9 +119,14 @@ class Session:
             )
         self._next_seq = chunk.seq + 1
         with self._lock:
+            since, received = self._window
+            self._window = (since, received + len(chunk.pcm))
             if self._backlog + len(chunk.pcm) > self._service.limits.max_backlog * BYTES_PER_SECOND:
-                _LOGGER.warning(
-                    "session %s falls behind: %d ms dropped", self.name, len(chunk.pcm) // 32
+                self._service.noise.warning(
+                    "behind",
+                    "session %s falls behind: %d ms dropped",
+                    self.name,
+                    len(chunk.pcm) // 32,
                 )
                 return
             self._backlog += len(chunk.pcm)
@@ -120,10 +140,25 @@ class Session:
             self.stopping = True
         self._inbox.put(None)
 
-    def abort(self) -> None:
-        """The service is stopping: drop what is queued and end the thread now."""
+    def audio_sent(self, now: float, window: float) -> float | None:
+        """Seconds of audio received over the last `window` seconds, once that much time
+        has passed since the count began (a new count begins then); None before."""
+        with self._lock:
+            since, received = self._window
+            if now - since < window:
+                return None
+            self._window = (now, 0)
+        return received / BYTES_PER_SECOND
+
+    def drop(self) -> None:
+        """Any thread: end the session without recognising what it still holds: its
+        sender has gone, and nobody would act on a transcript made now."""
         self._aborted = True
         self.stop()
+
+    def abort(self) -> None:
+        """The service is stopping: drop what is queued and end the thread now."""
+        self.drop()
         self._thread.join(timeout=5.0)
         if self._publisher is not None:
             self._publisher.cancel()
@@ -228,6 +263,10 @@ class SttService(Service):
         self._status: Latest | None = None
         self._unpronounceable: list[str] = []
         self._detail = ""
+        self._checks = PhraseChecks(engine.check)
+        self.noise = Throttled(_LOGGER)
+        """Warnings a sender can cause once per message (refused sessions, chunks out of
+        order, for no session or dropped): at most one of a kind every 10 s."""
         self._refused = _Recent(256)
         """Sessions refused or unknown, so that their audio is dropped without a line
         per chunk (the last few hundred names)."""
@@ -261,19 +300,35 @@ class SttService(Service):
             with self._sessions_lock:
                 sessions = list(self._sessions.values())
             for session in sessions:
-                if not session.stopping and now - session.last_heard > self.limits.idle_seconds:
-                    _LOGGER.info(
-                        "session %s idle for %g s: stopped", session.name, self.limits.idle_seconds
-                    )
-                    self._stop(session)
-                    idle = f"no audio for {self.limits.idle_seconds:g} s: the microphone closed"
-                    self._tell(session.name, SessionEnded(reason=idle))
+                ending = None if session.stopping else self._ending(session, now)
+                if ending is not None:
+                    reason, drop = ending
+                    _LOGGER.info("session %s closed: %s", session.name, reason)
+                    self._stop(session, drop)
+                    self._tell(session.name, SessionEnded(reason=reason))
+
+    def _ending(self, session: Session, now: float) -> tuple[str, bool] | None:
+        """Why `session` must end now, and whether what it holds is dropped (nobody
+        speaks in it); None while it may go on."""
+        limits = self.limits
+        if now - session.last_heard > limits.idle_seconds:
+            return f"no audio for {limits.idle_seconds:g} s: the microphone closed", True
+        if now - session.opened > limits.max_session:
+            return (
+                f"open for {limits.max_session:g} s, the longest a session may be: start a new one",
+                False,
+            )
+        sent = session.audio_sent(now, limits.audio_window)
+        if sent is not None and sent < limits.min_audio * limits.audio_window:
+            return (
+                f"{sent:.1f} s of audio in {limits.audio_window:g} s: a microphone sends "
+                "as much audio as time passes",
+                True,
+            )
+        return None
 
     async def _on_check(self, request: CheckPhrase) -> Message:
-        try:
-            return await asyncio.to_thread(self.engine.check, request.pcm, request.phrase)
-        except EngineError as exc:
-            return Failed(reason=str(exc))
+        return await self._checks.ask(request)
 
     # --- grammar ---------------------------------------------------------------------------
 
@@ -332,8 +387,11 @@ class SttService(Service):
             session = self._sessions.get(name)
             if isinstance(message, AudioStart) and session is None:
                 if len(self._sessions) >= self.limits.max_sessions:
-                    _LOGGER.warning(
-                        "session %s refused: %d sessions open already", name, len(self._sessions)
+                    self.noise.warning(
+                        "refused",
+                        "session %s refused: %d sessions open already",
+                        name,
+                        len(self._sessions),
                     )
                     self._refused.add(name)
                     self._tell(
@@ -358,18 +416,26 @@ class SttService(Service):
                 if session is None:
                     if name not in self._refused:  # said once, not once per chunk
                         self._refused.add(name)
-                        _LOGGER.warning("audio for session %s, not started: dropped", name)
+                        self.noise.warning(
+                            "unknown", "audio for session %s, not started: dropped", name
+                        )
                 elif not session.stopping:
                     session.feed(message)
             case AudioStop():
                 if session is None:
-                    _LOGGER.warning("stop for session %s, which was not started: ignored", name)
+                    self.noise.warning(
+                        "unknown-stop", "stop for session %s, which was not started: ignored", name
+                    )
                 else:
                     self._stop(session)
 
-    def _stop(self, session: Session) -> None:
-        """Any thread: end the session; it is forgotten once its last event is out."""
-        session.stop()
+    def _stop(self, session: Session, drop: bool = False) -> None:
+        """Any thread: end the session (`drop`: without recognising what it holds); it is
+        forgotten once its last event is out."""
+        if drop:
+            session.drop()
+        else:
+            session.stop()
         assert self._loop is not None
         with contextlib.suppress(RuntimeError):  # the loop is closing
             self._loop.call_soon_threadsafe(session.finished.add_done_callback, self._forget)

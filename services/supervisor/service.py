@@ -21,6 +21,7 @@ import zenoh
 from voicectl.shared.bus import Bus, Pending, json_decoder
 from voicectl.shared.errors import ServiceError
 from voicectl.shared.keys import ANY, RobotKeys, last_chunk, robot_of
+from voicectl.shared.keys import MAX_ROBOTS as MAX_ROBOTS  # (`--max-robots`)
 from voicectl.shared.messages import (
     EmergencyStop,
     ExecutorEvent,
@@ -45,9 +46,6 @@ from .store import OrderStore
 
 _LOGGER = logging.getLogger(__name__)
 
-MAX_ROBOTS = 256
-"""Robots served at most besides those configured or restored: every name costs memory
-and bus declarations, and anyone on the bus can make names up (`--max-robots`)."""
 CLAIM_WINDOW = 2.0
 """Seconds after this supervisor claimed a robot during which another's claim counts as
 made at the same time, and is settled by Zenoh id; any later one is a newcomer's, which

@@ -33,7 +33,7 @@ from starlette.websockets import WebSocket
 from voicectl.shared.bus import Bus, BusOptions
 from voicectl.shared.client import Refused, Unreachable, VoicectlClient
 from voicectl.shared.errors import TtsError, VoicectlError
-from voicectl.shared.keys import RobotKeys, check_chunk
+from voicectl.shared.keys import MAX_ROBOTS, RobotKeys, check_chunk
 from voicectl.shared.messages import (
     Cancel,
     CancelAll,
@@ -153,8 +153,12 @@ class Panel:
     """The API's handlers; the bus and the hub arrive when the app starts. `voice` speaks
     the panel's answers (/api/speech); None turns that off."""
 
-    def __init__(self, robot: str, access: Access, voice: Voice | None = None) -> None:
+    def __init__(
+        self, robot: str, access: Access, voice: Voice | None = None, max_robots: int = MAX_ROBOTS
+    ) -> None:
         self.default_robot = robot
+        self.max_robots = max_robots
+        """Robots the hub follows at most besides `robot` (`--max-robots`)."""
         self.access = access
         self.voice = voice
         self._bus: Bus | None = None
@@ -166,7 +170,7 @@ class Panel:
         """Serve from `bus`; the hub it gives is a service for the caller to run."""
         self._bus = bus
         self._client = VoicectlClient(bus, BUS_TIMEOUT)
-        self.hub = Hub(bus, self.default_robot)
+        self.hub = Hub(bus, self.default_robot, self.max_robots)
         return self.hub
 
     def end_streams(self) -> None:

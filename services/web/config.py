@@ -7,7 +7,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from voicectl.shared.config import default_token_file
-from voicectl.shared.process import add_bus_arguments, robot_name
+from voicectl.shared.keys import MAX_ROBOTS
+from voicectl.shared.process import add_bus_arguments, positive_int, robot_name
 from voicectl.shared.tts import VOICES
 
 from .tls import add_tls_arguments
@@ -29,6 +30,8 @@ class WebConfig:
     """Other origins whose pages may open the microphone socket."""
     voice: str | None = None
     """The engine that says the panel's answers; None: espeak-ng if installed; 'none'."""
+    max_robots: int = MAX_ROBOTS
+    """Robots followed at most besides `robot` (their last state, pose, parts, labels)."""
 
     @property
     def token_path(self) -> Path:
@@ -50,6 +53,7 @@ class WebConfig:
             keyfile=args.keyfile,
             allow_origins=tuple(args.allow_origin),
             voice=args.voice,
+            max_robots=args.max_robots,
         )
 
 
@@ -66,6 +70,15 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         default=None,
         help="file holding the API token, created if missing (default: data dir/token; "
         "$VOICECTL_TOKEN overrides)",
+    )
+    parser.add_argument(
+        "--max-robots",
+        type=positive_int,
+        default=MAX_ROBOTS,
+        metavar="N",
+        help="robots followed at most besides --robot (default %(default)s): names come from "
+        "anyone on the bus; when full, the one heard from longest ago that no page shows and "
+        "no supervisor serves makes room, else a newcomer is not followed",
     )
     add_tls_arguments(parser)
     parser.add_argument(

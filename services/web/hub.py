@@ -6,6 +6,11 @@ pose, parts and the orders' places at once, so a reloaded page is whole without 
 A robot's own map is subscribed to only while a browser listens to that robot: its
 executor relays the map only while someone does.
 
+Robot names come from anyone on the bus, so what is kept per robot is bounded as the
+supervisor bounds the robots it serves (`--max-robots`): past the cap, the robot heard
+from longest ago that no browser shows and no supervisor serves is forgotten to make
+room, and otherwise the newcomer is not followed. The default robot is always followed.
+
 The hub is a service (shared/process.py): `start()` subscribes, `run()` marks robots
 offline whose pose went stale, `stop()` ends every subscription.
 """
@@ -13,6 +18,7 @@ offline whose pose went stale, `stop()` ends every subscription.
 from __future__ import annotations
 
 import asyncio
+import collections
 import contextlib
 import logging
 from collections.abc import Callable, Iterator
@@ -20,7 +26,14 @@ from collections.abc import Callable, Iterator
 import msgspec
 
 from voicectl.shared.bus import Bus, json_decoder
-from voicectl.shared.keys import ANY, ConverterKeys, RobotKeys, last_chunk, robot_of
+from voicectl.shared.keys import (
+    ANY,
+    MAX_ROBOTS,
+    ConverterKeys,
+    RobotKeys,
+    last_chunk,
+    robot_of,
+)
 from voicectl.shared.messages import (
     PartialTranscript,
     Places,
@@ -43,12 +56,6 @@ QUEUE_LIMIT = 200
 """Frames a stalled browser may fall behind before it loses the oldest."""
 END = b""
 """The last item of a listener's queue: the stream ends (the server is stopping)."""
-FOLLOWED = 1024
-"""Robots followed at most (their parts kept) that no supervisor serves: names come from
-anyone on the bus."""
-FOLLOWED_AT_ALL = 4096
-"""Robots followed at most, those a supervisor serves included (a forged supervisor
-token costs as much as a real one)."""
 
 
 class Parts(msgspec.Struct, tag="parts", tag_field="type"):
@@ -80,9 +87,14 @@ PanelEvent = (
 class Hub(Service):
     """Bus subscriptions for every robot, and the browsers listening to each."""
 
-    def __init__(self, bus: Bus, default_robot: str) -> None:
+    def __init__(self, bus: Bus, default_robot: str, max_robots: int = MAX_ROBOTS) -> None:
         self._bus = bus
         self._default = default_robot
+        self._max_robots = max_robots
+        self._followed: collections.OrderedDict[str, None] = collections.OrderedDict()
+        """Robots besides the default one whose frames, parts and labels are kept, the one
+        heard from longest ago first; at most `max_robots` of them, and those browsers
+        show."""
         self._listeners: dict[str, set[asyncio.Queue[bytes]]] = {}
         self._last: dict[str, dict[str, bytes]] = {}
         """Per robot, the last frame of each kind a new listener needs."""
@@ -163,13 +175,24 @@ class Hub(Service):
         return Parts(robot=robot, parts=states)
 
     def knows_state(self, robot: str) -> bool:
-        return "StateUpdate" in self._last.get(robot, {})
+        return self.knows(robot, "StateUpdate")
+
+    def knows(self, robot: str, kind: str) -> bool:
+        """Whether a last frame of `kind` ('StateUpdate', 'SttStatus', 'pose', 'map') is
+        kept for `robot`, to prime a page opened now."""
+        return kind in self._last.get(robot, {})
 
     def remember(self, robot: str, state: StateUpdate) -> None:
         """A state asked for (a panel opened before any change was published)."""
         frame = self._frame(state)
-        self._last.setdefault(robot, {})["StateUpdate"] = frame
+        if self._follow(robot):
+            self._last.setdefault(robot, {})["StateUpdate"] = frame
         self._send(robot, frame)
+
+    @property
+    def held(self) -> set[str]:
+        """The robots something is kept for (frames, parts, labels, a fresh pose)."""
+        return {*self._last, *self._labels, *self._alive, *self._posed, *self._listed}
 
     @contextlib.contextmanager
     def listen(self, robot: str) -> Iterator[asyncio.Queue[bytes]]:
@@ -186,6 +209,7 @@ class Hub(Service):
             queue.put_nowait(self._places)
         listeners = self._listeners.setdefault(robot, set())
         listeners.add(queue)
+        self._follow(robot)  # one a browser shows is followed, past the cap if need be
         if robot not in self._maps:
             self._maps[robot] = self._bus.subscribe(
                 RobotKeys(robot).map, json_decoder(RobotMap), self._on_event, history=True
@@ -194,8 +218,10 @@ class Hub(Service):
             yield queue
         finally:
             listeners.discard(queue)
-            if not listeners and robot in self._maps:
-                self._maps.pop(robot)()
+            if not listeners:
+                del self._listeners[robot]
+                if robot in self._maps:
+                    self._maps.pop(robot)()
 
     def _frame(self, message: object) -> bytes:
         return b"data: " + self._encoder.encode(message) + b"\n\n"
@@ -210,6 +236,9 @@ class Hub(Service):
 
     def _on_event(self, key: str, message: PanelEvent) -> None:
         robot = robot_of(key)
+        kept = isinstance(message, StateUpdate | SttStatus | RobotMap | RobotPose)
+        if kept and not self._follow(robot):
+            return  # nobody shows it: it has no listener to send to either
         frame = self._frame(message)
         match message:
             case StateUpdate() | SttStatus():
@@ -235,11 +264,14 @@ class Hub(Service):
 
     def _on_label(self, key: str, alive: bool) -> None:
         robot, label = robot_of(key), last_chunk(key)
-        labels = self._labels.setdefault(robot, set())
-        if alive:
-            labels.add(label)
+        if alive and self._follow(robot):
+            self._labels.setdefault(robot, set()).add(label)
+        elif robot in self._labels:
+            self._labels[robot].discard(label)
+            if not self._labels[robot]:
+                del self._labels[robot]
         else:
-            labels.discard(label)
+            return
         self._send(robot, self._frame(self.labels(robot)))
 
     def _on_converter(self, _key: str, alive: bool) -> None:
@@ -251,7 +283,7 @@ class Hub(Service):
         robot, service = robot_of(key), last_chunk(key)
         services = self._alive.get(robot)
         if services is None:
-            if not alive or not self._may_follow(robot, service):
+            if not alive or not self._follow(robot, serving=service == "supervisor"):
                 return
             services = self._alive[robot] = set()
         if alive:
@@ -268,17 +300,43 @@ class Hub(Service):
                 for queue in listeners:
                     queue.put_nowait(robots)
 
-    def _may_follow(self, robot: str, service: str) -> bool:
-        """Whether to follow one more robot: always the default one and those a supervisor
-        serves (up to `FOLLOWED_AT_ALL`), any other up to `FOLLOWED`."""
-        followed = len(self._alive)
-        served = robot == self._default or service == "supervisor"
-        if followed < (FOLLOWED_AT_ALL if served else FOLLOWED):
+    def _follow(self, robot: str, serving: bool = False) -> bool:
+        """Whether to keep what is heard of `robot` (`serving`: its supervisor announces
+        itself). The default robot always; one already followed, or one a browser shows;
+        a newcomer while fewer than `max_robots` are followed, or once the one heard from
+        longest ago that nobody shows and no supervisor serves is forgotten for it."""
+        if robot == self._default:
             return True
-        self._noise.warning(
-            "follow", "robot '%s' not followed: %d robots are already", robot, followed
-        )
-        return False
+        if robot in self._followed:
+            self._followed.move_to_end(robot)
+            return True
+        full = len(self._followed) >= self._max_robots
+        if full and not self._make_room() and robot not in self._listeners:
+            self._noise.warning(
+                "follow",
+                "robot '%s'%s not followed: %d robots are (--max-robots), each shown or "
+                "served; start the panel with --robot %s to show it whatever comes",
+                robot,
+                " (its supervisor announced itself)" if serving else "",
+                len(self._followed),
+                robot,
+            )
+            return False
+        self._followed[robot] = None
+        return True
+
+    def _make_room(self) -> bool:
+        """Forget the robot heard from longest ago that no browser shows and no supervisor
+        serves; False if there is none."""
+        for robot in self._followed:
+            if robot not in self._listeners and robot not in self._listed:
+                break
+        else:
+            return False
+        del self._followed[robot]
+        for table in (self._last, self._labels, self._alive, self._posed):
+            table.pop(robot, None)
+        return True
 
     def _send_parts(self, robot: str) -> None:
         self._send(robot, self._frame(self.parts(robot)))

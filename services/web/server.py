@@ -32,7 +32,7 @@ def panel_of(config: WebConfig) -> Panel:
     """The API's handlers with their token and voice: before the bus opens, so that a
     missing voice engine is told at once."""
     access = Access(load_or_create_token(config.token_path), origins=list(config.allow_origins))
-    return Panel(config.robot, access, _voice(config.voice))
+    return Panel(config.robot, access, _voice(config.voice), config.max_robots)
 
 
 def build(bus: Bus, config: WebConfig, options: BusOptions, panel: Panel) -> PanelServer:
