@@ -16,7 +16,7 @@ from voicectl.services.converter.shipped import shipped_orders
 from voicectl.services.stt.config import add_engine_arguments, engine_options
 from voicectl.services.web.tls import add_tls_arguments, tls_problem
 from voicectl.shared.bus import DEFAULT_ROUTER, Bus
-from voicectl.shared.client import Refused, VoicectlClient
+from voicectl.shared.client import Refused, SayRefused, VoicectlClient
 from voicectl.shared.config import data_dir, default_token_file, load_or_create_token
 from voicectl.shared.errors import BusError, OrdersFileError
 from voicectl.shared.keys import ConverterKeys, RobotKeys
@@ -28,6 +28,7 @@ from voicectl.shared.messages import (
     GetState,
     Message,
     ParseProblem,
+    ParseResult,
     Release,
     Reorder,
     Resume,
@@ -489,25 +490,18 @@ async def _say(args: argparse.Namespace) -> int:
     try:
         with Bus.open(bus_options(args, wait=False), asyncio.get_running_loop()) as bus:
             said = await VoicectlClient(bus).say(args.robot, args.text, partial=args.partial)
-    except Refused as exc:
+    except SayRefused as exc:
+        # Refused is an answer too: the same JSON as any other, with what was understood
+        # held back and why.
+        _print_said(exc.result or ParseResult(), [], refused=str(exc))
         print(f"voicectl say: {exc}", file=sys.stderr)
         return 1
     except BusError as exc:  # no router, or no converter or supervisor answering
         print(f"voicectl say: {exc}", file=sys.stderr)
         return 3
     result = said.result
-    # What went to the robot is under "orders"; what was understood and held back is not
-    # printed as if it had been sent.
     sent = bool(said.order_ids)
-    _print_json(
-        {
-            "submitted": sent,
-            "orders": result.orders if sent else [],
-            "not_sent": [] if sent else result.orders,
-            "errors": result.errors,
-            "order_ids": said.order_ids,
-        }
-    )
+    _print_said(result, said.order_ids)
     # One line on stderr, for a person: what happened, then each part not understood.
     problems = "; ".join(_unsaid(error) for error in result.errors)
     if sent and problems:
@@ -519,6 +513,23 @@ async def _say(args: argparse.Namespace) -> int:
     # Exit status follows what happened: 0 when orders went to the robot (with --partial,
     # even though some words made none), 1 when nothing did.
     return 0 if sent else 1
+
+
+def _print_said(result: ParseResult, order_ids: list[str], refused: str | None = None) -> None:
+    """`say`'s JSON, the same keys whatever happened. What went to the robot is under
+    "orders"; what was understood and held back (or refused) is not printed as if it had
+    been sent."""
+    sent = bool(order_ids)
+    _print_json(
+        {
+            "submitted": sent,
+            "orders": result.orders if sent else [],
+            "not_sent": [] if sent else result.orders,
+            "errors": result.errors,
+            "order_ids": order_ids,
+            "refused": refused,
+        }
+    )
 
 
 def _unsaid(error: ParseProblem) -> str:
