@@ -10,7 +10,10 @@ import socket
 from pathlib import Path
 from typing import Any
 
+import pytest
+
 from harness.client import Client, client_wait_ready
+from harness.ports import free_port
 from harness.wait import async_wait_until, wait_until
 from voicectl.shared.bus import json_decoder
 from voicectl.shared.keys import RobotKeys
@@ -257,6 +260,28 @@ def test_a_negative_reorder_position_is_refused_in_one_line() -> None:
         "voicectl reorder: argument position: position must be 0 or more, not -1 "
         "(see voicectl reorder --help)\n"
     )
+
+
+@pytest.mark.parametrize(
+    ("flag", "value", "allowed"),
+    [
+        ("--limit", "0", "1 to 500"),
+        ("--limit", "1000", "1 to 500"),
+        ("--offset", "-1", f"0 to {2**53}"),
+        ("--limit", "ten", "1 to 500"),
+    ],
+)
+def test_a_history_page_out_of_range_is_a_usage_error_naming_the_range(
+    flag: str, value: str, allowed: str
+) -> None:
+    """Said by the command itself, before the bus: no router is there to ask."""
+    done = voicectl("history", flag, value, "--connect", f"tcp/127.0.0.1:{free_port()}")
+    assert done.returncode == 2, done.stderr
+    assert done.stdout == ""
+    assert done.stderr.count("\n") == 1, done.stderr
+    assert done.stderr.startswith(
+        f"voicectl history: argument {flag}: must be a whole number from {allowed}, not '{value}'"
+    ), done.stderr
 
 
 async def test_cancel_all_says_what_it_cancelled_and_partial_say_exits_0(

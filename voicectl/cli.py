@@ -7,6 +7,7 @@ import asyncio
 import datetime
 import importlib
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import NoReturn
 
@@ -22,6 +23,8 @@ from voicectl.shared.errors import BusError, OrdersFileError
 from voicectl.shared.keys import ConverterKeys, RobotKeys
 from voicectl.shared.kinds import ON_ZENOH, TransportKind
 from voicectl.shared.messages import (
+    HISTORY_LIMIT_MAX,
+    HISTORY_OFFSET_MAX,
     Cancel,
     CancelAll,
     GetHistory,
@@ -155,8 +158,18 @@ def build_parser() -> argparse.ArgumentParser:
 
     supervisor_command("state", "print the supervisor's state as JSON")
     history = supervisor_command("history", "print a page of finished orders as JSON")
-    history.add_argument("--offset", type=int, default=0)
-    history.add_argument("--limit", type=int, default=20)
+    history.add_argument(
+        "--offset",
+        type=_whole_number(0, HISTORY_OFFSET_MAX),
+        default=0,
+        help="how many of the newest to skip (default 0)",
+    )
+    history.add_argument(
+        "--limit",
+        type=_whole_number(1, HISTORY_LIMIT_MAX),
+        default=20,
+        help=f"how many to print, 1 to {HISTORY_LIMIT_MAX} (default 20)",
+    )
     supervisor_command("cancel", "cancel a queued or running order").add_argument("order_id")
     supervisor_command("cancel-all", "cancel the queue and the running order")
     supervisor_command(
@@ -361,6 +374,24 @@ def _position(text: str) -> int:
     if position < 0:
         raise argparse.ArgumentTypeError(f"position must be 0 or more, not {position}")
     return position
+
+
+def _whole_number(low: int, high: int) -> Callable[[str], int]:
+    """argparse type for a whole number from `low` to `high`: a value out of range is a
+    usage error naming the range, said before anything goes on the bus."""
+
+    def convert(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            value = None
+        if value is None or not low <= value <= high:
+            raise argparse.ArgumentTypeError(
+                f"must be a whole number from {low} to {high}, not {text!r}"
+            )
+        return value
+
+    return convert
 
 
 def _robot_namespace(text: str) -> tuple[str, str]:
