@@ -6,6 +6,7 @@ from __future__ import annotations
 import asyncio
 import datetime
 import json
+import os
 import socket
 from pathlib import Path
 from typing import Any
@@ -21,8 +22,9 @@ from voicectl.shared.messages import Failed, GetState, StateReply, SupervisorRep
 from voicectl.shared.robot.keys import RobotNames
 from voicectl.shared.ros2 import Pose2D, Ros2Codec, RosDistro, new_goal_id
 
-from .conftest import Processes, voicectl
+from .conftest import REPO, Processes, voicectl
 from .support import joined
+from .test_hints import BARE_PATH, run_as_written
 
 
 def test_parse_prints_one_json_object() -> None:
@@ -253,13 +255,23 @@ def test_transcribe_of_a_missing_file_says_which_in_one_line(tmp_path: Path) -> 
 
 
 def test_a_negative_reorder_position_is_refused_in_one_line() -> None:
-    done = voicectl("reorder", "some-id", "-1", "--connect", "tcp/127.0.0.1:1")
+    """...and the help it points to is a command that runs as written, from the clone."""
+    done = voicectl(
+        "reorder",
+        "some-id",
+        "-1",
+        "--connect",
+        "tcp/127.0.0.1:1",
+        env={**os.environ, "PATH": BARE_PATH},
+    )
     assert done.returncode == 2
     assert done.stdout == ""
-    assert done.stderr == (
-        "voicectl reorder: argument position: position must be 0 or more, not -1 "
-        "(see voicectl reorder --help)\n"
-    )
+    said, _, helps = done.stderr.partition(" (see ")
+    assert said == "voicectl reorder: argument position: position must be 0 or more, not -1"
+    assert helps.endswith(" reorder --help)\n"), helps
+    shown = run_as_written(helps.removesuffix(")\n"), REPO, BARE_PATH)
+    assert shown.returncode == 0, shown.stderr
+    assert shown.stdout.startswith("usage: voicectl reorder"), shown.stdout
 
 
 @pytest.mark.parametrize(

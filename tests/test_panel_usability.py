@@ -399,6 +399,13 @@ def test_messages_stand_by_their_control_and_go_when_stale(
                     assert 0 < below < 200, below
                     expect(page.locator("#banner")).to_be_hidden()
                     shot(page, "1-send-refused-while-latched", screen)
+                    # The supervisor's own refusal names the command that releases (as it
+                    # runs where the stack runs: `.venv/bin/voicectl release` from a clone);
+                    # in the panel's words it is left out.
+                    refusal = page.evaluate(SUBMIT_REFUSED)
+                    assert "(" in refusal["said"], refusal  # the hint was there
+                    assert "emergency stop is on" in refusal["shown"], refusal
+                    assert "voicectl" not in refusal["shown"], refusal
 
                     page.click("#head-release")
                     expect(latched).to_be_hidden()
@@ -436,6 +443,18 @@ def test_messages_stand_by_their_control_and_go_when_stale(
     answer = stack_get(stack, "/favicon.ico")
     assert answer[0] == 200, answer
     assert answer[1].startswith("image/svg"), answer
+
+
+SUBMIT_REFUSED = """async () => {
+  // The staged order submitted through the panel's own api(): what the refusal said,
+  // and what the panel shows of it.
+  try {
+    await api("/api/submit", { orders: [view.staged[0].order], request_id: newRequestId() });
+  } catch (error) {
+    return { said: error.message, shown: forPerson(error.message) };
+  }
+  return null;
+}"""
 
 
 def failed_requests(page: Page) -> list[str]:

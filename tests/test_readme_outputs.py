@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import re
+import subprocess
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -120,7 +121,7 @@ def test_each_command_prints_what_the_readme_says(stack: Stack, tmp_path: Path) 
         ("bus-secrets", ["bus-secrets", str(tmp_path / "bus")], 1),
         ("up", ["up", "--router", stack.router, "--port", str(stack.port)], 2),
     ]
-    refused = None
+    refused = hint = None
     for command, argv, expected in runs:
         done = stack.voicectl(*argv)
         allowed = expected if isinstance(expected, tuple) else (expected,)
@@ -128,9 +129,22 @@ def test_each_command_prints_what_the_readme_says(stack: Stack, tmp_path: Path) 
         check_shape(command, rows[command], done.returncode, done.stdout, done.stderr)
         if argv[:2] == ["say", "turn left"] and done.returncode == 1:
             refused = json.loads(done.stdout)
+            hint = re.search(r"\(([^(]*) release, or Release in the panel\)", done.stderr)
     # The refusal says why, and holds back what was understood without calling it sent.
     assert refused is not None
     assert "emergency stop" in refused["refused"], refused
     assert [order["description"] for order in refused["not_sent"]] == ["turn left"], refused
     assert refused["submitted"] is False
     assert refused["orders"] == refused["order_ids"] == []
+    # Its hint runs as written where the command ran (the router named by its variable).
+    assert hint is not None
+    release = subprocess.run(
+        ["bash", "-c", f"{hint.group(1)} release"],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        env={**stack.env, "ZENOH_CONNECT": stack.router},
+        timeout=60,
+        check=False,
+    )
+    assert release.returncode == 0, (hint.group(1), release.stderr)

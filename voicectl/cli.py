@@ -20,6 +20,7 @@ from voicectl.shared.bus import DEFAULT_ROUTER, Bus
 from voicectl.shared.client import Refused, SayRefused, VoicectlClient
 from voicectl.shared.config import data_dir, default_token_file, load_or_create_token
 from voicectl.shared.errors import BusError, OrdersFileError
+from voicectl.shared.hints import pip_install, voicectl_command
 from voicectl.shared.keys import ConverterKeys, RobotKeys
 from voicectl.shared.kinds import ON_ZENOH, TransportKind
 from voicectl.shared.messages import (
@@ -57,7 +58,8 @@ class _OneLineParser(argparse.ArgumentParser):
     """Usage errors in one line, as every other error of voicectl: what, and where help is."""
 
     def error(self, message: str) -> NoReturn:
-        self.exit(2, f"{self.prog}: {message} (see {self.prog} --help)\n")
+        helps = voicectl_command(*self.prog.split()[1:], "--help")
+        self.exit(2, f"{self.prog}: {message} (see {helps})\n")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -255,7 +257,7 @@ def main(argv: list[str] | None = None) -> int:
         command = argv[0] if argv else "voicectl"
         print(
             f"voicectl {command}: {exc}; this installation lacks the host's packages "
-            "(pip install 'voicectl[host]')",
+            f"({pip_install('host')})",
             file=sys.stderr,
         )
         return 2
@@ -427,7 +429,7 @@ def _bus_secrets(args: argparse.Namespace) -> int:
         return 1
     clients = [path.stem for path in written if path.suffix == ".json5" and path.stem != "router"]
     print(f"bus secrets in {directory} (keys, passwords and client configs mode 0600)")
-    print(f"router: voicectl router --config {directory / 'router.json5'}")
+    print(f"router: {voicectl_command('router', '--config', str(directory / 'router.json5'))}")
     print(f"clients: --config {directory}/<user>.json5 for {', '.join(clients)}")
     for robot in robots:
         scope = (
@@ -446,7 +448,8 @@ def _cert(args: argparse.Namespace) -> int:
     certfile, keyfile = directory / "panel.crt", directory / "panel.key"
     write_certificate(args.hosts, certfile, keyfile)
     print(f"certificate {certfile} for {', '.join(args.hosts)}; key {keyfile} (mode 0600)")
-    print(f"serve with: voicectl up --host 0.0.0.0 --certfile {certfile} --keyfile {keyfile}")
+    serve = ["up", "--host", "0.0.0.0", "--certfile", str(certfile), "--keyfile", str(keyfile)]
+    print(f"serve with: {voicectl_command(*serve)}")
     return 0
 
 

@@ -67,9 +67,11 @@ function clearNotes(reason) {
 
 function forPerson(text) {
   // The services' messages serve the command line too: a hint naming a CLI command means
-  // nothing to the person at the panel, and is left out.
-  return String(text).replace(/\s*\((?:run |use )?`?voicectl [^)]*\)/g, "")
-    .replace(/[;,:]?\s*(?:run|use) `?voicectl [^.;]*/g, "");
+  // nothing to the person at the panel, and is left out. The command is named as it runs
+  // where the service runs: `voicectl release`, `.venv/bin/voicectl release`,
+  // `/usr/bin/python3 -m voicectl release`.
+  return String(text).replace(/\s*\((?:run |use )?`?(?:[^\s()`]+ -m )?[^\s()`]*voicectl [^)]*\)/g, "")
+    .replace(/[;,:]?\s*(?:run|use) `?(?:[^\s()`]+ -m )?[^\s()`]*voicectl [^.;]*/g, "");
 }
 
 function el(tag, text, cls) {
