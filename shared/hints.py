@@ -13,11 +13,16 @@ from __future__ import annotations
 import importlib.metadata
 import importlib.util
 import os
+import re
 import shutil
 import sys
 from pathlib import Path
 
 DISTRIBUTION = "voicectl"
+UNLISTED = frozenset({"test", "bench"})
+"""Extras for developing voicectl, never the one a hint names."""
+MODULE_DISTRIBUTIONS = {"text_to_num": "text2num"}
+"""Modules whose distribution is not named after them (the others: '_' read as '-')."""
 
 
 def _shown(path: Path) -> str:
@@ -76,3 +81,52 @@ def pip_install(extras: str) -> str:
 def apt_get_install(*packages: str) -> str:
     """The Debian command that installs `packages`, with sudo unless this is root."""
     return ("" if os.geteuid() == 0 else "sudo ") + "apt-get install " + " ".join(packages)
+
+
+def _normalized(name: str) -> str:
+    return re.sub(r"[-_.]+", "-", name).lower()
+
+
+def _extras() -> dict[str, set[str]]:
+    """Each extra of the installed voicectl and the distributions it brings, those of the
+    extras it names included (`host` is `voicectl[converter,stt,web]`)."""
+    direct: dict[str, set[str]] = {}
+    named: dict[str, set[str]] = {}
+    try:
+        requirements = importlib.metadata.requires(DISTRIBUTION) or []
+    except importlib.metadata.PackageNotFoundError:  # run from a checkout never installed
+        requirements = []
+    for requirement in requirements:
+        found = re.match(
+            r"\s*([A-Za-z0-9._-]+)(?:\[([^\]]*)\])?[^;]*;\s*extra\s*==\s*\"([^\"]+)\"",
+            requirement,
+        )
+        if found is None:
+            continue  # a core dependency
+        name, inner, extra = found.groups()
+        if _normalized(name) == DISTRIBUTION:
+            named.setdefault(extra, set()).update(e.strip() for e in (inner or "").split(","))
+        else:
+            direct.setdefault(extra, set()).add(_normalized(name))
+
+    def brings(extra: str, seen: frozenset[str]) -> set[str]:
+        found = set(direct.get(extra, ()))
+        for inner in named.get(extra, ()):
+            if inner not in seen:
+                found |= brings(inner, seen | {inner})
+        return found
+
+    return {extra: brings(extra, frozenset({extra})) for extra in {*direct, *named}}
+
+
+def extra_for(module: str, preferred: str = "") -> str:
+    """The extra that brings the missing top-level `module`: `preferred` (the command's own)
+    when it does, else the smallest that does; `preferred`, or 'host', when none names it
+    (a dependency of a dependency)."""
+    wanted = _normalized(MODULE_DISTRIBUTIONS.get(module, module))
+    extras = _extras()
+    bringing = [name for name, brought in extras.items() if wanted in brought]
+    bringing = [name for name in bringing if name not in UNLISTED]
+    if preferred in bringing or not bringing:
+        return preferred or "host"
+    return min(bringing, key=lambda name: (len(extras[name]), name))

@@ -1,6 +1,6 @@
 """The commands hints name (shared/hints.py) run as written where the person is: from the
 clone that `scripts/up` installed into (nothing on PATH), from another directory, and with
-the installation's bin/ on PATH."""
+the installation's bin/ on PATH; the extra named is the one that brings what is missing."""
 
 from __future__ import annotations
 
@@ -11,6 +11,8 @@ import sys
 from pathlib import Path
 
 import pytest
+
+from voicectl.shared.hints import extra_for
 
 from .conftest import REPO
 
@@ -79,3 +81,23 @@ def test_an_apt_command_is_for_this_user() -> None:
     if os.geteuid() == 0:  # apt-get's simulation: reads the package lists, changes nothing
         done = run_as_written(command.replace(" install ", " install -s "), REPO, BARE_PATH)
         assert done.returncode == 0, (command, done.stderr)
+
+
+@pytest.mark.parametrize(
+    ("module", "command_extra", "named"),
+    [
+        ("soxr", "listen", "listen"),
+        ("sounddevice", "listen", "mic"),  # listen's microphone is an extra of its own
+        ("text_to_num", "converter", "converter"),  # a robot's `voicectl parse`
+        ("text_to_num", "", "converter"),
+        ("pocketsphinx", "stt", "stt"),  # in stt and listen both: the command's own
+        ("pocketsphinx", "listen", "listen"),
+        ("starlette", "host", "host"),  # host brings web's packages
+        ("starlette", "", "web"),
+        ("cffi", "listen", "listen"),  # no extra names it: the command's own
+    ],
+)
+def test_the_extra_named_is_the_one_that_brings_the_module(
+    module: str, command_extra: str, named: str
+) -> None:
+    assert extra_for(module, command_extra) == named

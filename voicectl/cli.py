@@ -20,7 +20,7 @@ from voicectl.shared.bus import DEFAULT_ROUTER, Bus
 from voicectl.shared.client import Refused, SayRefused, VoicectlClient
 from voicectl.shared.config import data_dir, default_token_file, load_or_create_token
 from voicectl.shared.errors import BusError, OrdersFileError
-from voicectl.shared.hints import pip_install, voicectl_command
+from voicectl.shared.hints import extra_for, pip_install, voicectl_command
 from voicectl.shared.keys import ConverterKeys, RobotKeys
 from voicectl.shared.kinds import ON_ZENOH, TransportKind
 from voicectl.shared.messages import (
@@ -45,6 +45,17 @@ from .health import add_health_arguments, check
 from .stack import Child, PanelAddress, port_in_use, run_stack
 
 SERVICES = ("router", "converter", "stt", "supervisor", "executor", "relay", "sim", "web", "listen")
+COMMAND_EXTRAS = {
+    "up": "host",
+    "converter": "converter",
+    "parse": "converter",
+    "stt": "stt",
+    "transcribe": "stt",
+    "web": "web",
+    "cert": "web",
+    "listen": "listen",
+}
+"""The extra each command needs beyond the core, named when one of its modules is missing."""
 SHIPPED_ORDERS = shipped_orders()
 """orders/ of the checkout, or the installed copy of its files."""
 _ENCODER = msgspec.json.Encoder()
@@ -253,11 +264,13 @@ def main(argv: list[str] | None = None) -> int:
     except ModuleNotFoundError as exc:
         if (exc.name or "").partition(".")[0] in ("shared", "services", "voicectl"):
             raise  # one of ours: a bug, not a missing package
-        # A robot installs only the core: the host's commands say what they lack.
+        # A robot installs only the core, a host may lack an extra: the command says which
+        # extra brings what is missing, and how to install it here.
         command = argv[0] if argv else "voicectl"
+        extra = extra_for(exc.name or "", COMMAND_EXTRAS.get(command, ""))
         print(
-            f"voicectl {command}: {exc}; this installation lacks the host's packages "
-            f"({pip_install('host')})",
+            f"voicectl {command}: {exc}; this installation lacks voicectl's [{extra}] extra "
+            f"({pip_install(extra)})",
             file=sys.stderr,
         )
         return 2
