@@ -632,6 +632,12 @@ def test_a_photo_an_order_took_is_shown_in_its_history_row(
                 expect(photos).to_have_count(taken + 1, timeout=60_000)
                 row = photos.first
                 expect(row.locator("td.succeeded")).to_be_visible()
+                # Where the file is kept on the robot is one click away, not on the row.
+                message = row.locator("td.message")
+                expect(message).to_contain_text("took a 64x48 photo")
+                assert "kept on the robot" not in message.inner_text()
+                message.locator("details.more summary").click()
+                expect(message).to_contain_text("kept on the robot as ")
                 row.locator("button.show-photo").click()
                 image = row.locator("img.photo")
                 expect(image).to_be_visible()
