@@ -62,6 +62,16 @@ class Refused(VoicectlError):
         self.reason = reason
 
 
+class SayRefused(Refused):
+    """A service refused what `VoicectlClient.say` asked: the text's orders, if the
+    converter made them, come with the refusal (`result`, None when the converter itself
+    refused)."""
+
+    def __init__(self, refused: Refused, result: ParseResult | None) -> None:
+        super().__init__(refused.service, refused.reason)
+        self.result = result
+
+
 class Unreachable(BusError):
     """No answer from a service: no router, the service is not up, or (on a secured
     bus) the router does not let this user ask it."""
@@ -237,8 +247,15 @@ class VoicectlClient:
 
     async def say(self, robot: str, text: str, partial: bool = False) -> Said:
         """Parse `text` and submit its orders: only when every part of it made an order,
-        unless `partial`, which submits what was understood."""
-        result = await self.parse(text)
+        unless `partial`, which submits what was understood. A refusal is `SayRefused`,
+        with what the text made."""
+        try:
+            result = await self.parse(text)
+        except Refused as exc:
+            raise SayRefused(exc, None) from exc
         sending = result.orders if partial or not result.errors else []
-        order_ids = await self.submit(robot, sending, transcript=text) if sending else []
+        try:
+            order_ids = await self.submit(robot, sending, transcript=text) if sending else []
+        except Refused as exc:
+            raise SayRefused(exc, result) from exc
         return Said(result=result, order_ids=order_ids)

@@ -527,11 +527,17 @@ class Reorder(Message):
     position: Annotated[int, msgspec.Meta(ge=0)]
 
 
+HISTORY_OFFSET_MAX = 2**53
+"""The furthest a history page may start (JSON's largest exact integer)."""
+HISTORY_LIMIT_MAX = 500
+"""The most records one history page holds."""
+
+
 class GetHistory(Message):
     """A page of finished orders, most recent first."""
 
-    offset: Annotated[int, msgspec.Meta(ge=0, le=2**53)] = 0
-    limit: Annotated[int, msgspec.Meta(ge=1, le=500)] = 50
+    offset: Annotated[int, msgspec.Meta(ge=0, le=HISTORY_OFFSET_MAX)] = 0
+    limit: Annotated[int, msgspec.Meta(ge=1, le=HISTORY_LIMIT_MAX)] = 50
 
 
 SupervisorRequest = (

@@ -26,6 +26,7 @@ from types import MappingProxyType
 from typing import Protocol
 
 from .errors import TtsError
+from .hints import apt_get_install, pip_install
 
 MAX_TEXT = 300
 """Characters one phrase may have: an answer is a sentence, not a page."""
@@ -170,8 +171,12 @@ def not_installed(engine: str, install: str) -> str:
     return f"speech engine {engine!r} is not installed ({install})"
 
 
-ESPEAK_INSTALL = "apt-get install espeak-ng, or pip install espeakng-loader"
-FLITE_INSTALL = "apt-get install flite"
+def espeak_install() -> str:
+    return f"{apt_get_install('espeak-ng')}, or {pip_install('speak')}"
+
+
+def flite_install() -> str:
+    return apt_get_install("flite")
 
 
 def _espeak_ng(voice: str | None, rate: int | None) -> Voice:
@@ -186,20 +191,20 @@ def _espeak_ng(voice: str | None, rate: int | None) -> Voice:
         library = [*(["--voice", voice] if voice else []), *(["--rate", str(rate)] if rate else [])]
         argv = [sys.executable, "-m", "voicectl.shared.espeak_library", *library]
     else:
-        raise TtsError(not_installed("espeak-ng", ESPEAK_INSTALL))
-    return CommandVoice("espeak-ng", lambda text: (argv, text.encode()), ESPEAK_INSTALL)
+        raise TtsError(not_installed("espeak-ng", espeak_install()))
+    return CommandVoice("espeak-ng", lambda text: (argv, text.encode()), espeak_install())
 
 
 def _flite(voice: str | None, rate: int | None) -> Voice:
     """CMU flite (voices kal, awb, rms, slt): more natural than espeak-ng, English only."""
     binary = shutil.which("flite")
     if binary is None:
-        raise TtsError(not_installed("flite", FLITE_INSTALL))
+        raise TtsError(not_installed("flite", flite_install()))
     options = ["-voice", voice] if voice else []
     if rate:  # flite has no rate: it stretches durations instead
         options += ["--setf", f"duration_stretch={DEFAULT_WPM / rate:.3f}"]
     argv = [binary, *options, "-o", "/dev/stdout", "-t"]
-    return CommandVoice("flite", lambda text: ([*argv, text], b""), FLITE_INSTALL)
+    return CommandVoice("flite", lambda text: ([*argv, text], b""), flite_install())
 
 
 VOICES: Mapping[str, Callable[[str | None, int | None], Voice]] = MappingProxyType(

@@ -30,6 +30,7 @@ import zenoh
 import zenoh.ext
 
 from .errors import BusError
+from .hints import voicectl_command
 from .throttle import Throttled
 
 _LOGGER = logging.getLogger(__name__)
@@ -649,7 +650,8 @@ def _open_session(options: BusOptions) -> zenoh.Session:
             raise failed[0]
         why = str(failed[0]).split(" at /", 1)[0]  # Zenoh appends its source file
         if not options.wait:
-            why = f"waited {CLIENT_TIMEOUT:g} s; is voicectl up or voicectl router running"
+            up, router = voicectl_command("up"), voicectl_command("router")
+            why = f"waited {CLIENT_TIMEOUT:g} s; is {up} or {router} running"
             if options.config_file is not None:
                 why += ", and do its TLS certificates and credentials match --config"
             why += "?"

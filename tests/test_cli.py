@@ -6,11 +6,15 @@ from __future__ import annotations
 import asyncio
 import datetime
 import json
+import os
 import socket
 from pathlib import Path
 from typing import Any
 
+import pytest
+
 from harness.client import Client, client_wait_ready
+from harness.ports import free_port
 from harness.wait import async_wait_until, wait_until
 from voicectl.shared.bus import json_decoder
 from voicectl.shared.keys import RobotKeys
@@ -18,8 +22,9 @@ from voicectl.shared.messages import Failed, GetState, StateReply, SupervisorRep
 from voicectl.shared.robot.keys import RobotNames
 from voicectl.shared.ros2 import Pose2D, Ros2Codec, RosDistro, new_goal_id
 
-from .conftest import Processes, voicectl
+from .conftest import REPO, Processes, voicectl
 from .support import joined
+from .test_hints import BARE_PATH, run_as_written
 
 
 def test_parse_prints_one_json_object() -> None:
@@ -250,13 +255,45 @@ def test_transcribe_of_a_missing_file_says_which_in_one_line(tmp_path: Path) -> 
 
 
 def test_a_negative_reorder_position_is_refused_in_one_line() -> None:
-    done = voicectl("reorder", "some-id", "-1", "--connect", "tcp/127.0.0.1:1")
+    """...and the help it points to is a command that runs as written, from the clone."""
+    done = voicectl(
+        "reorder",
+        "some-id",
+        "-1",
+        "--connect",
+        "tcp/127.0.0.1:1",
+        env={**os.environ, "PATH": BARE_PATH},
+    )
     assert done.returncode == 2
     assert done.stdout == ""
-    assert done.stderr == (
-        "voicectl reorder: argument position: position must be 0 or more, not -1 "
-        "(see voicectl reorder --help)\n"
-    )
+    said, _, helps = done.stderr.partition(" (see ")
+    assert said == "voicectl reorder: argument position: position must be 0 or more, not -1"
+    assert helps.endswith(" reorder --help)\n"), helps
+    shown = run_as_written(helps.removesuffix(")\n"), REPO, BARE_PATH)
+    assert shown.returncode == 0, shown.stderr
+    assert shown.stdout.startswith("usage: voicectl reorder"), shown.stdout
+
+
+@pytest.mark.parametrize(
+    ("flag", "value", "allowed"),
+    [
+        ("--limit", "0", "1 to 500"),
+        ("--limit", "1000", "1 to 500"),
+        ("--offset", "-1", f"0 to {2**53}"),
+        ("--limit", "ten", "1 to 500"),
+    ],
+)
+def test_a_history_page_out_of_range_is_a_usage_error_naming_the_range(
+    flag: str, value: str, allowed: str
+) -> None:
+    """Said by the command itself, before the bus: no router is there to ask."""
+    done = voicectl("history", flag, value, "--connect", f"tcp/127.0.0.1:{free_port()}")
+    assert done.returncode == 2, done.stderr
+    assert done.stdout == ""
+    assert done.stderr.count("\n") == 1, done.stderr
+    assert done.stderr.startswith(
+        f"voicectl history: argument {flag}: must be a whole number from {allowed}, not '{value}'"
+    ), done.stderr
 
 
 async def test_cancel_all_says_what_it_cancelled_and_partial_say_exits_0(

@@ -79,8 +79,13 @@ HOOK = textwrap.dedent(
 
 def on_robot(code: str, *args: str) -> subprocess.CompletedProcess[str]:
     """Run `code` in a Python that cannot import what only the extras install."""
+    return refusing(refused_modules(), code, *args)
+
+
+def refusing(modules: set[str], code: str, *args: str) -> subprocess.CompletedProcess[str]:
+    """Run `code` in a Python that cannot import `modules`."""
     return subprocess.run(
-        [sys.executable, "-c", HOOK + textwrap.dedent(code), ",".join(refused_modules()), *args],
+        [sys.executable, "-c", HOOK + textwrap.dedent(code), ",".join(modules), *args],
         capture_output=True,
         text=True,
         cwd=REPO,
@@ -92,10 +97,33 @@ def on_robot(code: str, *args: str) -> subprocess.CompletedProcess[str]:
 def test_the_hook_refuses_the_hosts_packages() -> None:
     done = on_robot("from voicectl.cli import main; sys.exit(main(['parse', 'turn left']))")
     assert done.returncode == 2, done.stderr
-    assert done.stderr.strip().splitlines() == [
+    [line] = done.stderr.strip().splitlines()
+    assert line.startswith(
         "voicectl parse: No module named 'text_to_num' (not on a robot); this installation "
-        "lacks the host's packages (pip install 'voicectl[host]')"
-    ]
+        "lacks voicectl's [converter] extra ("
+    ), line
+    assert re.search(r"pip install (-e '[^']*|'voicectl)\[converter\]'\)$", line), line
+
+
+@pytest.mark.parametrize(
+    ("missing", "argv", "extra"),
+    [
+        ("soxr", ["listen", "--list-devices"], "listen"),
+        ("sounddevice", ["listen", "--list-devices"], "mic"),
+        ("pocketsphinx", ["listen", "--list-devices"], "listen"),
+        ("pocketsphinx", ["transcribe", "README.md"], "stt"),
+        ("starlette", ["up", "--port", "1"], "host"),
+        ("cryptography", ["cert", "localhost"], "web"),
+    ],
+)
+def test_a_missing_extra_is_the_one_named(missing: str, argv: list[str], extra: str) -> None:
+    """Where one extra is missing (a host installed with [host] alone, and listen run
+    there), the command names that extra, not another that happens to be installed."""
+    done = refusing({missing}, f"from voicectl.cli import main; sys.exit(main({argv!r}))")
+    assert done.returncode == 2, done.stderr
+    [line] = done.stderr.strip().splitlines()
+    assert re.search(rf"pip install (-e '[^']*|'voicectl)\[{extra}\]'", line), line
+    assert f"[{extra}] extra" in line or "not installed" in line, line
 
 
 def test_what_a_robot_runs_imports_without_the_extras() -> None:

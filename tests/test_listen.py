@@ -5,9 +5,12 @@ at all, moves nothing."""
 
 from __future__ import annotations
 
+import asyncio
+import json
 import os
 import queue
 import shlex
+import shutil
 import signal
 import subprocess
 import sys
@@ -18,19 +21,31 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from harness.ports import free_port
 from harness.pulse import PulseAudio
 from harness.pulse import unavailable as pulse_unavailable
 from harness.speech_set import pink_noise
-from harness.wait import wait_until
+from harness.wait import async_wait_until, wait_until
 from voicectl.services.listen.listener import ECHO_TAIL
 from voicectl.services.stt.audio import read_wav
 from voicectl.shared.bus import Bus
 from voicectl.shared.client import VoicectlClient
-from voicectl.shared.messages import GetState, OrderStatus, Release, State, StateReply
+from voicectl.shared.keys import RobotKeys, last_chunk
+from voicectl.shared.messages import (
+    GetState,
+    OrderStatus,
+    PartialTranscript,
+    Proposal,
+    Release,
+    State,
+    StateReply,
+)
 
 from .conftest import REPO, Speak, Stack
-from .support import on_bus
+from .support import joined, on_bus
 from .test_docs import block_after
+from .test_hints import BARE_PATH
+from .test_panel_browser import silent_wav
 
 pytestmark = pytest.mark.e2e
 
@@ -150,6 +165,157 @@ def test_a_file_becomes_orders_the_simulator_carries_out(
         ("take picture", OrderStatus.SUCCEEDED),
         ("turn left", OrderStatus.SUCCEEDED),
     ]
+
+
+async def test_the_end_of_a_file_waits_for_the_answer_to_what_was_said_last(
+    router: str, tmp_path: Path
+) -> None:
+    """A recogniser that answers after the listener went back to sleep (a loaded host's,
+    seconds after the audio ended) is still heard: the file's end waits for the answer to
+    every utterance the recogniser began to hear. The recogniser is a stand-in at the bus
+    seam, with the converter's answer: a partial transcript while the file plays, the
+    proposal only once the listener has put its session to sleep."""
+    quiet = silent_wav(tmp_path / "quiet.wav", 1.0)
+    listener = await asyncio.create_subprocess_exec(
+        *[sys.executable, "-m", "voicectl", "listen", str(quiet), "--awake", "0.2"],
+        *["--no-stop-word", "--connect", router],
+        stderr=asyncio.subprocess.PIPE,
+        cwd=REPO,
+    )
+    said: list[str] = []
+
+    async def read() -> None:
+        assert listener.stderr is not None
+        async for line in listener.stderr:
+            said.append(line.decode().rstrip())
+
+    reading = asyncio.ensure_future(read())
+    keys = RobotKeys("robot")
+    try:
+        with joined(router) as bus:
+            sessions: list[str] = []
+
+            def streamed(key: str, _audio: bytes) -> None:
+                sessions.append(last_chunk(key))
+
+            bus.subscribe(keys.stt_audio_any, bytes, streamed)
+            await async_wait_until(lambda: sessions, 30.0, "the listener's audio session")
+            session = sessions[0]
+            bus.publish(keys.partial, PartialTranscript(session=session, utterance=0, text="turn"))
+            await async_wait_until(
+                lambda: any(f"session {session} ended" in line for line in said),
+                30.0,
+                "the listener to put its session to sleep",
+            )
+            bus.publish(
+                keys.proposal,
+                Proposal(transcript="turn left", session=session, utterance=0, rejected=True),
+            )
+            async with asyncio.timeout(60):
+                code = await listener.wait()
+    finally:
+        if listener.returncode is None:
+            listener.kill()
+            await listener.wait()
+        await reading
+    assert code == 0, said
+    assert any("answer: " in line for line in said), said
+
+
+def copy_checkout(to: Path) -> None:
+    """The checkout's files as a clone has them (tracked, and new ones not ignored; none of
+    its .venv), symbolic links kept as links."""
+    listed = subprocess.run(
+        ["git", "ls-files", "-z", "--cached", "--others", "--exclude-standard"],
+        capture_output=True,
+        cwd=REPO,
+        check=True,
+    ).stdout.decode()
+    for name in filter(None, listed.split("\0")):
+        source = REPO / name
+        if not source.is_symlink() and not source.exists():
+            continue  # deleted, not yet committed
+        (to / name).parent.mkdir(parents=True, exist_ok=True)
+        shutil.copy2(source, to / name, follow_symlinks=False)
+
+
+@pytest.mark.timeout(900)
+def test_the_docs_examples_run_as_written_right_after_scripts_up(tmp_path: Path) -> None:
+    """docs/listen.md's examples in a clone that `scripts/up` itself installed (its .venv,
+    nothing on PATH), against the stack `scripts/up` starts: the device listing, then the
+    spoken file, whose orders `voicectl history` lists. The stack is on ports of the
+    test's own, which the examples reach through ZENOH_CONNECT; their /tmp files are the
+    test's own."""
+    clone = tmp_path / "clone"
+    copy_checkout(clone)
+    env = {
+        **{k: v for k, v in os.environ.items() if k not in ("VOICECTL_VENV", "VIRTUAL_ENV")},
+        "PATH": BARE_PATH,
+        "VOICECTL_DATA": str(tmp_path / "data"),
+        "PYTHONUNBUFFERED": "1",
+    }
+    # scripts/up's own steps: the Debian packages, the virtualenv; `up --help` then ends it.
+    installed = subprocess.run(
+        ["scripts/up", "--help"], cwd=clone, env=env, capture_output=True, text=True, timeout=840
+    )
+    assert installed.returncode == 0, installed.stdout + installed.stderr
+    router = f"tcp/127.0.0.1:{free_port()}"
+    up = subprocess.Popen(
+        ["scripts/up", "--router", router, "--port", str(free_port()), "--time-scale", "10"],
+        cwd=clone,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        start_new_session=True,
+    )
+    said: list[str] = []
+    reader = threading.Thread(target=lambda: said.extend(up.stdout or []), daemon=True)
+    reader.start()
+    examples = {**env, "ZENOH_CONNECT": router}
+
+    def run(command: str) -> subprocess.CompletedProcess[str]:
+        command = command.replace("/tmp/", f"{tmp_path}/")
+        done = subprocess.run(
+            ["bash", "-c", command], cwd=clone, env=examples, capture_output=True, text=True
+        )
+        print(f"$ {command}", done.stderr, sep="\n")
+        assert done.returncode == 0, (command, done.stdout, done.stderr)
+        return done
+
+    def history() -> list[tuple[str, str]]:
+        page = json.loads(run(".venv/bin/voicectl history").stdout)
+        return [(record["order"]["description"], record["status"]) for record in page["records"]]
+
+    try:
+        wait_until(
+            lambda: any("voicectl up: ready" in line for line in said) or up.poll() is not None,
+            180.0,
+            "the stack scripts/up starts",
+        )
+        assert up.poll() is None, "".join(said)
+        doc = REPO / "docs" / "listen.md"
+        listing = block_after(doc, "# Hands-free", "sh").strip()
+        assert listing == ".venv/bin/voicectl listen --list-devices"
+        run(listing)
+        for command in block_after(doc, "heard through the whole stack", "sh").strip().splitlines():
+            run(command)
+        wait_until(
+            lambda: ("take picture", "succeeded") in history(), 60.0, "the spoken orders to run"
+        )
+        assert history() == [("take picture", "succeeded"), ("turn left", "succeeded")]
+    finally:
+        if up.poll() is None:
+            os.killpg(up.pid, signal.SIGINT)
+            try:
+                up.wait(timeout=60)
+            except subprocess.TimeoutExpired:
+                os.killpg(up.pid, signal.SIGKILL)
+                up.wait()
+        reader.join(timeout=5)
+        if up.stdout is not None:
+            up.stdout.close()
+        print("".join(said))
 
 
 def test_the_wake_phrase_gates_commands_and_stop_needs_none(stack: Stack, speech: Speak) -> None:

@@ -125,7 +125,7 @@ async def test_a_failure_cancels_the_rest_of_the_utterance(robot: Robot) -> None
         assert (first.status, first.message) == (OrderStatus.FAILED, "door is closed")
         rest = await client.finished(after)
         assert rest.status == OrderStatus.CANCELLED
-        assert refused in rest.message
+        assert rest.message == "cancelled because “do refuse” before it failed"
 
 
 async def test_duplicate_submit_is_a_no_op(robot: Robot) -> None:

@@ -240,7 +240,10 @@ def test_speak_a_command_and_a_non_command(stack: Stack, speech: Speak, tmp_path
         expect(page.locator("#heard")).to_have_text(SAID)
         expect(page.locator("#heard")).to_have_class("heard final")
         expect(page.locator("#staged li .what")).to_have_text(["turn left", "reach kitchen"])
-        # what each ear heard, and why the orders are these
+        # what each ear heard, and why the orders are these: the engines' words, one
+        # click away
+        expect(page.locator("#ears")).to_be_hidden()
+        page.click("#ears-more summary")
         ears = page.locator("#ears li")
         expect(ears).to_have_count(3)
         expect(ears.nth(0)).to_contain_text("grammar")

@@ -163,6 +163,71 @@ def test_the_map_shows_places_robot_and_where_orders_go_before_and_after_send(
         expect(page.locator("#map .robot")).to_have_count(1)
 
 
+LABELS = """() => [...document.querySelectorAll("#map .place")].map((group) => {
+  // Each place's label: where it is drawn from its circle's centre, and its box, in the
+  // map's own units.
+  const circle = group.querySelector("circle");
+  const text = group.querySelector("text");
+  const box = text.getBBox();
+  const [cx, cy] = [Number(circle.getAttribute("cx")), Number(circle.getAttribute("cy"))];
+  return {name: text.textContent, cx, cy,
+          dx: Number(text.getAttribute("x")) - cx, dy: Number(text.getAttribute("y")) - cy,
+          box: {x: box.x, y: box.y, w: box.width, h: box.height}};
+})"""
+
+
+def labels_of(page: Page) -> dict[str, tuple[float, float]]:
+    """Where each place's label is drawn from its own place, once two looks agree (the
+    map is framed anew when the robot's map is read), after checking that each is nearer
+    its own place than any other."""
+    seen: list[list[dict[str, Any]]] = []
+
+    def settled() -> bool:
+        seen.append(page.evaluate(LABELS))
+        return len(seen) > 1 and bool(seen[-1]) and seen[-1] == seen[-2]
+
+    wait_until(settled, 30.0, "the places' labels to be drawn")
+    labels = seen[-1]
+    for label in labels:
+        box = label["box"]
+
+        def away(x: float, y: float, box: dict[str, float] = box) -> float:
+            dx = max(box["x"] - x, 0.0, x - box["x"] - box["w"])
+            dy = max(box["y"] - y, 0.0, y - box["y"] - box["h"])
+            return math.hypot(dx, dy)
+
+        own = away(label["cx"], label["cy"])
+        for other in labels:
+            if other is not label:
+                assert own < away(other["cx"], other["cy"]), (label["name"], other["name"])
+    return {label["name"]: (round(label["dx"], 6), round(label["dy"], 6)) for label in labels}
+
+
+def test_each_place_keeps_its_label_beside_it_at_every_redraw(stack: Stack, tmp_path: Path) -> None:
+    """A label is nearer its own place than any other, and at the same spot by it whatever
+    else the map shows: orders staged far away (the view widens), the robot driven to
+    another place."""
+    from playwright.sync_api import expect
+
+    with panel(stack, tmp_path / "profile") as page:
+        page.set_viewport_size({"width": 1280, "height": 900})
+        login(page, stack)
+        expect(page.locator("#map image.grid")).to_have_count(1, timeout=15_000)
+        expect(page.locator("#map .place")).to_have_count(4)
+        first = labels_of(page)
+        page.fill("#text", "go forward ten meters then go forward ten meters")
+        page.press("#text", "Enter")
+        expect(page.locator("#map .step.staged")).to_have_count(2)
+        assert labels_of(page) == first
+        page.click("#clear")
+        page.fill("#text", "reach bathroom")
+        page.press("#text", "Enter")
+        page.click("#send")
+        expect(page.locator("#pose")).to_contain_text("x 5.0 m, y 2.0 m", timeout=60_000)
+        assert labels_of(page) == first
+        page.screenshot(path=str(ARTIFACTS / "map-labels.png"))
+
+
 def test_on_a_phone_nothing_scrolls_sideways_and_stop_stays_in_reach(
     stack: Stack, tmp_path: Path
 ) -> None:

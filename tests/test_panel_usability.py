@@ -428,6 +428,13 @@ def test_messages_stand_by_their_control_and_go_when_stale(
                     assert 0 < below < 200, below
                     expect(page.locator("#banner")).to_be_hidden()
                     shot(page, "1-send-refused-while-latched", screen)
+                    # The supervisor's own refusal names the command that releases (as it
+                    # runs where the stack runs: `.venv/bin/voicectl release` from a clone);
+                    # in the panel's words it is left out.
+                    refusal = page.evaluate(SUBMIT_REFUSED)
+                    assert "(" in refusal["said"], refusal  # the hint was there
+                    assert "emergency stop is on" in refusal["shown"], refusal
+                    assert "voicectl" not in refusal["shown"], refusal
 
                     page.click("#head-release")
                     expect(latched).to_be_hidden()
@@ -465,6 +472,18 @@ def test_messages_stand_by_their_control_and_go_when_stale(
     answer = stack_get(stack, "/favicon.ico")
     assert answer[0] == 200, answer
     assert answer[1].startswith("image/svg"), answer
+
+
+SUBMIT_REFUSED = """async () => {
+  // The staged order submitted through the panel's own api(): what the refusal said,
+  // and what the panel shows of it.
+  try {
+    await api("/api/submit", { orders: [view.staged[0].order], request_id: newRequestId() });
+  } catch (error) {
+    return { said: error.message, shown: forPerson(error.message) };
+  }
+  return null;
+}"""
 
 
 def failed_requests(page: Page) -> list[str]:
@@ -642,6 +661,12 @@ def test_a_photo_an_order_took_is_shown_in_its_history_row(
                 expect(photos).to_have_count(taken + 1, timeout=60_000)
                 row = photos.first
                 expect(row.locator("td.succeeded")).to_be_visible()
+                # Where the file is kept on the robot is one click away, not on the row.
+                message = row.locator("td.message")
+                expect(message).to_contain_text("took a 64x48 photo")
+                assert "kept on the robot" not in message.inner_text()
+                message.locator("details.more summary").click()
+                expect(message).to_contain_text("kept on the robot as ")
                 row.locator("button.show-photo").click()
                 image = row.locator("img.photo")
                 expect(image).to_be_visible()

@@ -80,6 +80,25 @@ def test_a_failure_cancels_the_rest_of_its_utterance_only(queue: RobotQueue) -> 
         (b, OrderStatus.CANCELLED),
         (a, OrderStatus.FAILED),
     ]
+    # Why, in words a person knows the order by: what it does, never its id.
+    assert queue.history[0].message == "cancelled because “a” before it failed"
+
+
+@pytest.mark.parametrize(
+    ("status", "said"),
+    [
+        (OrderStatus.REJECTED, "was refused"),
+        (OrderStatus.INTERRUPTED, "was interrupted"),
+    ],
+)
+def test_the_reason_of_a_cancelled_sibling_names_the_order_before_it(
+    queue: RobotQueue, status: OrderStatus, said: str
+) -> None:
+    a, _b = queue.submit("req-1", [order("move forward 10 m"), order("b")], "")
+    queue.start_next()
+    queue.finish(a, status, "no")
+    assert queue.history[0].message == f"cancelled because “move forward 10 m” before it {said}"
+    assert a not in queue.history[0].message
 
 
 def test_continue_on_failure_keeps_the_rest() -> None:

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import os
 import shlex
 import socket
 import stat
@@ -49,6 +50,7 @@ from voicectl.shared.ros2 import Odometry, Ros2Codec
 
 from .conftest import REPO, Processes, voicectl
 from .support import joined, order, until_heard
+from .test_hints import hint
 
 CODEC = Ros2Codec()
 
@@ -389,12 +391,14 @@ def test_no_credentials_or_a_wrong_password_cannot_connect(
     wrong["transport"]["auth"]["usrpwd"]["password"] = "guess"
     guessing = tmp_path / "guessing.json5"
     guessing.write_text(json.dumps(wrong))
+    path = os.environ["PATH"]
+    up, router = (hint(f"voicectl_command('{c}')", REPO, path) for c in ("up", "router"))
     for config in (anonymous, guessing):
         refused = voicectl("state", "--robot", "r1", "--config", str(config), timeout=60)
         assert refused.returncode == 3
         assert refused.stderr.strip() == (
             f"voicectl state: cannot reach the router at {site.endpoint} (waited 3 s; is "
-            "voicectl up or voicectl router running, and do its TLS certificates and "
+            f"{up} or {router} running, and do its TLS certificates and "
             "credentials match --config?)"
         )
     allowed = voicectl("state", "--robot", "r1", "--config", str(site.config("panel")))

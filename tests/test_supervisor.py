@@ -74,7 +74,7 @@ async def test_sigkill_with_orders_in_flight_loses_nothing_and_resumes(site: Sit
         rest = await client.finished(then)
         assert (rest.status, rest.message) == (
             OrderStatus.CANCELLED,
-            f"an earlier order of the same command ended cancelled: {running}",
+            "cancelled because “do drive” before it was cancelled",
         )
         state = await client.state()
         assert state.current is None

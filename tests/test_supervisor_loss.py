@@ -137,7 +137,7 @@ async def test_a_lost_supervisor_stops_the_moving_robot(robot: Robot, moving: Or
         rest = await client.finished(sibling)
         assert (rest.status, rest.message) == (
             OrderStatus.CANCELLED,
-            f"an earlier order of the same command ended cancelled: {running}",
+            f"cancelled because “{moving.description}” before it was cancelled",
         )
         state = await client.state()
         assert [r.id for r in state.queue] == [later]

@@ -27,6 +27,7 @@ from voicectl.stack import Child, port_in_use, wait_for_port
 
 from .conftest import REPO, Stack, voicectl
 from .support import on_bus
+from .test_hints import BARE_PATH, hint, run_as_written
 
 pytestmark = pytest.mark.e2e
 
@@ -37,9 +38,11 @@ def test_a_command_without_a_router_fails_in_seconds_naming_it() -> None:
     done = voicectl("state", "--connect", endpoint)
     assert time.monotonic() - started < 15.0
     assert done.returncode == 3
+    path = os.environ["PATH"]
+    up, router = (hint(f"voicectl_command('{c}')", REPO, path) for c in ("up", "router"))
     assert done.stderr.splitlines() == [
         f"voicectl state: cannot reach the router at {endpoint} "
-        "(waited 3 s; is voicectl up or voicectl router running?)"
+        f"(waited 3 s; is {up} or {router} running?)"
     ]
 
 
@@ -277,10 +280,11 @@ def test_a_forged_owner_token_does_not_stop_the_stack(stack: Stack) -> None:
 @pytest.mark.parametrize("output", ["pipe", "terminal"])
 def test_the_login_address_goes_to_a_terminal_never_to_a_log(tmp_path: Path, output: str) -> None:
     """The token in the panel's address logs a person in with one click; where the
-    output may be kept (a pipe, a file, a journal) the address comes without it."""
+    output may be kept (a pipe, a file, a journal) the address comes without it, and the
+    command that prints it runs as written (from a clone, with nothing on PATH)."""
     router_port, port = free_ports(2)
     data = tmp_path / "data"
-    env = {**os.environ, "VOICECTL_DATA": str(data), "PYTHONUNBUFFERED": "1"}
+    env = {**os.environ, "VOICECTL_DATA": str(data), "PYTHONUNBUFFERED": "1", "PATH": BARE_PATH}
     env.pop("VOICECTL_TOKEN", None)
     command = ["up", "--router", f"tcp/127.0.0.1:{router_port}", "--port", str(port), "--no-stt"]
     reading, writing = os.openpty() if output == "terminal" else os.pipe()
@@ -324,10 +328,11 @@ def test_the_login_address_goes_to_a_terminal_never_to_a_log(tmp_path: Path, out
         assert f"voicectl up: panel on {address}#token={token}" in lines
     else:
         assert f"voicectl up: panel on {address}" in lines
-        assert (
-            "`voicectl token` prints it"
-            in lines[lines.index(f"voicectl up: panel on {address}") + 1]
-        )
+        said = lines[lines.index(f"voicectl up: panel on {address}") + 1]
+        assert said.endswith("` prints it"), said
+        command = said.split("`")[1]
+        printed = run_as_written(command, REPO, BARE_PATH, VOICECTL_DATA=str(data))
+        assert printed.stdout.strip() == token, (command, printed.stderr)
         assert not [line for line in lines if token in line]
 
 

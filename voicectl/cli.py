@@ -8,6 +8,7 @@ import datetime
 import importlib
 import stat
 import sys
+from collections.abc import Callable
 from pathlib import Path
 from typing import NoReturn
 
@@ -17,18 +18,22 @@ from voicectl.services.converter.shipped import shipped_orders
 from voicectl.services.stt.config import add_engine_arguments, engine_options
 from voicectl.services.web.tls import add_tls_arguments, tls_problem
 from voicectl.shared.bus import DEFAULT_ROUTER, Bus
-from voicectl.shared.client import Refused, VoicectlClient
+from voicectl.shared.client import Refused, SayRefused, VoicectlClient
 from voicectl.shared.config import data_dir, default_token_file, load_or_create_token
 from voicectl.shared.errors import BusError, OrdersFileError
+from voicectl.shared.hints import extra_for, pip_install, voicectl_command
 from voicectl.shared.keys import ConverterKeys, RobotKeys
 from voicectl.shared.kinds import ON_ZENOH, TransportKind
 from voicectl.shared.messages import (
+    HISTORY_LIMIT_MAX,
+    HISTORY_OFFSET_MAX,
     Cancel,
     CancelAll,
     GetHistory,
     GetState,
     Message,
     ParseProblem,
+    ParseResult,
     Release,
     Reorder,
     Resume,
@@ -41,6 +46,17 @@ from .health import add_health_arguments, check
 from .stack import Child, PanelAddress, port_in_use, run_stack
 
 SERVICES = ("router", "converter", "stt", "supervisor", "executor", "relay", "sim", "web", "listen")
+COMMAND_EXTRAS = {
+    "up": "host",
+    "converter": "converter",
+    "parse": "converter",
+    "stt": "stt",
+    "transcribe": "stt",
+    "web": "web",
+    "cert": "web",
+    "listen": "listen",
+}
+"""The extra each command needs beyond the core, named when one of its modules is missing."""
 SHIPPED_ORDERS = shipped_orders()
 """orders/ of the checkout, or the installed copy of its files."""
 _ENCODER = msgspec.json.Encoder()
@@ -54,7 +70,8 @@ class _OneLineParser(argparse.ArgumentParser):
     """Usage errors in one line, as every other error of voicectl: what, and where help is."""
 
     def error(self, message: str) -> NoReturn:
-        self.exit(2, f"{self.prog}: {message} (see {self.prog} --help)\n")
+        helps = voicectl_command(*self.prog.split()[1:], "--help")
+        self.exit(2, f"{self.prog}: {message} (see {helps})\n")
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -155,8 +172,18 @@ def build_parser() -> argparse.ArgumentParser:
 
     supervisor_command("state", "print the supervisor's state as JSON")
     history = supervisor_command("history", "print a page of finished orders as JSON")
-    history.add_argument("--offset", type=int, default=0)
-    history.add_argument("--limit", type=int, default=20)
+    history.add_argument(
+        "--offset",
+        type=_whole_number(0, HISTORY_OFFSET_MAX),
+        default=0,
+        help="how many of the newest to skip (default 0)",
+    )
+    history.add_argument(
+        "--limit",
+        type=_whole_number(1, HISTORY_LIMIT_MAX),
+        default=20,
+        help=f"how many to print, 1 to {HISTORY_LIMIT_MAX} (default 20)",
+    )
     supervisor_command("cancel", "cancel a queued or running order").add_argument("order_id")
     supervisor_command("cancel-all", "cancel the queue and the running order")
     supervisor_command(
@@ -258,11 +285,13 @@ def main(argv: list[str] | None = None) -> int:
     except ModuleNotFoundError as exc:
         if (exc.name or "").partition(".")[0] in ("shared", "services", "voicectl"):
             raise  # one of ours: a bug, not a missing package
-        # A robot installs only the core: the host's commands say what they lack.
+        # A robot installs only the core, a host may lack an extra: the command says which
+        # extra brings what is missing, and how to install it here.
         command = argv[0] if argv else "voicectl"
+        extra = extra_for(exc.name or "", COMMAND_EXTRAS.get(command, ""))
         print(
-            f"voicectl {command}: {exc}; this installation lacks the host's packages "
-            "(pip install 'voicectl[host]')",
+            f"voicectl {command}: {exc}; this installation lacks voicectl's [{extra}] extra "
+            f"({pip_install(extra)})",
             file=sys.stderr,
         )
         return 2
@@ -383,6 +412,24 @@ def _position(text: str) -> int:
     return position
 
 
+def _whole_number(low: int, high: int) -> Callable[[str], int]:
+    """argparse type for a whole number from `low` to `high`: a value out of range is a
+    usage error naming the range, said before anything goes on the bus."""
+
+    def convert(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            value = None
+        if value is None or not low <= value <= high:
+            raise argparse.ArgumentTypeError(
+                f"must be a whole number from {low} to {high}, not {text!r}"
+            )
+        return value
+
+    return convert
+
+
 def _robot_namespace(text: str) -> tuple[str, str]:
     """argparse type for NAME=NAMESPACE."""
     name, equals, namespace = text.partition("=")
@@ -434,7 +481,7 @@ def _bus_secrets(args: argparse.Namespace) -> int:
         return 1
     clients = [path.stem for path in written if path.suffix == ".json5" and path.stem != "router"]
     print(f"bus secrets in {directory} (keys, passwords and client configs mode 0600)")
-    print(f"router: voicectl router --config {directory / 'router.json5'}")
+    print(f"router: {voicectl_command('router', '--config', str(directory / 'router.json5'))}")
     print(f"clients: --config {directory}/<user>.json5 for {', '.join(clients)}")
     for robot in robots:
         scope = (
@@ -454,7 +501,8 @@ def _cert(args: argparse.Namespace) -> int:
     write_certificate(args.hosts, certfile, keyfile)
     mode = stat.S_IMODE(keyfile.stat().st_mode)  # what the file has, not what was meant
     print(f"certificate {certfile} for {', '.join(args.hosts)}; key {keyfile} (mode {mode:04o})")
-    print(f"serve with: voicectl up --host 0.0.0.0 --certfile {certfile} --keyfile {keyfile}")
+    serve = ["up", "--host", "0.0.0.0", "--certfile", str(certfile), "--keyfile", str(keyfile)]
+    print(f"serve with: {voicectl_command(*serve)}")
     return 0
 
 
@@ -529,25 +577,18 @@ async def _say(args: argparse.Namespace) -> int:
     try:
         with Bus.open(bus_options(args, wait=False), asyncio.get_running_loop()) as bus:
             said = await VoicectlClient(bus).say(args.robot, args.text, partial=args.partial)
-    except Refused as exc:
+    except SayRefused as exc:
+        # Refused is an answer too: the same JSON as any other, with what was understood
+        # held back and why.
+        _print_said(exc.result or ParseResult(), [], refused=str(exc))
         print(f"voicectl say: {exc}", file=sys.stderr)
         return 1
     except BusError as exc:  # no router, or no converter or supervisor answering
         print(f"voicectl say: {exc}", file=sys.stderr)
         return 3
     result = said.result
-    # What went to the robot is under "orders"; what was understood and held back is not
-    # printed as if it had been sent.
     sent = bool(said.order_ids)
-    _print_json(
-        {
-            "submitted": sent,
-            "orders": result.orders if sent else [],
-            "not_sent": [] if sent else result.orders,
-            "errors": result.errors,
-            "order_ids": said.order_ids,
-        }
-    )
+    _print_said(result, said.order_ids)
     # One line on stderr, for a person: what happened, then each part not understood.
     problems = "; ".join(_unsaid(error) for error in result.errors)
     if sent and problems:
@@ -559,6 +600,23 @@ async def _say(args: argparse.Namespace) -> int:
     # Exit status follows what happened: 0 when orders went to the robot (with --partial,
     # even though some words made none), 1 when nothing did.
     return 0 if sent else 1
+
+
+def _print_said(result: ParseResult, order_ids: list[str], refused: str | None = None) -> None:
+    """`say`'s JSON, the same keys whatever happened. What went to the robot is under
+    "orders"; what was understood and held back (or refused) is not printed as if it had
+    been sent."""
+    sent = bool(order_ids)
+    _print_json(
+        {
+            "submitted": sent,
+            "orders": result.orders if sent else [],
+            "not_sent": [] if sent else result.orders,
+            "errors": result.errors,
+            "order_ids": order_ids,
+            "refused": refused,
+        }
+    )
 
 
 def _unsaid(error: ParseProblem) -> str:

@@ -18,6 +18,7 @@ from typing import IO
 import zenoh
 
 from voicectl.shared.bus import BusOptions
+from voicectl.shared.hints import voicectl_command
 
 STOP_TIMEOUT = 10.0
 START_TIMEOUT = 60.0
@@ -226,7 +227,7 @@ def _print_panel(web: PanelAddress) -> None:
     print(f"voicectl up: panel on {web.address}", flush=True)
     print(
         "voicectl up: its token is not printed where it could be logged: "
-        "`voicectl token` prints it",
+        f"`{voicectl_command('token')}` prints it",
         flush=True,
     )
 

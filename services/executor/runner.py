@@ -16,6 +16,7 @@ from collections.abc import Callable, Coroutine
 
 from voicectl.shared.bus import Bus, Latest, json_decoder
 from voicectl.shared.errors import OrderFailed
+from voicectl.shared.hints import voicectl_command
 from voicectl.shared.keys import RobotKeys
 from voicectl.shared.messages import (
     Accepted,
@@ -245,8 +246,9 @@ class ExecutorService(Service):
         Releasing is not done here but on its own key (`_on_release`)."""
         if not latch.on:
             return Failed(
-                reason="the latch is released through the supervisor (voicectl release, or "
-                "Release in the panel), which lifts its own STOP too"
+                reason="the latch is released through the supervisor "
+                f"({voicectl_command('release')}, or Release in the panel), which lifts its "
+                "own STOP too"
             )
         self._robot.latched = True
         running = self._running

