@@ -315,11 +315,23 @@ class GetGrammar(Message):
     """Ask for the current recogniser grammar (a recogniser that starts late does this)."""
 
 
-ConverterRequest = ParseRequest | GetGrammar
+class Amend(Message):
+    """Make `order` again as `change` (a correction, an order of label `queue` whose edit
+    is `replace`) says: another number, or another case of the same order."""
+
+    order: Order
+    change: Order
+
+
+ConverterRequest = ParseRequest | GetGrammar | Amend
 
 
 class ParseReply(Message):
     result: ParseResult
+
+
+class Amended(Message):
+    order: Order
 
 
 class Grammar(Message):
@@ -451,6 +463,28 @@ class Progress(Data):
     percent: float | None = None
 
 
+class Via(StrEnum):
+    """How a request reached the supervisor."""
+
+    VOICE = "voice"
+    """The robot's own ear (`voicectl listen`)."""
+    PANEL = "panel"
+    CLI = "cli"
+    """A `voicectl` command."""
+    API = "api"
+    """Anything else that asks the bus or the HTTP API directly."""
+
+
+class Asked(Data):
+    """Who asked for an order or an edit, and how: kept with it in the history."""
+
+    via: Via = Via.API
+    spoken: bool = False
+    """Said (a microphone, the robot's ear) rather than typed or clicked."""
+    by: str = ""
+    """Who, as the client knows it: a user and host, a panel's address."""
+
+
 class OrderRecord(Data):
     """An order as the supervisor tracks it, from acceptance to its result."""
 
@@ -465,6 +499,8 @@ class OrderRecord(Data):
     submitted_at: float = 0.0
     started_at: float | None = None
     ended_at: float | None = None
+    asked: Asked | None = None
+    """Who asked for it and how; None for records from before it was kept."""
 
 
 class State(Data):
@@ -486,6 +522,8 @@ class State(Data):
     stop_detail: str = ""
     """What the robot, navigation and the executor answered to the last emergency stop:
     they answer after the stop is acknowledged, and their answers land here."""
+    undo: str = ""
+    """The edit an "undo" would revert now, in words ("cancel kitchen"); empty when none."""
 
 
 class Submit(Message):
@@ -494,6 +532,19 @@ class Submit(Message):
     request_id: str
     orders: list[Order]
     transcript: str = ""
+    asked: Asked | None = None
+
+
+class Edit(Message):
+    """Change the queue or ask about it: `edit` is an order of the reserved label `queue`
+    (shared/edits.py reads its parameters), as the converter made it from words."""
+
+    request_id: str
+    edit: Order
+    orders: list[Order] = msgspec.field(default_factory=list)
+    """The orders it brings: those an `after` edit puts after the last one added."""
+    transcript: str = ""
+    asked: Asked | None = None
 
 
 class Cancel(Message):
@@ -541,7 +592,16 @@ class GetHistory(Message):
 
 
 SupervisorRequest = (
-    Submit | Cancel | CancelAll | EmergencyStop | Release | Resume | GetState | Reorder | GetHistory
+    Submit
+    | Cancel
+    | CancelAll
+    | EmergencyStop
+    | Release
+    | Resume
+    | GetState
+    | Reorder
+    | GetHistory
+    | Edit
 )
 
 
@@ -570,6 +630,19 @@ class Stopped(Message):
     detail: str
 
 
+class Answered(Message):
+    """The answer to an `Edit`: what it did or why not, in one short sentence, or the
+    answer to a question."""
+
+    answer: str
+    changed: bool = False
+    """The queue changed (a refused edit and a question change nothing)."""
+    edit_id: str = ""
+    """The edit's record in the history; empty for a question."""
+    order_ids: list[str] = msgspec.field(default_factory=list)
+    """The orders it queued (an `after` edit's, a correction's new order)."""
+
+
 class StateReply(Message):
     state: State
 
@@ -587,9 +660,9 @@ class StateUpdate(Message):
     state: State
 
 
-SupervisorReply = Submitted | Done | Stopped | Failed | StateReply | HistoryPage
+SupervisorReply = Submitted | Done | Stopped | Failed | StateReply | HistoryPage | Answered
 
-ConverterReply = ParseReply | Grammar | Failed
+ConverterReply = ParseReply | Grammar | Amended | Failed
 
 SttReply = PhraseCheck | Failed
 

@@ -127,7 +127,7 @@ def test_grid_lists_multiples_of_step_within_bounds() -> None:
         ({"min": 1, "max": 2, "unit": "m", "to": "yaw"}, "'yaw' needs a unit of angle"),
         ({"min": 1, "max": 2, "unit": "deg", "to": "x"}, "'x' needs a unit of length"),
         ({"min": 3, "max": 2}, "min 3 is above max 2"),
-        ({"min": 1, "max": 2, "type": "text"}, "type must be number or integer"),
+        ({"min": 1, "max": 2, "type": "text"}, "type must be number, integer or order"),
         ({"min": 1, "max": 2, "sign": 2}, "sign must be 1 or -1"),
         ({"min": 1, "max": 2, "to": "label"}, "'to' must be x, y, yaw or a parameter name"),
         ({"min": 1, "max": 2, "colour": "red"}, "unknown key(s) colour; allowed:"),

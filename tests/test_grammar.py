@@ -140,15 +140,23 @@ def test_every_phrase_of_the_grammar_parses_to_one_order_or_names_the_range() ->
 def test_jsgf_has_one_rule_per_command_and_shared_number_rules() -> None:
     jsgf = GRAMMAR.jsgf
     assert jsgf.startswith("#JSGF V1.0;\ngrammar voicectl;\n")
+    # orders/queue.yaml's edits may stand next to an order without the separator
+    assert "public <command> = <part> ( <separator> <part> )*;" in jsgf
     assert (
-        "public <command> = <edge> <order> <edge> ( <separator> <edge> <order> <edge> )*;" in jsgf
+        "<part> = <edge> [ <edit> <edge> ] <task> <edge> [ <edit> <edge> ] | <edge> <edit> <edge>;"
+        in jsgf
     )
     assert "<edge> = [ please | now ];" in jsgf
     assert "<skip> = [ a | the | to | please | now ];" in jsgf
     assert "<separator> = then;" in jsgf
     assert "// turn_by/left" in jsgf
-    # left and right turns share the same 180 values
-    assert jsgf.count("one hundred seventy nine |") == 1
+    # left and right turns share the same values; a correction's number has its own
+    assert jsgf.count("one hundred seventy nine |") == 2
+    without_edits = build_grammar(OrderSet.load(ORDERS / "spoken.yaml")).jsgf
+    assert (
+        "public <command> = <edge> <order> <edge> ( <separator> <edge> <order> <edge> )*;"
+        in without_edits
+    )
 
 
 def test_version_follows_the_orders() -> None:

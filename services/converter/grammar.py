@@ -13,6 +13,10 @@ the kitchen"), never inside a spoken number; before and after a whole command on
 courtesy words of `EDGE_WORDS` (`<edge>`: "please turn left now"). With two skip words
 anywhere, the search explained "can you hear me" as "turn the the right" and "turn on the
 lights" as "to turn back" (bench/stt.py, dev split).
+
+Edits of the queue (orders of label `queue`) may also stand next to an order without the
+separator, one before it and one after ("after that go to base", "go forward two meters
+no three"), as the parser reads them; without such orders the grammar is as before.
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ import itertools
 import math
 from collections.abc import Iterable
 
+from voicectl.shared.edits import QUEUE_LABEL
 from voicectl.shared.messages import Grammar
 
 from .expand import SlotRef, Template
@@ -73,6 +78,8 @@ class _Builder:
         """What stands between two words of a command in the JSGF."""
         self.rules: list[tuple[str, str, str]] = []
         """(rule name, body, command name)."""
+        self.edits: set[str] = set()
+        """The rules of edits of the queue."""
         self.number_rules: dict[tuple[str, ...], str] = {}
         self.number_words: set[str] = set()
         self.phrases: list[str] = []
@@ -81,6 +88,8 @@ class _Builder:
 
     def add(self, command: Command) -> None:
         rule = f"c{len(self.rules)}"
+        if command.order.label == QUEUE_LABEL:
+            self.edits.add(rule)
         expansion = command.expansion
         if not expansion.finite:
             self.unexpandable.append(f"{command.name}: {expansion.problem}")
@@ -120,19 +129,35 @@ class _Builder:
 
     def jsgf(self, separator_rule: str) -> str:
         edges = [w for w in self.skip_words if w in EDGE_WORDS]
-        order = "<edge> <order> <edge>" if edges else "<order>"
+        edge = "<edge> " if edges else ""
+        tasks = [name for name, _, _ in self.rules if name not in self.edits]
+        edits = [name for name, _, _ in self.rules if name in self.edits]
+        if edits and tasks:
+            # An edit may stand next to an order, without the separator.
+            part = "<part>"
+            beside = f"[ <edit> {edge}]"
+            alone = f"{edge}<edit> {edge}".rstrip()
+            parts = [f"<part> = {edge}{beside} <task> {edge}{beside} | {alone};"]
+        else:
+            part = f"{edge}<order> {edge}".strip()
+            parts = []
         lines = [
             "#JSGF V1.0;",
             f"grammar {GRAMMAR_NAME};",
-            f"public <command> = {order} ( <separator> {order} )*;",
+            f"public <command> = {part} ( <separator> {part} )*;",
             f"<separator> = {separator_rule};",
+            *parts,
         ]
         if edges:
             lines.append(f"<edge> = [ {' | '.join(edges)} ];")
         if self.skip_words:
             lines.append(f"<skip> = [ {' | '.join(self.skip_words)} ];")
-        names = " | ".join(f"<{name}>" for name, _, _ in self.rules)
-        lines.append(f"<order> = {names or '<VOID>'};")
+        if parts:
+            lines.append(f"<task> = {' | '.join(f'<{name}>' for name in tasks)};")
+            lines.append(f"<edit> = {' | '.join(f'<{name}>' for name in edits)};")
+        else:
+            names = " | ".join(f"<{name}>" for name, _, _ in self.rules)
+            lines.append(f"<order> = {names or '<VOID>'};")
         lines.extend(f"<{name}> = {body}; // {command}" for name, body, command in self.rules)
         for spoken, name in self.number_rules.items():
             lines.append(f"<{name}> = {' | '.join(spoken)};")

@@ -9,7 +9,7 @@ from voicectl.shared.messages import Order, ParamValue, TargetPose
 
 from .expand import Expansion
 from .patterns import PLACEHOLDER, combined
-from .slots import NUMBER_PATTERN, SlotSpec, format_value
+from .slots import NUMBER_PATTERN, OrderSlot, SlotSpec, format_value
 
 POSE_KEYS = ("x", "y", "yaw")
 
@@ -26,6 +26,8 @@ class CaseSpec:
     line: int | None = None
     confirm: bool | None = None
     """Overrides the order's `confirm` when set."""
+    refs: dict[str, OrderSlot] = field(default_factory=dict)
+    """Its slots that name a queued order (orders of label `queue` only)."""
 
 
 @dataclass(frozen=True)
@@ -44,6 +46,8 @@ class OrderSpec:
     line: int | None = None
     confirm: bool = False
     """Read back and wait for a spoken yes before it runs (hands-free listening)."""
+    refs: dict[str, OrderSlot] = field(default_factory=dict)
+    """Its slots that name a queued order (orders of label `queue` only)."""
 
     def confirms(self, case: CaseSpec | None) -> bool:
         return case.confirm if case is not None and case.confirm is not None else self.confirm
@@ -76,9 +80,12 @@ class OrderSpec:
         """The case's description with an example number for each slot ("forward 0.5 m"),
         for hints: a person reads it, so no raw placeholders."""
         slots = {**self.slots, **case.slots}
+        refs = {**self.refs, **case.refs}
 
         def number(found: re.Match[str]) -> str:
             slot = slots.get(found[1])
+            if found[1] in refs:
+                return f"[{found[1]}]"  # a name of an order in the queue
             return format_value(slot.grid()[0]) if slot is not None else found[0]
 
         return PLACEHOLDER.sub(number, case.description)
@@ -100,8 +107,11 @@ class Command:
     aliases: tuple[str, ...]
     """The order's alias, then the case's: said one after the other."""
     slots: dict[str, SlotSpec]
-    """The slots of the pattern, by name."""
+    """The number slots of the pattern, by name."""
     expansion: Expansion
+    refs: dict[str, OrderSlot] = field(default_factory=dict)
+    """Slots naming a queued order: a command with some is a template, which the
+    converter turns into one command per name once every file is loaded (refer.py)."""
 
     @property
     def name(self) -> str:

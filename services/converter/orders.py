@@ -41,6 +41,7 @@ from .orders_file import (
     check_file,
     read_yaml,
 )
+from .refer import names_of, spelled
 
 __all__ = ["DEFAULT_SKIP_WORDS", "OrderSet", "OrdersInvalid", "orders_files"]
 
@@ -66,6 +67,16 @@ class OrderSet:
     prefixes: tuple[Command, ...] = ()
     """The aliases of orders with cases, alone."""
     separator_expansion: Expansion = field(default_factory=Expansion)
+    templates: tuple[Command, ...] = ()
+    """Commands that name a queued order (`{order}`), as written: `commands` holds what
+    they make with each name of these orders (refer.py)..."""
+    spelt: int = 0
+    """...at its end, this many: made again whenever files are joined."""
+
+    @property
+    def written(self) -> tuple[Command, ...]:
+        """The whole commands as the files write them, without those templates made."""
+        return self.commands[: len(self.commands) - self.spelt]
 
     @property
     def skip_words(self) -> tuple[str, ...]:
@@ -118,14 +129,23 @@ class OrderSet:
         skip_words: tuple[str, ...] | None,
         sources: tuple[str, ...],
     ) -> OrderSet:
+        templates = tuple(c for c in commands if c.refs)
+        plain = [c for c in commands if not c.refs]
+        whole = [c for c in plain if c.case or not c.order.cases]
+        try:
+            named = spelled(templates, names_of(whole))
+        except ValueError as exc:
+            raise OrdersInvalid([(f"{', '.join(sources)}: {exc}", None)]) from exc
         return OrderSet(
             orders=orders,
             separator=separator,
             declared_skip_words=skip_words,
             sources=sources,
-            commands=tuple(c for c in commands if c.case or not c.order.cases),
-            prefixes=tuple(c for c in commands if c.order.cases and not c.case),
+            commands=(*whole, *named),
+            prefixes=tuple(c for c in plain if c.order.cases and not c.case),
             separator_expansion=expand(separator),
+            templates=templates,
+            spelt=len(named),
         )
 
     @staticmethod
@@ -164,7 +184,7 @@ class OrderSet:
             )
         return OrderSet.build(
             tuple(o for s in sets for o in s.orders),
-            [c for s in sets for c in (*s.prefixes, *s.commands)],
+            [c for s in sets for c in (*s.prefixes, *s.written, *s.templates)],
             separators.pop(),
             declared.pop() if declared else None,
             tuple(src for s in sets for src in s.sources),

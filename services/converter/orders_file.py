@@ -18,13 +18,14 @@ from typing import Any
 
 import yaml
 
+from voicectl.shared.edits import QUEUE_LABEL, read_edit
 from voicectl.shared.errors import OrdersFileError, VoicectlError
-from voicectl.shared.messages import ParamValue
+from voicectl.shared.messages import Order, ParamValue
 
 from .expand import SlotRef, expand
 from .model import POSE_KEYS, CaseSpec, Command, OrderSpec
 from .patterns import PLACEHOLDER, SLOT_GROUP, SLOT_STUB, check_regex, combined, with_slots
-from .slots import SlotSpec
+from .slots import OrderSlot, SlotSpec, slot_from_dict
 from .text import normalise
 
 RESERVED_KEYS = frozenset({"voice_alias", "label", "description", "cases", "slots", "confirm"})
@@ -140,7 +141,7 @@ def _order_from_dict(name: str, spec: Any, source: str) -> OrderSpec:
     description = spec.get("description", _plain(alias, name))
     if not isinstance(description, str):
         raise _Problem("'description' must be a string", _line(spec, "description"))
-    slots = _slots(spec)
+    slots, refs = _slots(spec)
     values = _values(spec)
     confirm = _confirm(spec)
     raw_cases = spec.get("cases", {})
@@ -166,6 +167,7 @@ def _order_from_dict(name: str, spec: Any, source: str) -> OrderSpec:
         slots=slots,
         line=_line(spec),
         confirm=bool(confirm),
+        refs=refs,
     )
     for case in order.cases or (None,):
         at = f" case '{case.name}'" if case else ""
@@ -196,14 +198,16 @@ def _case_from_dict(name: str, spec: Any) -> CaseSpec:
     description = spec.get("description", _plain(alias, name))
     if not isinstance(description, str):
         raise _Problem("'description' must be a string", _line(spec, "description"))
+    slots, refs = _slots(spec)
     return CaseSpec(
         name=name,
         alias=alias,
         description=description,
         values=_values(spec),
-        slots=_slots(spec),
+        slots=slots,
         line=_line(spec),
         confirm=_confirm(spec),
+        refs=refs,
     )
 
 
@@ -233,17 +237,23 @@ def _required_str(spec: dict[str, Any], key: str) -> str:
     return value.strip()
 
 
-def _slots(spec: dict[str, Any]) -> dict[str, SlotSpec]:
+def _slots(spec: dict[str, Any]) -> tuple[dict[str, SlotSpec], dict[str, OrderSlot]]:
+    """The number slots and the order slots declared under `slots`."""
     raw = spec.get("slots") or {}
     if not isinstance(raw, dict):
         raise _Problem("'slots' must be a mapping of slot name to slot", _line(spec, "slots"))
     slots: dict[str, SlotSpec] = {}
+    refs: dict[str, OrderSlot] = {}
     for name, slot in raw.items():
         try:
-            slots[str(name)] = SlotSpec.from_dict(str(name), slot)
+            made = slot_from_dict(str(name), slot)
         except ValueError as exc:
             raise _Problem(str(exc), _line(raw, name)) from exc
-    return slots
+        if isinstance(made, OrderSlot):
+            refs[made.name] = made
+        else:
+            slots[made.name] = made
+    return slots, refs
 
 
 def _values(spec: dict[str, Any]) -> dict[str, ParamValue]:
@@ -295,14 +305,15 @@ def _commands(order: OrderSpec) -> list[Command]:
     for case in order.cases:
         commands.append(_command(order, case))
         case_used.update(PLACEHOLDER.findall(case.alias))
-        unused = set(case.slots) - order_used - set(PLACEHOLDER.findall(case.alias))
+        declared = {*case.slots, *case.refs}
+        unused = declared - order_used - set(PLACEHOLDER.findall(case.alias))
         if unused:
             raise _Problem(
                 f"slot(s) {', '.join(sorted(unused))} declared but not in any alias",
                 case.line,
                 f" case '{case.name}'",
             )
-    unused = set(order.slots) - order_used - case_used
+    unused = {*order.slots, *order.refs} - order_used - case_used
     if unused:
         raise _Problem(
             f"slot(s) {', '.join(sorted(unused))} declared but not in any alias", order.line
@@ -310,10 +321,24 @@ def _commands(order: OrderSpec) -> list[Command]:
     return commands
 
 
+def command(order: OrderSpec, case: CaseSpec | None) -> Command:
+    """The command `order` makes with `case` (or alone): its aliases joined, its slots
+    checked, its phrases expanded. Raises ValueError saying what is wrong."""
+    try:
+        return _command(order, case)
+    except _Problem as exc:
+        raise ValueError(f"order '{order.name}'{exc.where}: {exc}") from None
+
+
+MAX_ORDER_SLOTS = 2
+
+
 def _command(order: OrderSpec, case: CaseSpec | None) -> Command:
     at = f" case '{case.name}'" if case else ""
     line = case.line if case else order.line
-    available = {**order.slots, **(case.slots if case else {})}
+    numbers = {**order.slots, **(case.slots if case else {})}
+    names = {**order.refs, **(case.refs if case else {})}
+    available: dict[str, SlotSpec | OrderSlot] = {**numbers, **names}
     aliases = [order.alias, *([case.alias] if case else [])]
     used = [name for alias in aliases for name in PLACEHOLDER.findall(alias)]
     for name in used:
@@ -322,15 +347,18 @@ def _command(order: OrderSpec, case: CaseSpec | None) -> Command:
         if name not in available:
             declared = ", ".join(sorted(available)) or "none"
             raise _Problem(f"slot '{{{name}}}' is not declared; declared: {declared}", line, at)
-    slots = {name: available[name] for name in used}
-    targets = [slot.to for slot in slots.values()]
+    slots = {name: numbers[name] for name in used if name in numbers}
+    refs = {name: names[name] for name in used if name in names}
+    targets = [slot.to for slot in slots.values()] + [ref.to for ref in refs.values()]
     for target in targets:
         if targets.count(target) > 1:
             raise _Problem(f"two slots write to '{target}'", line, at)
+    _check_refs(order, refs, line, at)
 
     try:
         expansion = expand(
-            combined(tuple(aliases), SLOT_STUB, ()), {f"{SLOT_GROUP}{n}": n for n in slots}
+            combined(tuple(aliases), SLOT_STUB, ()),
+            {f"{SLOT_GROUP}{n}": n for n in (*slots, *refs)},
         )
     except re.error as exc:  # each alias compiled alone: e.g. a group name in both
         raise _Problem(f"the aliases do not combine into one regex: {exc}", line, at) from exc
@@ -344,7 +372,56 @@ def _command(order: OrderSpec, case: CaseSpec | None) -> Command:
                 line,
                 at,
             )
-    return Command(order, case, tuple(aliases), slots, expansion)
+    if order.label == QUEUE_LABEL and (case is not None or not order.cases):
+        _check_edit(order, case, slots, refs, line, at)
+    return Command(order, case, tuple(aliases), slots, expansion, refs)
+
+
+def _check_refs(order: OrderSpec, refs: dict[str, OrderSlot], line: int | None, at: str) -> None:
+    if refs and order.label != QUEUE_LABEL:
+        raise _Problem(
+            f"a slot of type order names an order in the queue: only orders of label "
+            f"'{QUEUE_LABEL}' have one (slot {', '.join(sorted(refs))})",
+            line,
+            at,
+        )
+    if len(refs) > MAX_ORDER_SLOTS:
+        raise _Problem(f"at most {MAX_ORDER_SLOTS} slots of type order in one command", line, at)
+    for ref in refs.values():
+        if ref.like and (ref.like == ref.name or ref.like not in refs):
+            raise _Problem(
+                f"slot '{ref.name}': 'like' must name another slot of type order of the same "
+                f"command, not {ref.like!r}",
+                line,
+                at,
+            )
+    if len(refs) == MAX_ORDER_SLOTS and not any(ref.like for ref in refs.values()):
+        raise _Problem(
+            "two slots of type order in one command: the second says which order it is of "
+            "with 'like: <the first>'",
+            line,
+            at,
+        )
+
+
+def _check_edit(
+    order: OrderSpec,
+    case: CaseSpec | None,
+    slots: dict[str, SlotSpec],
+    refs: dict[str, OrderSlot],
+    line: int | None,
+    at: str,
+) -> None:
+    """An order of label `queue` must say an edit the supervisor knows, with sample values
+    where its slots go."""
+    params: dict[str, ParamValue] = dict(order.merged_values(case))
+    params.update({slot.to: 1.0 for slot in slots.values()})
+    params.update({ref.to: ref.name for ref in refs.values()})
+    made = Order(order=order.name, label=QUEUE_LABEL, description="", params=params)
+    try:
+        read_edit(made)
+    except ValueError as exc:
+        raise _Problem(f"not an edit of the queue: {exc}", line, at) from None
 
 
 def _line(mapping: Any, key: Any = None) -> int | None:

@@ -11,6 +11,10 @@ move forward one meter"): a segment that is not one order is tried split at its 
 and taken only if every piece is an order, so that "one hundred and five" stays a number.
 Unit symbols after a number are read as the unit's word ("4.5 m", "90°", "30 s"), unless
 an alias itself uses the symbol.
+
+An edit of the queue (an order of label `queue`) may stand next to an order without the
+separator ("after that go to base", "go forward two meters no three"); a correction said
+right after an order corrects it there and then (amend.py), so that it never adds one.
 """
 
 from __future__ import annotations
@@ -24,9 +28,11 @@ from dataclasses import dataclass
 
 import regex
 
+from voicectl.shared.edits import QUEUE_LABEL, ReplaceEdit, is_edit, read_edit
 from voicectl.shared.errors import VoicectlError
 from voicectl.shared.messages import Order, ParseProblem, ParseResult
 
+from .amend import Amender, AmendRefused
 from .expand import SlotRef
 from .model import Command
 from .orders import OrderSet
@@ -142,6 +148,22 @@ class _Index:
         return [self.matchers[p] for p in sorted(positions) if self._needs[p] <= present]
 
 
+def _replacement(order: Order) -> ReplaceEdit | None:
+    """The correction `order` says, if it is one."""
+    if not is_edit(order):
+        return None
+    try:
+        edit = read_edit(order)
+    except ValueError:
+        return None
+    return edit if isinstance(edit, ReplaceEdit) else None
+
+
+def _names(change: ReplaceEdit, order: Order) -> bool:
+    """Whether a correction names `order`: the last one, or its case (or order) by name."""
+    return change.which in ("last", order.case or order.order)
+
+
 def _keys(matcher: _Matcher) -> tuple[list[str], bool]:
     """A command's index keys, and whether each is mandatory (else they are the first
     words). No keys when the alias cannot be expanded, or when a phrase of the expansion
@@ -177,16 +199,24 @@ class Parser:
         self._skip_words = frozenset(orders.skip_words)
         self._commands = _Index(orders.commands, orders.skip_words, use_index)
         self._prefixes = _Index(orders.prefixes, orders.skip_words, use_index)
-        self._suggester = Suggester(orders.commands, self._parse_alone, orders.skip_words)
-        alias_words = {
+        # Edits are short phrases that name the other orders' words ("no kitchen", "cancel
+        # left"): offered for a near-miss, they crowd out the orders people meant.
+        self._suggester = Suggester(
+            [c for c in orders.commands if c.order.label != QUEUE_LABEL],
+            self._parse_alone,
+            orders.skip_words,
+        )
+        after_numbers = {
             word.casefold()
             for command in orders.commands
             for template in command.expansion.templates
-            for word in template
-            if isinstance(word, str)
+            for before, word in itertools.pairwise(template)
+            if isinstance(word, str) and (isinstance(before, SlotRef) or _NUMERIC.search(before))
         }
-        self._symbols = {k: v for k, v in UNIT_SYMBOLS.items() if k not in alias_words}
-        """Unit symbols read as words: those no alias uses itself."""
+        self._symbols = {k: v for k, v in UNIT_SYMBOLS.items() if k not in after_numbers}
+        """Unit symbols read as words: those no alias uses itself after a number (the
+        queue's "what s next" leaves "10 s" ten seconds)."""
+        self.amender = Amender(orders.commands)
         self.unit_words = frozenset(
             word.casefold()
             for command in orders.commands
@@ -213,7 +243,9 @@ class Parser:
             try:
                 parsed = self._parse_segment(segment, suggest=True, deadline=deadline)
                 if isinstance(parsed, ParseProblem):
-                    parsed = self._joined(segment, deadline) or parsed
+                    parsed = (
+                        self._joined(segment, deadline) or self._beside(segment, deadline) or parsed
+                    )
             except _TooSlow as exc:
                 parsed = ParseProblem(text=segment[:80], reason=str(exc))
             match parsed:
@@ -223,7 +255,43 @@ class Parser:
                     result.errors.append(error)
                 case list() as orders:
                     result.orders.extend(orders)
-        return result
+        return self._corrected(result)
+
+    def _corrected(self, result: ParseResult) -> ParseResult:
+        """`result` with each correction that follows an order applied to that order (an
+        order it cannot fit makes an error instead), never added beside it."""
+        orders: list[Order] = []
+        errors = list(result.errors)
+        for order in result.orders:
+            change = _replacement(order)
+            before = orders[-1] if orders else None
+            if change is None or before is None or is_edit(before) or not _names(change, before):
+                orders.append(order)
+                continue
+            try:
+                orders[-1] = self.amender.amend(before, change)
+            except AmendRefused as exc:
+                orders.pop()
+                errors.append(
+                    ParseProblem(text=f"{before.description}, {order.description}", reason=str(exc))
+                )
+        if len(orders) == len(result.orders):
+            return result
+        return ParseResult(orders=orders, errors=errors)
+
+    def _beside(self, segment: str, deadline: float) -> list[Order] | None:
+        """The two orders of a segment that is an edit next to an order, said without the
+        separator ("after that go to base"), if exactly one cut makes them."""
+        words = segment.split(" ")
+        found: list[list[Order]] = []
+        for cut in range(1, len(words)):
+            left = self._parse_segment(" ".join(words[:cut]), False, deadline)
+            if not isinstance(left, Order):
+                continue
+            right = self._parse_segment(" ".join(words[cut:]), False, deadline)
+            if isinstance(right, Order) and (is_edit(left) or is_edit(right)):
+                found.append([left, right])
+        return found[0] if len(found) == 1 else None
 
     def spell_units(self, text: str) -> str:
         """Unit symbols right after a number as the unit's word: "4.5 m" -> "4.5 meters"."""

@@ -9,13 +9,18 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from voicectl.shared.bus import Bus, Latest, json_decoder
+from voicectl.shared.edits import ReplaceEdit, read_edit
 from voicectl.shared.errors import OrdersFileError
 from voicectl.shared.keys import ConverterKeys, RobotKeys, robot_of
 from voicectl.shared.messages import (
+    Amend,
+    Amended,
     ConverterRequest,
+    Failed,
     GetGrammar,
     Grammar,
     Message,
+    Order,
     OrdersStatus,
     ParseReply,
     ParseRequest,
@@ -26,6 +31,7 @@ from voicectl.shared.messages import (
 )
 from voicectl.shared.process import Service
 
+from .amend import AmendRefused
 from .decide import decide, problem, readings
 from .grammar import build_grammar
 from .orders import OrderSet, OrdersInvalid
@@ -169,6 +175,21 @@ class ConverterService(Service):
                 return ParseReply(result=self._loaded.parser.parse(text))
             case GetGrammar():
                 return self._loaded.grammar
+            case Amend(order=order, change=change):
+                return self._amend(order, change)
+
+    def _amend(self, order: Order, change: Order) -> Message:
+        """`order` made again as the correction `change` says, or why not."""
+        try:
+            edit = read_edit(change)
+        except ValueError as exc:
+            return Failed(reason=f"not a correction: {exc}")
+        if not isinstance(edit, ReplaceEdit):
+            return Failed(reason=f"not a correction: '{change.description}' is another edit")
+        try:
+            return Amended(order=self._loaded.parser.amender.amend(order, edit))
+        except AmendRefused as exc:
+            return Failed(reason=str(exc))
 
     def _on_transcript(self, key: str, transcript: Transcript) -> None:
         """The one decision on what was said (decide.py): the grammar's result, and what

@@ -35,6 +35,8 @@ MAX_SPOKEN = 999_999
 class SlotType(StrEnum):
     NUMBER = "number"
     INTEGER = "integer"
+    ORDER = "order"
+    """A name of a queued order (`OrderSlot`), for the orders of label `queue`."""
 
 
 @dataclass(frozen=True)
@@ -66,6 +68,7 @@ POSE_UNIT_KINDS = {"x": "length", "y": "length", "yaw": "angle"}
 """A slot that feeds the target pose must be spoken in a unit of this kind."""
 
 SLOT_KEYS = frozenset({"type", "unit", "min", "max", "to", "sign", "step"})
+ORDER_SLOT_KEYS = frozenset({"type", "to", "like"})
 FORBIDDEN_TARGETS = frozenset({"voice_alias", "label", "description", "cases", "slots", "frame"})
 
 # English number words that text2num reads; "a" only as in "a hundred".
@@ -191,8 +194,8 @@ class SlotSpec:
                 f"allowed: {', '.join(sorted(SLOT_KEYS))}"
             )
         kind = spec.get("type", "number")
-        if kind not in set(SlotType):
-            raise ValueError(f"slot '{name}': type must be number or integer, got {kind!r}")
+        if kind not in set(SlotType) or kind == SlotType.ORDER:
+            raise ValueError(f"slot '{name}': type must be number, integer or order, got {kind!r}")
         slot_type = SlotType(kind)
         unit_name = spec.get("unit", "count")
         if unit_name not in UNITS:
@@ -288,6 +291,46 @@ class SlotSpec:
         if self.type is SlotType.INTEGER and self.unit.factor == 1.0:
             return int(value) * self.sign
         return value * self.unit.factor * self.sign
+
+
+@dataclass(frozen=True)
+class OrderSlot:
+    """A queued order named inside an alias (`{order}` of "cancel {order}"): the words of
+    one of its cases ("kitchen"), or of an order without cases ("take a picture"). The
+    converter spells each name out in its place once every file is loaded (refer.py), and
+    the order made carries the name's key (the case's or order's name) in `to`."""
+
+    name: str
+    to: str
+    like: str = ""
+    """Another order slot of the same alias: this one then names another case of an order
+    that one names ("not {which} {instead}")."""
+
+    @staticmethod
+    def from_dict(name: str, spec: dict[str, Any]) -> OrderSlot:
+        # {type: order, to: which, like: other}
+        unknown = set(spec) - ORDER_SLOT_KEYS
+        if unknown:
+            raise ValueError(
+                f"slot '{name}': unknown key(s) {', '.join(sorted(map(str, unknown)))} for a "
+                f"slot of type order; allowed: {', '.join(sorted(ORDER_SLOT_KEYS))}"
+            )
+        target = spec.get("to", name)
+        if not isinstance(target, str) or not target or target in FORBIDDEN_TARGETS:
+            raise ValueError(f"slot '{name}': 'to' must be a parameter name, got {target!r}")
+        like = spec.get("like", "")
+        if not isinstance(like, str):
+            raise ValueError(f"slot '{name}': 'like' must name another slot, got {like!r}")
+        return OrderSlot(name, target, like)
+
+
+def slot_from_dict(name: str, spec: Any) -> SlotSpec | OrderSlot:
+    """One slot declaration, of any type; ValueError saying what is wrong and allowed."""
+    if isinstance(spec, dict) and spec.get("type") == SlotType.ORDER:
+        if not re.fullmatch(r"[A-Za-z_]\w*", name):
+            raise ValueError(f"slot name {name!r} must be letters, digits or '_'")
+        return OrderSlot.from_dict(name, spec)
+    return SlotSpec.from_dict(name, spec)
 
 
 def _number(slot: str, key: str, value: Any) -> float:

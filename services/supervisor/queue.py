@@ -7,6 +7,7 @@ the store; the queue itself never touches a file or the bus.
 from __future__ import annotations
 
 import hashlib
+import itertools
 import random
 import time
 from collections import deque
@@ -15,7 +16,7 @@ from collections.abc import Callable
 import msgspec
 
 from voicectl.shared.errors import VoicectlError
-from voicectl.shared.messages import Order, OrderRecord, OrderStatus, Progress, State
+from voicectl.shared.messages import Asked, Order, OrderRecord, OrderStatus, Progress, State
 
 FINAL = frozenset(
     {
@@ -45,6 +46,11 @@ SNAPSHOT_HISTORY = 20
 RECENT_REQUESTS = 10_000
 """Request ids remembered in memory to answer retries; older ones are forgotten, so that a
 long-running supervisor does not grow with every submit it ever took."""
+
+
+PAUSED_ASKED = "paused when asked: say go on, or press Resume"
+"""Why the queue waits after a person said "pause": unlike a restart's pause, it holds
+until someone lets it go, even once the queue has run empty."""
 
 
 MAX_QUEUE = 1000
@@ -103,6 +109,10 @@ class RobotQueue:
         self._next_position = 0.0
         self._changed: dict[str, OrderRecord] = {}
         self._new_requests: list[tuple[str, list[str]]] = []
+        self.touched: str | None = None
+        """The order last added or moved, which "after that" puts the next ones after."""
+        self.undo_words = ""
+        """The edit an "undo" would take back now, as said; '' when none."""
         # Order ids: 64 random bits from a generator seeded once by the OS; uuid4 asks the
         # OS for every id, which showed up in profiles of submit bursts.
         self._ids = random.Random()
@@ -135,10 +145,18 @@ class RobotQueue:
 
     # --- changes ------------------------------------------------------------------------------
 
-    def submit(self, request_id: str, orders: list[Order], transcript: str) -> list[str]:
-        """Queue `orders`; the same `request_id` again returns the first answer, queues
-        nothing. The same id with other orders is a RequestConflict: never dropped quietly.
-        Orders past the queue's cap are a QueueFull, and none of them is queued."""
+    def submit(
+        self,
+        request_id: str,
+        orders: list[Order],
+        transcript: str,
+        asked: Asked | None = None,
+        at: int | None = None,
+    ) -> list[str]:
+        """Queue `orders` (at the end, or from index `at` of the queue on); the same
+        `request_id` again returns the first answer, queues nothing. The same id with
+        other orders is a RequestConflict: never dropped quietly. Orders past the queue's
+        cap are a QueueFull, and none of them is queued."""
         digest = hashlib.blake2b(msgspec.json.encode(orders), digest_size=16).digest()
         if request_id in self._requests:
             if self._digests.get(request_id, digest) != digest:
@@ -157,28 +175,118 @@ class RobotQueue:
         now = self._clock()
         records = [
             OrderRecord(
-                id=f"{self._ids.getrandbits(64):016x}",
+                id=self.new_id(),
                 order=order,
                 status=OrderStatus.QUEUED,
                 transcript=transcript,
                 request_id=request_id,
                 submitted_at=now,
+                asked=asked,
             )
             for order in orders
         ]
-        for record in records:
-            self._positions[record.id] = self._next_position
-            self._next_position += 1.0
-            self.queue.append(record)
-            self._changed[record.id] = record
+        if at is None or at >= len(self.queue):
+            for record in records:
+                self._positions[record.id] = self._next_position
+                self._next_position += 1.0
+                self.queue.append(record)
+                self._changed[record.id] = record
+        else:
+            self._insert(records, at)
         ids = [r.id for r in records]
+        self.remember(request_id, ids)
+        if ids:
+            self.touched = ids[-1]
+        return ids
+
+    def now(self) -> float:
+        return self._clock()
+
+    def new_id(self) -> str:
+        return f"{self._ids.getrandbits(64):016x}"
+
+    def remember(self, request_id: str, ids: list[str]) -> None:
+        """What `request_id` did (the orders it queued, or an edit's record), to answer its
+        retries; kept on disk too."""
         self._requests[request_id] = ids
         self._new_requests.append((request_id, ids))
         while len(self._requests) > RECENT_REQUESTS:  # a retry comes within seconds
             oldest = next(iter(self._requests))
             del self._requests[oldest]
             self._digests.pop(oldest, None)
-        return ids
+
+    def answered(self, request_id: str) -> list[str] | None:
+        """What `request_id` did, if it was taken before."""
+        return self._requests.get(request_id)
+
+    def _insert(self, records: list[OrderRecord], at: int) -> None:
+        """`records` into the queue from index `at` on, at positions between their new
+        neighbours' (the whole queue numbered afresh when the gap runs out)."""
+        before = self._positions[self.queue[at - 1].id] if at > 0 else None
+        after = self._positions[self.queue[at].id]
+        if before is None:
+            before = after - len(records) - 1.0
+        step = (after - before) / (len(records) + 1)
+        for offset, record in enumerate(records):
+            self.queue.insert(at + offset, record)
+            self._positions[record.id] = before + step * (offset + 1)
+            self._changed[record.id] = record
+        spaced = [self._positions[r.id] for r in self.queue]
+        if any(a >= b for a, b in itertools.pairwise(spaced)):
+            self._renumber()
+
+    def open_records(self) -> list[OrderRecord]:
+        """The running order, then the queued ones, in dispatch order."""
+        return ([self.current] if self.current is not None else []) + list(self.queue)
+
+    def position_of(self, order_id: str) -> float:
+        return self._positions.get(order_id, 0.0)
+
+    def head_position(self) -> float:
+        """A position before every queued order's."""
+        return (self._positions[self.queue[0].id] if self.queue else self._next_position) - 1.0
+
+    def reopen(self, record: OrderRecord, position: float) -> OrderRecord:
+        """Queue `record` again at `position` (an edit that ended it is undone): queued, as
+        it was before it started or ended, with its id; out of the history."""
+        for index, old in enumerate(self.history):
+            if old.id == record.id:
+                del self.history[index]
+                break
+        again = msgspec.structs.replace(
+            record,
+            status=OrderStatus.QUEUED,
+            message="",
+            progress=None,
+            started_at=None,
+            ended_at=None,
+        )
+        self._place(again, position)
+        return again
+
+    def move_to(self, order_id: str, position: float) -> bool:
+        """Put a queued order back at the `position` it had; False if it is not queued."""
+        record = next((r for r in self.queue if r.id == order_id), None)
+        if record is None:
+            return False
+        self.queue.remove(record)
+        self._place(record, position)
+        return True
+
+    def _place(self, record: OrderRecord, position: float) -> None:
+        index = next(
+            (i for i, r in enumerate(self.queue) if self._positions[r.id] > position),
+            len(self.queue),
+        )
+        self.queue.insert(index, record)
+        self._positions[record.id] = position
+        self._next_position = max(self._next_position, position + 1.0)
+        self._changed[record.id] = record
+
+    def note(self, record: OrderRecord) -> None:
+        """A finished record that never queued (an edit of the queue) into the history."""
+        self.history.appendleft(record)
+        self._changed[record.id] = record
 
     def knows(self, request_id: str) -> bool:
         """Whether `request_id` was taken before (a submit with it again is a retry)."""
@@ -371,6 +479,7 @@ class RobotQueue:
             stopped=self.stopped,
             paused=self.paused,
             stop_detail=self.stop_detail if self.stopped else "",
+            undo=self.undo_words,
         )
 
     def release(self) -> None:
@@ -385,5 +494,5 @@ class RobotQueue:
         self.history.appendleft(ended)
         self._positions.pop(record.id, None)
         self._changed[record.id] = ended
-        if not self.queue:
+        if not self.queue and self.paused != PAUSED_ASKED:
             self.paused = ""  # nothing left to resume

@@ -9,16 +9,38 @@ import functools
 import logging
 from collections.abc import Callable
 
+import msgspec
+
+from voicectl.shared.answers import question_words
 from voicectl.shared.bus import Bus, json_decoder
+from voicectl.shared.edits import (
+    AfterEdit,
+    AskEdit,
+    CancelEdit,
+    ClearEdit,
+    FirstEdit,
+    PauseEdit,
+    QueueEdit,
+    ReplaceEdit,
+    ResumeEdit,
+    SkipEdit,
+    UndoEdit,
+    is_edit,
+    read_edit,
+)
 from voicectl.shared.errors import BusError
 from voicectl.shared.hints import voicectl_command
-from voicectl.shared.keys import RobotKeys
+from voicectl.shared.keys import ConverterKeys, RobotKeys
 from voicectl.shared.messages import (
     Accepted,
+    Amend,
+    Amended,
+    Answered,
     Cancel,
     CancelAll,
     CancelOrder,
     Done,
+    Edit,
     EmergencyStop,
     Execute,
     ExecutorEvent,
@@ -32,14 +54,17 @@ from voicectl.shared.messages import (
     Halt,
     HistoryPage,
     Message,
+    Order,
     OrderFinished,
     OrderProgress,
     OrderRecord,
     OrderStatus,
+    Place,
     Rejected,
     Release,
     Reorder,
     Resume,
+    RobotPose,
     Running,
     StateReply,
     StateUpdate,
@@ -57,6 +82,8 @@ from voicectl.shared.robot.stop import (
 )
 from voicectl.shared.ros2 import NAVIGATE_FEEDBACK
 
+from . import edits
+from .edits import UNDO_DEPTH, Applied, Undo
 from .queue import QueueFull, RequestConflict, RobotQueue
 from .store import Operation, OrderStore
 
@@ -89,10 +116,23 @@ STOP_NODE = "voicectl_supervisor"
 class RobotSupervisor:
     """Everything the supervisor does for one robot."""
 
-    def __init__(self, bus: Bus, store: OrderStore, queue: RobotQueue) -> None:
+    def __init__(
+        self,
+        bus: Bus,
+        store: OrderStore,
+        queue: RobotQueue,
+        places: Callable[[], list[Place]] = list,
+    ) -> None:
         self._bus = bus
         self._store = store
         self._queue = queue
+        self._places = places
+        """The converter's named places, for "where are you?"."""
+        self._pose: RobotPose | None = None
+        self._undos: list[Undo] = []
+        """How to take back the last edits, oldest first (at most `UNDO_DEPTH`)."""
+        self._undo_codec = (msgspec.json.Encoder(), msgspec.json.Decoder(Undo))
+        self._converter_decode = json_decoder(Amended | Failed)
         self._keys = RobotKeys(queue.robot)
         self._reply_decode = json_decoder(ExecutorReply)
         self._executor_latch = ExecutorLatch(
@@ -128,6 +168,21 @@ class RobotSupervisor:
     @property
     def robot(self) -> str:
         return self._queue.robot
+
+    def on_pose(self, pose: RobotPose) -> None:
+        """Where the robot is, as its executor last said: for "where are you?"."""
+        self._pose = pose
+
+    def restore_undos(self, saved: list[bytes]) -> None:
+        """How to undo the edits made before a restart (the store's, oldest first)."""
+        decode = self._undo_codec[1].decode
+        for raw in saved[-UNDO_DEPTH:]:
+            try:
+                self._undos.append(decode(raw))
+            except (msgspec.DecodeError, msgspec.ValidationError) as exc:
+                _LOGGER.warning("%s: an unreadable undo in the store: %s", self.robot, exc)
+        self._queue.undo_words = self._undos[-1].description if self._undos else ""
+        self._changed()
 
     def on_info(self, info: ExecutorInfo) -> None:
         """The executor's word on its robot: its stop is prepared now, not at STOP."""
@@ -230,6 +285,8 @@ class RobotSupervisor:
                     self._store.history_page(self.robot, offset, limit), reads=True
                 )
                 return HistoryPage(records=records, total=total, offset=offset)
+            case Edit():
+                return await self._edit(request)
 
     def accept(self, submit: Submit) -> tuple[list[str], bool] | Failed:
         """Queue a submit's orders: their ids, and whether they are new (not a retry's);
@@ -237,6 +294,11 @@ class RobotSupervisor:
         writes `changes()` and answers after the commit."""
         if not submit.request_id:
             return Failed(reason="submit needs a non-empty request_id")
+        if any(is_edit(order) for order in submit.orders):
+            return Failed(
+                reason="an order of label 'queue' is an edit of the queue, not work: send it "
+                "as an edit (voicectl say and the panel do)"
+            )
         if self._queue.stopped:
             return Failed(
                 reason="the emergency stop is on: release it first "
@@ -244,7 +306,9 @@ class RobotSupervisor:
             )
         new = not self._queue.knows(submit.request_id)
         try:
-            ids = self._queue.submit(submit.request_id, submit.orders, submit.transcript)
+            ids = self._queue.submit(
+                submit.request_id, submit.orders, submit.transcript, submit.asked
+            )
         except (RequestConflict, QueueFull) as exc:
             return Failed(reason=str(exc))
         return ids, new
@@ -257,6 +321,136 @@ class RobotSupervisor:
             self._queue.withdraw(submit.request_id)
             self._changed()
         return Failed(reason=f"could not store the orders, so none was queued or run: {error}")
+
+    # --- edits of the queue -----------------------------------------------------------
+
+    async def _edit(self, request: Edit) -> Message:
+        """An edit of the queue or a question (services/supervisor/edits.py), answered in
+        one sentence; the edit recorded in the history, and how to undo it kept."""
+        queue = self._queue
+        before = queue.answered(request.request_id)
+        if before is not None:  # a retry: what the first one did
+            return self._answered_before(before)
+        try:
+            if not is_edit(request.edit):
+                raise ValueError(f"'{request.edit.description}' is an order, not an edit")
+            edit = read_edit(request.edit)
+        except ValueError as exc:
+            return Failed(reason=f"not an edit of the queue: {exc}")
+        if isinstance(edit, AskEdit):
+            state = queue.snapshot()
+            return Answered(answer=question_words(edit.question, state, self._pose, self._places()))
+        made = edits.Request(
+            edit_id=queue.new_id(),
+            request_id=request.request_id,
+            edit=request.edit,
+            orders=request.orders,
+            transcript=request.transcript,
+            asked=request.asked,
+        )
+        applied = await self._apply(edit, made)
+        for order_id in applied.stop:
+            await self._cancel(order_id, f"cancelled by “{request.edit.description}”")
+        record = edits.edit_record(made, applied, queue.now())
+        queue.note(record)
+        queue.remember(request.request_id, [record.id])
+        operations: list[Operation] = []
+        if applied.undo is not None:
+            self._undos.append(applied.undo)
+            operations.append(
+                self._store.save_undo(
+                    self.robot, applied.undo.edit_id, self._undo_codec[0].encode(applied.undo)
+                )
+            )
+            while len(self._undos) > UNDO_DEPTH:
+                operations.append(self._store.drop_undo(self.robot, self._undos.pop(0).edit_id))
+        queue.undo_words = self._undos[-1].description if self._undos else ""
+        saved = self._store.keep([*self.changes(), *operations])
+        await self._committed(saved)
+        _LOGGER.info("%s: edit %r: %s", self.robot, request.edit.description, applied.answer)
+        return Answered(
+            answer=applied.answer,
+            changed=applied.changed,
+            edit_id=record.id,
+            order_ids=applied.added,
+        )
+
+    async def _apply(self, edit: QueueEdit, request: edits.Request) -> Applied:
+        queue = self._queue
+        match edit:
+            case CancelEdit():
+                return edits.cancel(queue, edit, request)
+            case ClearEdit():
+                return edits.clear(queue, edit, request)
+            case FirstEdit():
+                return edits.first(queue, edit, request)
+            case AfterEdit():
+                return edits.after(queue, edit, request)
+            case SkipEdit():
+                return edits.skip(queue, edit, request)
+            case PauseEdit():
+                return edits.pause(queue, edit, request)
+            case ResumeEdit():
+                return edits.resume(queue, edit, request)
+            case ReplaceEdit():
+                return await self._replace(edit, request)
+            case UndoEdit():
+                return self._undo()
+            case AskEdit():  # answered before: it changes nothing
+                return Applied("")
+
+    def _undo(self) -> Applied:
+        if not self._undos:
+            return Applied("nothing to undo")
+        undo = self._undos.pop()
+        applied = edits.revert(self._queue, undo)
+        self._store.keep([self._store.drop_undo(self.robot, undo.edit_id)])
+        return applied
+
+    async def _replace(self, edit: ReplaceEdit, request: edits.Request) -> Applied:
+        """A correction: the order named made again by the converter (its own command,
+        slots and bounds), in its place."""
+        queue = self._queue
+        if queue.stopped:
+            return Applied("the emergency stop is on: release it first")
+        target = edits.find(queue, edit.which)
+        if isinstance(target, str):
+            return Applied(target)
+        amended = await self._amend(target.order, request.edit)
+        if isinstance(amended, str):
+            return Applied(amended)
+        if not any(r.id == target.id for r in queue.open_records()):
+            return Applied(f"{target.order.description} is no longer in the queue")
+        return edits.replace(queue, target, amended, request)
+
+    async def _amend(self, order: Order, change: Order) -> Order | str:
+        """`order` as the correction `change` makes it, asked of the converter; or why not."""
+        try:
+            reply = await self._bus.request(
+                ConverterKeys().parse,
+                Amend(order=order, change=change),
+                self._converter_decode,
+                EXECUTOR_TIMEOUT,
+            )
+        except BusError as exc:
+            return f"I cannot correct it now: the converter does not answer ({exc})"
+        match reply:
+            case Amended(order=amended):
+                return amended
+            case Failed(reason=reason):
+                return reason
+        return f"the converter answered {type(reply).__name__}"
+
+    def _answered_before(self, ids: list[str]) -> Answered:
+        """A retry of an edit: the answer its first try gave, from the history."""
+        record = next((r for r in self._queue.history if r.id in ids), None)
+        if record is None:
+            return Answered(answer="done before", edit_id=ids[0] if ids else "")
+        return Answered(
+            answer=record.message,
+            changed=record.status is OrderStatus.SUCCEEDED,
+            edit_id=record.id,
+        )
 
     async def _cancel(self, order_id: str, why: str) -> Message:
         if self._queue.remove_queued(order_id, why):

@@ -20,7 +20,7 @@ import zenoh
 
 from voicectl.shared.bus import Bus, Pending, json_decoder
 from voicectl.shared.errors import ServiceError
-from voicectl.shared.keys import ANY, RobotKeys, last_chunk, robot_of
+from voicectl.shared.keys import ANY, ConverterKeys, RobotKeys, last_chunk, robot_of
 from voicectl.shared.keys import MAX_ROBOTS as MAX_ROBOTS  # (`--max-robots`)
 from voicectl.shared.messages import (
     EmergencyStop,
@@ -29,7 +29,10 @@ from voicectl.shared.messages import (
     Failed,
     GetState,
     Message,
+    Place,
+    Places,
     Release,
+    RobotPose,
     StateReply,
     Submit,
     Submitted,
@@ -128,6 +131,8 @@ class SupervisorService(Service):
         self._decode_reply = json_decoder(SupervisorReply)
         self._decode_event = json_decoder(ExecutorEvent)
         self._decode_info = json_decoder(ExecutorInfo)
+        self._decode_pose = json_decoder(RobotPose)
+        self._places: list[Place] = []
         self._noise = Throttled(_LOGGER)
         self._tasks: set[asyncio.Task[None]] = set()
         self.conflict: asyncio.Future[str] = asyncio.get_running_loop().create_future()
@@ -143,11 +148,15 @@ class SupervisorService(Service):
                 raise ServiceError(_taken(name, rival))
         # A latch file that cannot be read may have held any robot's STOP: all stopped.
         unsure = bool(self._store.latched.unreadable)
+        # The converter's named places, in which "where are you?" is answered.
+        self._bus.subscribe(
+            ConverterKeys().places, json_decoder(Places), self._on_places, history=True
+        )
         for name, robot in saved.items():
             queue = self._new_queue(name)
             queue.restore(robot.open_orders, robot.history, robot.requests)
             queue.stopped = robot.stopped or unsure
-            self._add(queue, kept=True)
+            self._add(queue, kept=True).restore_undos(robot.undos)
             if robot.open_orders:
                 _LOGGER.info("%s: restored %d open order(s)", name, len(robot.open_orders))
         for name in robots:
@@ -199,7 +208,7 @@ class SupervisorService(Service):
         """Serve `queue`'s robot: claim it (the owner token), hear its executor's events
         and announcement (the last one too, which the executor sends before its token),
         and other supervisors' claims."""
-        robot = RobotSupervisor(self._bus, self._store, queue)
+        robot = RobotSupervisor(self._bus, self._store, queue, lambda: self._places)
         keys = RobotKeys(queue.robot)
         self._robots[queue.robot] = robot
         robot.start()
@@ -211,6 +220,7 @@ class SupervisorService(Service):
             bus.subscribe(
                 keys.executor_info, self._decode_info, lambda _, i: robot.on_info(i), history=True
             ),
+            bus.subscribe(keys.pose, self._decode_pose, lambda _, pose: robot.on_pose(pose)),
         ]
         if self._serving:
             ends.append(bus.announce(keys.alive("supervisor")))
@@ -230,6 +240,9 @@ class SupervisorService(Service):
         task.add_done_callback(self._tasks.discard)
 
     # --- which robots -------------------------------------------------------------------
+
+    def _on_places(self, _key: str, places: Places) -> None:
+        self._places = places.places
 
     def _on_executor(self, key: str, alive: bool) -> None:
         name = robot_of(key)

@@ -65,6 +65,12 @@ CREATE TABLE IF NOT EXISTS requests (
     order_ids BLOB NOT NULL,
     PRIMARY KEY (robot, request_id)
 );
+CREATE TABLE IF NOT EXISTS edits (
+    robot TEXT NOT NULL,
+    id TEXT NOT NULL,
+    undo BLOB NOT NULL,
+    PRIMARY KEY (robot, id)
+);
 """
 BATCH_LIMIT = 2000
 """Most operations in one transaction."""
@@ -81,6 +87,8 @@ class Durability(StrEnum):
 
 KEPT_REQUESTS = 10_000
 """Request ids kept on disk (the newest), to answer a retry after a restart."""
+KEPT_UNDOS = 10
+"""Edits per robot that can be undone after a restart (the newest)."""
 
 
 @dataclass
@@ -94,6 +102,8 @@ class SavedRobot:
     requests: dict[str, list[str]] = field(default_factory=dict)
     stopped: bool = False
     """The emergency stop was latched when the supervisor stopped."""
+    undos: list[bytes] = field(default_factory=list)
+    """How to undo its last edits, oldest first, as the supervisor encoded them."""
 
 
 Operation = Callable[[sqlite3.Connection], Any]
@@ -306,6 +316,23 @@ class OrderStore:
 
         return save
 
+    def save_undo(self, robot: str, edit_id: str, undo: bytes) -> Operation:
+        """How to undo edit `edit_id` (kept until it is undone, or too old)."""
+
+        def save(db: sqlite3.Connection) -> None:
+            db.execute(
+                "INSERT OR REPLACE INTO edits (robot, id, undo) VALUES (?, ?, ?)",
+                (robot, edit_id, undo),
+            )
+
+        return save
+
+    def drop_undo(self, robot: str, edit_id: str) -> Operation:
+        def drop(db: sqlite3.Connection) -> None:
+            db.execute("DELETE FROM edits WHERE robot = ? AND id = ?", (robot, edit_id))
+
+        return drop
+
     def history_page(
         self, robot: str, offset: int, limit: int
     ) -> Callable[[sqlite3.Connection], tuple[list[OrderRecord], int]]:
@@ -346,6 +373,14 @@ class OrderStore:
             ):
                 saved = robots.setdefault(robot, SavedRobot())
                 saved.requests[request_id] = ids_decoder.decode(ids)
+            for (robot,) in db.execute("SELECT DISTINCT robot FROM edits").fetchall():
+                db.execute(
+                    "DELETE FROM edits WHERE robot = ? AND rowid NOT IN (SELECT rowid FROM edits"
+                    " WHERE robot = ? ORDER BY rowid DESC LIMIT ?)",
+                    (robot, robot, KEPT_UNDOS),
+                )
+            for robot, undo in db.execute("SELECT robot, undo FROM edits ORDER BY rowid"):
+                robots.setdefault(robot, SavedRobot()).undos.append(undo)
             for robot, stopped in db.execute("SELECT robot, stopped FROM robots"):
                 robots.setdefault(robot, SavedRobot()).stopped = bool(stopped)
             # Stopped in either the database or the latch file: stopped.
