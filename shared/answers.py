@@ -11,6 +11,7 @@ from collections.abc import Sequence
 from .edits import QUEUE_LABEL
 from .messages import (
     Doubt,
+    Order,
     OrderRecord,
     OrderStatus,
     Place,
@@ -53,11 +54,16 @@ def proposal_words(proposal: Proposal) -> str:
     if proposal.doubts:
         asked = [doubt_words(proposal.transcript, doubt) for doubt in proposal.doubts]
         return ", and ".join(question.removesuffix("?") for question in asked) + "?"
-    orders = ", then ".join(spoken(order.description) for order in proposal.orders)
+    orders = orders_words(proposal.orders)
     missed = " and ".join(f"'{problem.text}'" for problem in proposal.errors if problem.text)
     if not orders:
         return NOT_CAUGHT
     return f"{orders}; I did not catch {missed}" if missed else orders
+
+
+def orders_words(orders: Sequence[Order]) -> str:
+    """Orders read back: 'turn left, then reach kitchen'."""
+    return ", then ".join(spoken(order.description) for order in orders)
 
 
 def doubt_words(transcript: str, doubt: Doubt) -> str:

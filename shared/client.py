@@ -19,9 +19,15 @@ from typing import Any, TypeVar
 import msgspec
 
 from .bus import Bus, json_decoder
+from .edits import requests
 from .errors import BusError, VoicectlError
 from .keys import ConverterKeys, RobotKeys, robot_of
 from .messages import (
+    Amend,
+    Amended,
+    Answered,
+    Asked,
+    Edit,
     EmergencyStop,
     ExecutorInfo,
     ExecutorReply,
@@ -83,10 +89,25 @@ class Unreachable(BusError):
 
 class Said(msgspec.Struct, frozen=True):
     """What a text became, and the ids of the orders submitted for it (none when nothing
-    was submitted)."""
+    was submitted), with the answers to its edits and questions."""
 
     result: ParseResult
     order_ids: list[str]
+    answers: list[Answered] = msgspec.field(default_factory=list)
+
+
+class Sent(msgspec.Struct, frozen=True):
+    """What sending orders did: the ids of those queued, and the supervisor's answer to
+    each edit and question among them, in order."""
+
+    order_ids: list[str]
+    answers: list[Answered]
+
+    @property
+    def done(self) -> bool:
+        """Whether anything happened: orders queued, the queue changed, or a question
+        answered (an edit refused did nothing)."""
+        return bool(self.order_ids) or any(a.changed or not a.edit_id for a in self.answers)
 
 
 class VoicectlClient:
@@ -96,6 +117,7 @@ class VoicectlClient:
         self.bus = bus
         self.timeout = timeout
         self._parse_decode = json_decoder(ParseReply | Failed)
+        self._amend_decode = json_decoder(Amended | Failed)
         self._supervisor_decode = json_decoder(SupervisorReply)
         self._executor_decode = json_decoder(ExecutorReply)
         self._photo_decode = json_decoder(PhotoReply)
@@ -191,6 +213,22 @@ class VoicectlClient:
             raise Refused("converter", reply.reason)
         return reply.result
 
+    async def amend(self, order: Order, change: Order) -> Order:
+        """`order` made again as the correction `change` says ("no, three"); Refused, with
+        the converter's reason, when it does not fit."""
+        try:
+            reply: Amended | Failed = await self.bus.request(
+                ConverterKeys().parse,
+                Amend(order=order, change=change),
+                self._amend_decode,
+                self.timeout,
+            )
+        except BusError as exc:
+            raise Unreachable("converter", exc) from exc
+        if isinstance(reply, Failed):
+            raise Refused("converter", reply.reason)
+        return reply.order
+
     async def request(self, robot: str, request: Message) -> SupervisorReply:
         """Ask `robot`'s supervisor; its reply as it is, `Failed` included. An emergency
         stop goes first and waits for room rather than being dropped."""
@@ -229,6 +267,31 @@ class VoicectlClient:
             raise Refused("supervisor", f"answered {type(reply).__name__} to a submit")
         return reply.order_ids
 
+    async def send(
+        self,
+        robot: str,
+        orders: list[Order],
+        transcript: str = "",
+        asked: Asked | None = None,
+        request_id: str | None = None,
+    ) -> Sent:
+        """Send what a text became to `robot`'s supervisor, in order: its orders queued,
+        its edits of the queue applied and its questions answered (shared/edits.py cuts
+        them into requests). Refused at the first request the supervisor refuses."""
+        queued: list[str] = []
+        answers: list[Answered] = []
+        for made in requests(orders, transcript, asked, request_id or uuid.uuid4().hex):
+            reply = await self.ask(robot, made)
+            match reply:
+                case Submitted(order_ids=ids) if isinstance(made, Submit):
+                    queued += ids
+                case Answered() if isinstance(made, Edit):
+                    answers.append(reply)
+                    queued += reply.order_ids
+                case _:
+                    raise Refused("supervisor", f"answered {type(reply).__name__}")
+        return Sent(order_ids=queued, answers=answers)
+
     async def photo(self, robot: str, order_id: str) -> Photo:
         """The photo order `order_id` took on `robot`, from its executor; Refused when
         there is none."""
@@ -245,17 +308,21 @@ class VoicectlClient:
             raise Refused("executor", reply.reason)
         return reply
 
-    async def say(self, robot: str, text: str, partial: bool = False) -> Said:
-        """Parse `text` and submit its orders: only when every part of it made an order,
-        unless `partial`, which submits what was understood. A refusal is `SayRefused`,
-        with what the text made."""
+    async def say(
+        self, robot: str, text: str, partial: bool = False, asked: Asked | None = None
+    ) -> Said:
+        """Parse `text` and send its orders, edits and questions (`send`): only when every
+        part of it made one, unless `partial`, which sends what was understood. A refusal
+        is `SayRefused`, with what the text made."""
         try:
             result = await self.parse(text)
         except Refused as exc:
             raise SayRefused(exc, None) from exc
         sending = result.orders if partial or not result.errors else []
         try:
-            order_ids = await self.submit(robot, sending, transcript=text) if sending else []
+            sent = await self.send(robot, sending, text, asked) if sending else None
         except Refused as exc:
             raise SayRefused(exc, result) from exc
-        return Said(result=result, order_ids=order_ids)
+        if sent is None:
+            return Said(result=result, order_ids=[])
+        return Said(result=result, order_ids=sent.order_ids, answers=sent.answers)

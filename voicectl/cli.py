@@ -5,7 +5,9 @@ from __future__ import annotations
 import argparse
 import asyncio
 import datetime
+import getpass
 import importlib
+import socket
 import stat
 import sys
 from collections.abc import Callable
@@ -18,7 +20,7 @@ from voicectl.services.converter.shipped import shipped_orders
 from voicectl.services.stt.config import add_engine_arguments, engine_options
 from voicectl.services.web.tls import add_tls_arguments, tls_problem
 from voicectl.shared.bus import DEFAULT_ROUTER, Bus
-from voicectl.shared.client import Refused, SayRefused, VoicectlClient
+from voicectl.shared.client import Refused, SayRefused, Sent, VoicectlClient
 from voicectl.shared.config import data_dir, default_token_file, load_or_create_token
 from voicectl.shared.errors import BusError, OrdersFileError
 from voicectl.shared.hints import extra_for, pip_install, voicectl_command
@@ -27,6 +29,8 @@ from voicectl.shared.kinds import ON_ZENOH, TransportKind
 from voicectl.shared.messages import (
     HISTORY_LIMIT_MAX,
     HISTORY_OFFSET_MAX,
+    Answered,
+    Asked,
     Cancel,
     CancelAll,
     GetHistory,
@@ -38,6 +42,7 @@ from voicectl.shared.messages import (
     Reorder,
     Resume,
     StateReply,
+    Via,
 )
 from voicectl.shared.process import add_bus_arguments, bus_options, robot_name
 from voicectl.shared.robot.keys import RobotNames, check_ros_name
@@ -574,9 +579,12 @@ def _transcribe(args: argparse.Namespace) -> int:
 
 
 async def _say(args: argparse.Namespace) -> int:
+    asked = Asked(via=Via.CLI, by=_who())
     try:
         with Bus.open(bus_options(args, wait=False), asyncio.get_running_loop()) as bus:
-            said = await VoicectlClient(bus).say(args.robot, args.text, partial=args.partial)
+            said = await VoicectlClient(bus).say(
+                args.robot, args.text, partial=args.partial, asked=asked
+            )
     except SayRefused as exc:
         # Refused is an answer too: the same JSON as any other, with what was understood
         # held back and why.
@@ -587,26 +595,44 @@ async def _say(args: argparse.Namespace) -> int:
         print(f"voicectl say: {exc}", file=sys.stderr)
         return 3
     result = said.result
-    sent = bool(said.order_ids)
-    _print_said(result, said.order_ids)
-    # One line on stderr, for a person: what happened, then each part not understood.
+    done = Sent(order_ids=said.order_ids, answers=said.answers).done
+    _print_said(result, said.order_ids, said.answers)
+    # For a person, on stderr: each answer of the robot, then what was not understood.
+    for answer in said.answers:
+        print(f"voicectl say: {answer.answer}", file=sys.stderr)
     problems = "; ".join(_unsaid(error) for error in result.errors)
-    if sent and problems:
+    if done and problems:
         print(f"voicectl say: submitted the rest; not understood: {problems}", file=sys.stderr)
-    elif not sent:
+    elif not done and not said.answers:
         held = " (--partial submits what was understood)" if result.orders else ""
         why = f": {problems}" if problems else ""
         print(f"voicectl say: nothing submitted{held}{why}", file=sys.stderr)
     # Exit status follows what happened: 0 when orders went to the robot (with --partial,
-    # even though some words made none), 1 when nothing did.
-    return 0 if sent else 1
+    # even though some words made none), the queue changed or a question was answered;
+    # 1 when nothing happened (an edit refused: "there is no kitchen in the queue").
+    return 0 if done else 1
 
 
-def _print_said(result: ParseResult, order_ids: list[str], refused: str | None = None) -> None:
+def _who() -> str:
+    """The person at this terminal, as the history keeps who asked: user@host."""
+    try:
+        user = getpass.getuser()
+    except (KeyError, OSError):  # no such user in a container's passwd
+        user = ""
+    host = socket.gethostname()
+    return f"{user}@{host}" if user else host
+
+
+def _print_said(
+    result: ParseResult,
+    order_ids: list[str],
+    answers: list[Answered] | None = None,
+    refused: str | None = None,
+) -> None:
     """`say`'s JSON, the same keys whatever happened. What went to the robot is under
     "orders"; what was understood and held back (or refused) is not printed as if it had
-    been sent."""
-    sent = bool(order_ids)
+    been sent. `answers` are the supervisor's to the text's edits and questions."""
+    sent = bool(order_ids) or bool(answers)
     _print_json(
         {
             "submitted": sent,
@@ -614,6 +640,7 @@ def _print_said(result: ParseResult, order_ids: list[str], refused: str | None =
             "not_sent": [] if sent else result.orders,
             "errors": result.errors,
             "order_ids": order_ids,
+            "answers": answers or [],
             "refused": refused,
         }
     )

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import socket
 import threading
 import time
 import uuid
@@ -27,11 +28,13 @@ from typing import Any
 from voicectl.shared import answers
 from voicectl.shared.bus import Bus, Stream, json_decoder
 from voicectl.shared.client import Refused, Unreachable, VoicectlClient
+from voicectl.shared.edits import is_edit
 from voicectl.shared.errors import BusError
 from voicectl.shared.keys import RobotKeys
 from voicectl.shared.messages import (
     FRAME_BYTES,
     MAX_CHECK_SECONDS,
+    Asked,
     AudioChunk,
     AudioStart,
     AudioStop,
@@ -45,6 +48,7 @@ from voicectl.shared.messages import (
     StateUpdate,
     Stopped,
     SttReply,
+    Via,
 )
 from voicectl.shared.process import Service
 
@@ -137,6 +141,9 @@ class Listener(Service):
         self._interrupt = interrupt
         self._speak = speak
         self._client = VoicectlClient(bus)
+        self._asked = Asked(
+            via=Via.VOICE, spoken=True, by=f"voicectl listen on {socket.gethostname()}"
+        )
         self._check_decoder = json_decoder(SttReply)
         self._loop = asyncio.get_running_loop()
         # Two searches: the wake phrase's is permissive (its false wakes are checked),
@@ -393,15 +400,16 @@ class Listener(Service):
         if not certain:
             await self.say(words)
             return
+        plain = [order for order in proposal.orders if not is_edit(order)]
         if any(order.confirm for order in proposal.orders):
             if not await self._confirmed(words):
                 await self.say("cancelled")
                 return
-        else:
-            await self.say(words)
+        elif plain:  # an edit or a question is answered, not read back
+            await self.say(answers.orders_words(plain))
         try:
-            ids = await self._client.submit(
-                self._config.robot, proposal.orders, transcript=proposal.transcript
+            sent = await self._client.send(
+                self._config.robot, proposal.orders, proposal.transcript, self._asked
             )
         except (Refused, Unreachable) as exc:
             _LOGGER.warning("not submitted: %s", exc)
@@ -409,8 +417,11 @@ class Listener(Service):
                 f"not sent: {answers.short(exc.reason if isinstance(exc, Refused) else str(exc))}"
             )
             return
-        self._mine.update(ids)
-        _LOGGER.info("submitted %s: %s", ", ".join(ids), proposal.transcript)
+        self._mine.update(sent.order_ids)
+        if sent.order_ids:
+            _LOGGER.info("submitted %s: %s", ", ".join(sent.order_ids), proposal.transcript)
+        for answered in sent.answers:
+            await self.say(answered.answer)
 
     async def _confirmed(self, words: str) -> bool:
         """Read the orders back and wait for "yes"; "no", or nothing, is no."""

@@ -32,9 +32,11 @@ from starlette.websockets import WebSocket
 
 from voicectl.shared.bus import Bus, BusOptions
 from voicectl.shared.client import Refused, Unreachable, VoicectlClient
+from voicectl.shared.edits import UndoEdit, edit_order
 from voicectl.shared.errors import TtsError, VoicectlError
 from voicectl.shared.keys import MAX_ROBOTS, RobotKeys, check_chunk
 from voicectl.shared.messages import (
+    Asked,
     Cancel,
     CancelAll,
     Done,
@@ -48,9 +50,8 @@ from voicectl.shared.messages import (
     Resume,
     StateReply,
     StateUpdate,
-    Submit,
-    Submitted,
     SupervisorReply,
+    Via,
 )
 from voicectl.shared.process import running
 from voicectl.shared.tts import MAX_TEXT, Voice, to_wav
@@ -74,6 +75,15 @@ class SubmitBody(msgspec.Struct, forbid_unknown_fields=True):
         default_factory=lambda: uuid.uuid4().hex
     )
     """One per batch a person means to send once: a retry with it queues nothing twice."""
+    via: Via = Via.API
+    """Who sends: the panel says `panel`; a script, nothing."""
+    spoken: bool = False
+    """The orders were said (into the panel's microphone), not typed."""
+
+
+class AmendBody(msgspec.Struct, forbid_unknown_fields=True):
+    order: Order
+    change: Order
 
 
 class TextBody(msgspec.Struct, forbid_unknown_fields=True):
@@ -128,6 +138,13 @@ class Access:
         scheme = "https" if websocket.url.scheme == "wss" else "http"
         own = f"{scheme}://{websocket.headers.get('host', '')}"
         return origin == own or origin in self.origins
+
+
+def _who(request: Request, via: Via) -> str:
+    """Who asked, as the history keeps it: the client's address."""
+    client = request.client
+    where = client.host if client is not None else "?"
+    return f"panel at {where}" if via is Via.PANEL else where
 
 
 def _one_line(exc: Exception) -> str:
@@ -215,6 +232,8 @@ class Panel:
             Route("/api/release", api(self._release), methods=["POST"]),
             Route("/api/resume", api(self._resume), methods=["POST"]),
             Route("/api/reorder", api(self._reorder), methods=["POST"]),
+            Route("/api/undo", api(self._undo), methods=["POST"]),
+            Route("/api/amend", api(self._amend), methods=["POST"]),
             Route("/api/speech", api(self._speech), methods=["POST"]),
             Route("/api/state", api(self._state)),
             Route("/api/history", api(self._history)),
@@ -297,24 +316,49 @@ class Panel:
         return await self._ask_converter(body.text)
 
     async def _submit(self, request: Request) -> object:
+        """Orders queued, edits of the queue applied and questions answered, in order."""
         keys = self._robot(request)
         body = await self._body(request, SubmitBody)
         if not body.orders:
             raise ApiError(400, "nothing to submit: 'orders' is empty")
-        reply = await self._ask_supervisor(
-            keys, Submit(request_id=body.request_id, orders=body.orders, transcript=body.transcript)
-        )
-        assert isinstance(reply, Submitted)
-        return {"order_ids": reply.order_ids}
+        asked = Asked(via=body.via, spoken=body.spoken, by=_who(request, body.via))
+        with _as_api_errors():
+            sent = await self.client.send(
+                keys.robot, body.orders, body.transcript, asked, body.request_id
+            )
+        return {"order_ids": sent.order_ids, "answers": sent.answers}
+
+    async def _undo(self, request: Request) -> object:
+        """The last edit of the queue taken back, as "undo" said does."""
+        keys = self._robot(request)
+        undo = edit_order(UndoEdit(), "undo")
+        asked = Asked(via=Via.PANEL, by=_who(request, Via.PANEL))
+        with _as_api_errors():
+            sent = await self.client.send(keys.robot, [undo], "undo", asked)
+        (answered,) = sent.answers
+        return {"answer": answered.answer, "changed": answered.changed}
+
+    async def _amend(self, request: Request) -> object:
+        """An order made again as a correction says ("no, three"): for an order a panel
+        has staged and not sent."""
+        body = await self._body(request, AmendBody)
+        with _as_api_errors():
+            return {"order": await self.client.amend(body.order, body.change)}
 
     async def _say(self, request: Request) -> object:
         """Parse and submit in one go, only when the whole text made orders."""
         keys = self._robot(request)
         body = await self._body(request, TextBody)
+        asked = Asked(via=Via.API, by=_who(request, Via.API))
         with _as_api_errors():
-            said = await self.client.say(keys.robot, body.text)
+            said = await self.client.say(keys.robot, body.text, asked=asked)
         result = said.result
-        return {"orders": result.orders, "errors": result.errors, "order_ids": said.order_ids}
+        return {
+            "orders": result.orders,
+            "errors": result.errors,
+            "order_ids": said.order_ids,
+            "answers": said.answers,
+        }
 
     async def _cancel(self, request: Request) -> object:
         keys = self._robot(request)
