@@ -17,7 +17,7 @@ from typing import Annotated
 
 import msgspec
 
-from .messages import Asked, Edit, Order, Submit
+from .messages import Asked, Edit, Order, OrderRecord, OrderStatus, Submit
 
 QUEUE_LABEL = "queue"
 """The label of the supervisor's own orders: never handed to an executor."""
@@ -148,6 +148,27 @@ EDITS = ", ".join(
     if isinstance(kind.__struct_config__.tag, str)
 )
 """The `edit:` values there are, for error messages."""
+
+
+UNDONE = "undone"
+"""Why an order an edit added ended when the edit was undone."""
+
+
+def cancelled_by(edit: Order) -> str:
+    """Why an order an edit ended ended, as its record says."""
+    return f"cancelled by “{edit.description}”"
+
+
+def replaced_by(order: Order) -> str:
+    return f"replaced by “{order.description}”"
+
+
+def ended_by_edit(record: OrderRecord) -> bool:
+    """Whether an edit of the queue ended `record` (its answer said so already)."""
+    message = record.message
+    return record.status is OrderStatus.CANCELLED and (
+        message.startswith(("cancelled by “", "replaced by “")) or message == UNDONE
+    )
 
 
 def is_edit(order: Order) -> bool:

@@ -28,7 +28,7 @@ from typing import Any
 from voicectl.shared import answers
 from voicectl.shared.bus import Bus, Stream, json_decoder
 from voicectl.shared.client import Refused, Unreachable, VoicectlClient
-from voicectl.shared.edits import is_edit
+from voicectl.shared.edits import ended_by_edit, is_edit
 from voicectl.shared.errors import BusError
 from voicectl.shared.keys import RobotKeys
 from voicectl.shared.messages import (
@@ -459,6 +459,8 @@ class Listener(Service):
     def _said_outcome(self, record: OrderRecord) -> None:
         if record.status is OrderStatus.CANCELLED and self._stopped:
             return  # "stopped" says it
+        if ended_by_edit(record):
+            return  # the edit's answer said it
         words = answers.outcome_words(record)
         if words:
             self._keep(self.say(words))

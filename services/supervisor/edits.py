@@ -19,6 +19,7 @@ import msgspec
 from voicectl.shared.answers import left_words, spoken
 from voicectl.shared.edits import (
     LAST,
+    UNDONE,
     AfterEdit,
     CancelEdit,
     ClearEdit,
@@ -26,6 +27,8 @@ from voicectl.shared.edits import (
     PauseEdit,
     ResumeEdit,
     SkipEdit,
+    cancelled_by,
+    replaced_by,
 )
 from voicectl.shared.messages import Asked, Order, OrderRecord, OrderStatus
 
@@ -115,10 +118,6 @@ def find(queue: RobotQueue, which: str, running: bool = True) -> OrderRecord | s
     return found[0]
 
 
-def _ended(request: Request) -> str:
-    return f"cancelled by “{request.edit.description}”"
-
-
 def cancel(queue: RobotQueue, edit: CancelEdit, request: Request) -> Applied:
     target = find(queue, edit.which)
     if isinstance(target, str):
@@ -127,11 +126,12 @@ def cancel(queue: RobotQueue, edit: CancelEdit, request: Request) -> Applied:
     what = spoken(target.order.description)
     if queue.current is not None and target.id == queue.current.id:
         undo.reopen.append(Reopened(target, queue.head_position(), ran=True))
+        queue.stopping[target.id] = cancelled_by(request.edit)
         return Applied(
             f"cancelled {what}; {left_words(len(queue.queue))}", True, undo, stop=[target.id]
         )
     position = queue.position_of(target.id)
-    queue.remove_queued(target.id, _ended(request))
+    queue.remove_queued(target.id, cancelled_by(request.edit))
     undo.reopen.append(Reopened(target, position))
     return Applied(f"cancelled {what}; {_left(queue)}", True, undo)
 
@@ -146,7 +146,7 @@ def clear(queue: RobotQueue, _edit: ClearEdit, request: Request) -> Applied:
     undo = Undo(request.edit_id, request.edit.description)
     for record in list(queue.queue):
         undo.reopen.append(Reopened(record, queue.position_of(record.id)))
-    count = queue.clear_queue(_ended(request))
+    count = queue.clear_queue(cancelled_by(request.edit))
     cleared = f"cleared {count} order{'s' if count != 1 else ''}"
     current = queue.current
     still = f"; still {spoken(current.order.description)}" if current is not None else ""
@@ -203,6 +203,7 @@ def skip(queue: RobotQueue, _edit: SkipEdit, request: Request) -> Applied:
         f"next: {spoken(queue.queue[0].order.description)}" if queue.queue else "nothing left"
     )
     answer = f"skipped {spoken(current.order.description)}; {following}"
+    queue.stopping[current.id] = cancelled_by(request.edit)
     return Applied(answer, True, undo, stop=[current.id])
 
 
@@ -233,11 +234,12 @@ def replace(queue: RobotQueue, target: OrderRecord, new: Order, request: Request
     running = queue.current is not None and queue.current.id == target.id
     if running:
         undo.reopen.append(Reopened(target, queue.head_position(), ran=True))
+        queue.stopping[target.id] = replaced_by(new)
         index = 0
     else:
         index = list(queue.queue).index(target)
         undo.reopen.append(Reopened(target, queue.position_of(target.id)))
-        queue.remove_queued(target.id, f"replaced by “{new.description}”")
+        queue.remove_queued(target.id, replaced_by(new))
     ids = queue.submit(request.request_id, [new], request.transcript, request.asked, at=index)
     undo.remove.extend(ids)
     answer = f"now {spoken(new.description)}, not {spoken(target.order.description)}"
@@ -249,9 +251,10 @@ def revert(queue: RobotQueue, undo: Undo) -> Applied:
     their positions, those it moved back, its pause turned back."""
     stop = []
     for order_id in undo.remove:
-        if queue.remove_queued(order_id, "undone"):
+        if queue.remove_queued(order_id, UNDONE):
             continue
         if queue.current is not None and queue.current.id == order_id:
+            queue.stopping[order_id] = UNDONE
             stop.append(order_id)
     for reopened in undo.reopen:
         record = reopened.record

@@ -111,6 +111,8 @@ class RobotQueue:
         self._new_requests: list[tuple[str, list[str]]] = []
         self.touched: str | None = None
         """The order last added or moved, which "after that" puts the next ones after."""
+        self.stopping: dict[str, str] = {}
+        """Running orders an edit is stopping, and what their record will say ended them."""
         self.undo_words = ""
         """The edit an "undo" would take back now, as said; '' when none."""
         # Order ids: 64 random bits from a generator seeded once by the OS; uuid4 asks the
@@ -362,6 +364,9 @@ class RobotQueue:
         record = self.current
         self.current = None
         self.current_verified = True
+        edited = self.stopping.pop(order_id, None)
+        if edited is not None and status is OrderStatus.CANCELLED:
+            message = edited  # the executor's "cancelled" says less than the edit that did
         self._to_history(record, status, message)
         broken = status in BREAKS_SEQUENCE or (lost and status is not OrderStatus.SUCCEEDED)
         if broken and not self._continue_on_failure:

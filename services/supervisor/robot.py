@@ -25,6 +25,7 @@ from voicectl.shared.edits import (
     ResumeEdit,
     SkipEdit,
     UndoEdit,
+    cancelled_by,
     is_edit,
     read_edit,
 )
@@ -350,7 +351,7 @@ class RobotSupervisor:
         )
         applied = await self._apply(edit, made)
         for order_id in applied.stop:
-            await self._cancel(order_id, f"cancelled by “{request.edit.description}”")
+            await self._cancel(order_id, cancelled_by(request.edit))
         record = edits.edit_record(made, applied, queue.now())
         queue.note(record)
         queue.remember(request.request_id, [record.id])
