@@ -203,7 +203,8 @@ def _idle(state: State) -> str:
     if state.stopped:
         return "the emergency stop is on"
     if state.queue_length and state.paused:
-        return f"{_orders(state.queue_length)} wait until you say go on"
+        verb = "waits" if state.queue_length == 1 else "wait"
+        return f"{_orders(state.queue_length)} {verb} until you say go on"
     if state.queue_length:
         return f"{_orders(state.queue_length)} waiting"
     return "the queue is empty"
@@ -249,13 +250,14 @@ def distance_words(record: OrderRecord) -> str:
     if progress.distance_linear is not None:
         return f"{metres(progress.distance_linear)} to go"
     if progress.distance_angular is not None:
-        return f"{math.degrees(abs(progress.distance_angular)):.0f} degrees to turn"
+        degrees = math.floor(math.degrees(abs(progress.distance_angular)) + 0.5)
+        return f"{degrees} degrees to turn"
     return ""
 
 
 def metres(distance: float) -> str:
     """A distance as people say it: '3 metres', '2.5 metres', '1 metre'."""
-    rounded = round(abs(distance), 1)
+    rounded = math.floor(abs(distance) * 10 + 0.5) / 10  # halves up, as the panel rounds
     shown = f"{rounded:g}"
     return f"{shown} metre" if shown == "1" else f"{shown} metres"
 

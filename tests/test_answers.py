@@ -6,15 +6,28 @@ from __future__ import annotations
 
 import pytest
 
-from voicectl.shared.answers import outcome_words, proposal_words, short, spoken, stopped_words
+from voicectl.shared.answers import (
+    outcome_words,
+    plain_reason,
+    proposal_words,
+    question_words,
+    short,
+    spoken,
+    stopped_words,
+)
 from voicectl.shared.messages import (
     Doubt,
     Order,
     OrderRecord,
     OrderStatus,
     ParseProblem,
+    Place,
+    Progress,
     Proposal,
+    RobotPose,
+    State,
     Stopped,
+    TargetPose,
 )
 
 
@@ -118,3 +131,125 @@ def test_units_are_said_in_full(written: str, said: str) -> None:
 
 def test_a_reason_without_spaces_is_cut_at_the_limit() -> None:
     assert short("x" * 100) == "x" * 60
+
+
+# --- questions about the queue (shared/edits.py's Question), from the state ---------------
+
+KITCHEN = Place(
+    name="kitchen",
+    phrase="reach kitchen",
+    description="reach kitchen",
+    pose=TargetPose(frame="map", x=3.0, y=5.0, yaw=1.0),
+)
+BASE = Place(
+    name="base", phrase="reach base", description="reach base", pose=TargetPose(frame="map")
+)
+PLACES = [BASE, KITCHEN]
+
+
+def going(to: Place, left: float | None = None) -> OrderRecord:
+    """A running order to a place, `left` metres from it as its executor last said."""
+    said = Progress(text="", distance_linear=left) if left is not None else None
+    order = Order(
+        order="goal", case=to.name, label="mbgoal", description=to.description, target_pose=to.pose
+    )
+    return OrderRecord(id="g", order=order, status=OrderStatus.RUNNING, progress=said)
+
+
+def waiting(*descriptions: str) -> list[OrderRecord]:
+    return [record(d, OrderStatus.QUEUED) for d in descriptions]
+
+
+RUNNING = State(
+    robot="r", current=going(KITCHEN, 3.0), queue=waiting("turn left", "reach base"), queue_length=2
+)
+TURNING = State(
+    robot="r",
+    current=OrderRecord(
+        id="t",
+        order=order("turn left"),
+        status=OrderStatus.RUNNING,
+        progress=Progress(distance_angular=0.785),
+    ),
+    queue=[],
+    queue_length=0,
+)
+IDLE = State(robot="r")
+PAUSED = State(
+    robot="r",
+    queue=waiting("reach base"),
+    queue_length=1,
+    paused="paused when asked: say go on, or press Resume",
+)
+STOPPED = State(robot="r", stopped=True)
+FAILED = State(
+    robot="r",
+    history=[
+        record("cancel kitchen", OrderStatus.SUCCEEDED),
+        record("reach kitchen", OrderStatus.FAILED, "navigation ended ABORTED: no path"),
+        record("turn left", OrderStatus.FAILED, "executor lost; halting the robot"),
+    ],
+)
+NEAR = RobotPose(x=3.0, y=3.0, yaw=0.0)
+AT = RobotPose(x=0.2, y=0.1, yaw=0.0)
+
+QUESTIONS = [
+    ("doing", RUNNING, None, "I am going to the kitchen, 3 metres to go, 2 more after it"),
+    ("doing", TURNING, None, "I am turning left, 45 degrees to turn"),
+    ("doing", IDLE, None, "nothing: the queue is empty"),
+    ("doing", PAUSED, None, "nothing: 1 order waits until you say go on"),
+    ("doing", STOPPED, None, "nothing: the emergency stop is on"),
+    ("going", RUNNING, None, "to the kitchen, 3 metres to go"),
+    ("going", TURNING, None, "I am turning left"),
+    ("going", IDLE, None, "nowhere: the queue is empty"),
+    ("next", RUNNING, None, "next: turn left, then 1 more"),
+    ("next", IDLE, None, "nothing next: the queue is empty"),
+    ("left", RUNNING, None, "3 left: reach kitchen now, then 2 more"),
+    ("left", TURNING, None, "1 left: turn left now"),
+    ("left", PAUSED, None, "1 waiting until you say go on"),
+    ("left", IDLE, None, "nothing left"),
+    ("far", RUNNING, None, "3 metres to go"),
+    ("far", TURNING, None, "45 degrees to turn"),
+    ("far", IDLE, None, "I am not going anywhere: the queue is empty"),
+    ("where", IDLE, NEAR, "near the kitchen, 2 metres from it"),
+    ("where", IDLE, AT, "at the base"),
+    ("where", IDLE, None, "I do not know: the robot has not said where it is"),
+    ("why", FAILED, None, "reach kitchen failed: navigation gave up on the way"),
+    ("why", IDLE, None, "nothing has failed lately"),
+]  # fmt: skip
+
+
+@pytest.mark.parametrize(("question", "state", "pose", "said"), QUESTIONS)
+def test_questions(question: str, state: State, pose: RobotPose | None, said: str) -> None:
+    assert question_words(question, state, pose, PLACES) == said
+
+
+def test_where_without_named_places_says_the_position() -> None:
+    assert question_words("where", IDLE, NEAR, []) == "at x 3.0, y 3.0: no places are named"
+
+
+def test_an_edits_record_is_not_the_failure_asked_about() -> None:
+    edit = OrderRecord(
+        id="e",
+        order=Order(order="cancel", label="queue", description="cancel x"),
+        status=OrderStatus.REJECTED,
+        message="there is no x in the queue",
+    )
+    state = State(robot="r", history=[edit, *FAILED.history[1:]])
+    assert question_words("why", state) == "reach kitchen failed: navigation gave up on the way"
+
+
+@pytest.mark.parametrize(
+    ("reason", "plain"),
+    [
+        ("navigation unavailable (no action server answered within 5 s)",
+         "my navigation is not running"),
+        ("no progress for 10 s, 0.52 short", "I got stuck on the way"),
+        ("executor lost; halting the robot", "my driver stopped answering"),
+        ("the supervisor restarted while it ran and no executor was there",
+         "I was restarted while doing it"),
+        ("the camera's 'yuv' frame does not open: bad", "the camera's 'yuv' frame does not open: bad"),
+    ],
+)  # fmt: skip
+def test_reasons_in_plain_words(reason: str, plain: str) -> None:
+    assert plain_reason(reason) == plain

@@ -12,10 +12,12 @@ from typing import Any
 
 import msgspec
 
-from voicectl.shared.answers import outcome_words, proposal_words, stopped_words
+from voicectl.shared.answers import outcome_words, proposal_words, question_words, stopped_words
+from voicectl.shared.edits import ended_by_edit
+from voicectl.shared.messages import Order, OrderRecord, OrderStatus
 
 from .conftest import REPO, Stack
-from .test_answers import OUTCOMES, PROPOSALS, STOPS
+from .test_answers import OUTCOMES, PLACES, PROPOSALS, QUESTIONS, STOPS
 from .test_panel_browser import CHROMIUM, CHROMIUM_FLAGS, login, panel
 from .test_panel_browser import pytestmark as pytestmark  # Chromium installed, or skipped
 
@@ -123,15 +125,38 @@ def test_answers_are_spoken_only_once_asked(stack: Stack, tmp_path: Path) -> Non
 
 def test_the_panel_says_what_the_service_would(tmp_path: Path) -> None:
     """answers.js and shared/answers.py on one table of messages."""
+    places = msgspec.to_builtins(PLACES)
     cases = (
-        [("proposalWords", msgspec.to_builtins(p), proposal_words(p)) for p, _ in PROPOSALS]
-        + [("outcomeWords", msgspec.to_builtins(r), outcome_words(r)) for r, _ in OUTCOMES]
-        + [("stoppedWords", msgspec.to_builtins(s), stopped_words(s)) for s, _ in STOPS]
+        [("proposalWords", [msgspec.to_builtins(p)], proposal_words(p)) for p, _ in PROPOSALS]
+        + [("outcomeWords", [msgspec.to_builtins(r)], outcome_words(r)) for r, _ in OUTCOMES]
+        + [("stoppedWords", [msgspec.to_builtins(s)], stopped_words(s)) for s, _ in STOPS]
+        + [
+            (
+                "questionWords",
+                [question, msgspec.to_builtins(state), msgspec.to_builtins(pose), places],
+                question_words(question, state, pose, PLACES),
+            )
+            for question, state, pose, _ in QUESTIONS
+        ]
+        + [("endedByEdit", [msgspec.to_builtins(r)], ended_by_edit(r)) for r in ENDINGS]
     )
     with blank_page(tmp_path / "profile") as page:
         page.add_script_tag(path=str(ANSWERS_JS))
         said = page.evaluate(
-            "cases => cases.map(([name, message]) => window.voicectlAnswers[name](message))",
-            [[name, message] for name, message, _ in cases],
+            "cases => cases.map(([name, args]) => window.voicectlAnswers[name](...args))",
+            [[name, args] for name, args, _ in cases],
         )
     assert said == [expected for _, _, expected in cases]
+
+
+ENDINGS = [
+    OrderRecord(id="1", order=Order(order="o", label="x", description="d"), status=status,
+                message=message)
+    for status, message in [
+        (OrderStatus.CANCELLED, "cancelled by “cancel kitchen”"),
+        (OrderStatus.CANCELLED, "replaced by “reach base”"),
+        (OrderStatus.CANCELLED, "undone"),
+        (OrderStatus.CANCELLED, "cancelled by user"),
+        (OrderStatus.SUCCEEDED, "cancelled by “x”"),
+    ]
+]  # fmt: skip
