@@ -248,7 +248,8 @@ def test_an_edits_record_is_not_the_failure_asked_about() -> None:
         ("executor lost; halting the robot", "my driver stopped answering"),
         ("the supervisor restarted while it ran and no executor was there",
          "I was restarted while doing it"),
-        ("the camera's 'yuv' frame does not open: bad", "the camera's 'yuv' frame does not open: bad"),
+        ("the camera's 'yuv' frame does not open: bad",
+         "the camera's 'yuv' frame does not open: bad"),
     ],
 )  # fmt: skip
 def test_reasons_in_plain_words(reason: str, plain: str) -> None:

@@ -38,6 +38,7 @@ const view = {
   photos: new Map(), // order id -> the object URL of the photo it took, once shown
   dismissed: new Set(), // ids of failed orders whose failure the person put away from "Now"
   opened: new Set(), // ids of history rows whose detail the person opened
+  talk: null, // the last edit or question heard here and its answer: {said, answer, question}
 };
 const voice = { context: null, asked: null, playing: null }; // the spoken answers, see say
 const answers = window.voicectlAnswers;
@@ -54,6 +55,11 @@ const PART_DOWN = {
 };
 // How an order that broke its command ended, after its description.
 const BROKE = { failed: "failed", rejected: "was refused", interrupted: "was interrupted" };
+// Orders of this label are the supervisor's own: edits of the queue and questions about it.
+const QUEUE_LABEL = "queue";
+const isEdit = (order) => order.label === QUEUE_LABEL;
+const questionOf = (order) => (isEdit(order) && order.params.edit === "ask" ? order.params.question : null);
+const isCorrection = (order) => isEdit(order) && order.params.edit === "replace";
 
 // --- helpers -----------------------------------------------------------------------------------
 
@@ -303,7 +309,7 @@ function scene() {
     chain([state.current.order], "running", view.startedAt[state.current.id] || view.pose);
   }
   if (state) chain(state.queue.map((record) => record.order), "queued", at);
-  chain(view.staged.map((item) => item.order), "staged", at);
+  chain(view.staged.filter((item) => !isEdit(item.order)).map((item) => item.order), "staged", at);
   steps.forEach((step, index) => {
     step.number = index + 1; // as the map numbers it
     step.trouble = step.to ? window.voicectlMap.goalTrouble(view.map, step.to) : "";
@@ -379,8 +385,8 @@ function handle(message) {
     case "parts": if (message.robot === view.robot) showParts(message.parts); break;
     case "robots": showRobots(message.robots); break;
     case "labels": if (message.robot === view.robot) { view.labels = message.labels; showStaged(); } break;
-    case "robotpose": showPose(message); break;
-    case "places": view.places = message.places; redraw(); break;
+    case "robotpose": showPose(message); showTalk(); break;
+    case "places": view.places = message.places; redraw(); showTalk(); break;
     case "robotmap": showMap(message); break;
     case "sttstatus": showStt(message); break;
     case "partialtranscript":
@@ -530,11 +536,14 @@ function showEars(proposal) {
   if (hearings.length && proposal.decision) box.append(el("li", proposal.decision, "ear-decision"));
 }
 
-function propose(proposal) {
+async function propose(proposal) {
   if (view.mic && !view.mic.socket) view.mic = null; // the closed microphone's last answer
   $("discard").hidden = true;
   showEars(proposal);
-  say(answers.proposalWords(proposal));
+  const asked = !proposal.rejected && !(proposal.doubts || []).length && proposal.orders.length &&
+    proposal.orders.every(isEdit) && !proposal.orders.some((order) => order.confirm);
+  // An edit or a question is answered (below), not read back.
+  if (!asked) say(answers.proposalWords(proposal));
   if (proposal.rejected) {
     // Why, in plain words, on the line that showed what was heard ("I heard '…': not a
     // command"); a suggestion, if the converter had one, below it.
@@ -553,13 +562,76 @@ function propose(proposal) {
   }
   showDoubt(null);
   showHeard(proposal.transcript, "final"); // the words the orders stand on
-  if (store.autoSend && proposal.orders.length && !proposal.errors.length) {
-    submit(proposal.orders.map((order) => ({ order, said: proposal.transcript })));
+  const orders = await take(proposal.orders, proposal.transcript, true);
+  if (store.autoSend && orders.length && !proposal.errors.length) {
+    submit(orders.map((order) => ({ order, said: proposal.transcript, spoken: true }))).catch(report);
     showErrors(proposal.transcript, []);
     return;
   }
-  stage(proposal.orders, proposal.transcript);
+  stage(orders, proposal.transcript, true);
   showErrors(proposal.transcript, proposal.errors);
+}
+
+// --- edits of the queue and questions about it --------------------------------------------
+
+async function take(orders, said, spoken) {
+  // Questions are asked at once, and a correction of an order staged here corrects it
+  // where it stands; what is left (orders, and edits of the queue) is staged.
+  const left = [];
+  const questions = [];
+  for (const order of orders) {
+    if (questionOf(order)) questions.push(order);
+    else if (!(isCorrection(order) && await correctStaged(order, said))) left.push(order);
+  }
+  if (questions.length) await ask(questions, said, spoken);
+  return left;
+}
+
+async function ask(questions, said, spoken) {
+  try {
+    const result = await api("/api/submit", { orders: questions, transcript: said, via: "panel", spoken });
+    const answered = result.answers[result.answers.length - 1];
+    talk(said, answered.answer, questionOf(questions[questions.length - 1]));
+  } catch (error) { report(error); }
+}
+
+async function correctStaged(change, said) {
+  // "no, three" or "not the kitchen, the bathroom" for an order staged and not sent: made
+  // again by the converter (its own slots and bounds), in its place. False when no staged
+  // order is the one named: then it corrects the queue, once sent.
+  const which = change.params.which;
+  const named = (item) => !isEdit(item.order) &&
+    (which === "last" || (item.order.case || item.order.order) === which);
+  const index = view.staged.map(named).lastIndexOf(true);
+  if (index < 0) return false;
+  const before = view.staged[index].order;
+  try {
+    const result = await api("/api/amend", { order: before, change });
+    view.staged[index] = { ...view.staged[index], order: result.order };
+    showStaged();
+    talk(said, `now ${answers.spoken(result.order.description)}, not ${answers.spoken(before.description)}`);
+  } catch (error) {
+    talk(said, forPerson(error.message));
+  }
+  return true;
+}
+
+function talk(said, answer, question = null) {
+  // What was asked or changed, and the answer: a question's answer is kept true as the
+  // robot's state changes (answers.js says it as the supervisor would now).
+  view.talk = { said, answer, question };
+  showTalk();
+  say(answer);
+}
+
+function showTalk() {
+  const shown = view.talk;
+  $("talk").hidden = !shown;
+  if (!shown) return;
+  $("talk-said").textContent = shown.said;
+  $("talk-answer").textContent = shown.question && view.state
+    ? answers.questionWords(shown.question, view.state, view.pose, view.places)
+    : shown.answer;
 }
 
 function showDoubt(proposal) {
@@ -610,8 +682,8 @@ function showDoubt(proposal) {
   box.hidden = false;
 }
 
-function stage(orders, said) {
-  for (const order of orders) view.staged.push({ order, said });
+function stage(orders, said, spoken = false) {
+  for (const order of orders) view.staged.push({ order, said, spoken });
   showStaged();
 }
 
@@ -641,7 +713,7 @@ async function addText(text) {
   try {
     const result = await api("/api/parse", { text });
     const repairable = result.errors.some((error) => suggestions(error).length);
-    if (!repairable) stage(result.orders, text);
+    if (!repairable) stage(await take(result.orders, text, false), text);
     const left = result.errors.map((error) => error.text).filter(Boolean);
     $("text").value = repairable ? text : left.join(" then ");
     showErrors(text, result.errors);
@@ -662,8 +734,12 @@ function showStaged() {
     // The sentence once, on the first of the orders it gave, not on every row.
     const first = index === 0 || view.staged[index - 1].said !== item.said;
     row.append(el("span", item.order.description, "what"));
+    if (isEdit(item.order)) {
+      row.classList.add("edit");
+      row.append(el("span", "changes the queue", "muted edit-note"));
+    }
     if (first) row.append(el("span", item.said, "muted said"));
-    if (view.labels && !view.labels.includes(item.order.label)) {
+    if (view.labels && !isEdit(item.order) && !view.labels.includes(item.order.label)) {
       // Said before it is sent: the executor would refuse it.
       row.append(el("span", `no executor serves '${item.order.label}'`, "unserved"));
     }
@@ -714,7 +790,13 @@ function newRequestId() {
 async function submit(items, requestId = newRequestId()) {
   const said = [...new Set(items.map((item) => item.said))].join(" / ");
   const orders = items.map((item) => item.order);
-  await api("/api/submit", { orders, transcript: said, request_id: requestId });
+  const spoken = items.some((item) => item.spoken);
+  const result = await api("/api/submit", { orders, transcript: said, request_id: requestId, via: "panel", spoken });
+  // What each edit did, said: the last one's answer shown, with undo beside the queue.
+  const edits = items.filter((item) => isEdit(item.order));
+  if (result.answers.length) {
+    talk(edits.length ? edits[edits.length - 1].said : said, result.answers.map((a) => a.answer).join("; "));
+  }
 }
 
 // --- watching ---------------------------------------------------------------------------------
@@ -759,6 +841,10 @@ function showState(state) {
   $("held-more").hidden = !$("held-detail").textContent;
   $("release").hidden = !state.stopped;
   $("resume").hidden = state.stopped || !state.paused;
+  // The last change to the queue, by whoever made it, can be taken back from here.
+  $("undo").hidden = !state.undo;
+  $("undo").textContent = state.undo ? `undo “${state.undo}”` : "undo";
+  showTalk();
   // Latched, the header itself says so on every screen: "Stopped — Release" in STOP's place.
   $("stop").classList.toggle("latched", state.stopped);
   $("stop").hidden = state.stopped && !view.unconfirmed; // a stop not confirmed stays at hand
@@ -821,7 +907,9 @@ function showFailure(record) {
 function announceEnded(state) {
   // The order that has just ended, said once; the history the page opened with is not
   // news. Under an emergency stop the stop's own answer says it all.
-  const fresh = view.finished ? state.history.filter((record) => !view.finished.has(record.id)) : [];
+  // An edit's own answer says what it did, and how the orders it ended ended.
+  const fresh = view.finished ? state.history.filter((record) => !view.finished.has(record.id) &&
+    !isEdit(record.order) && !answers.endedByEdit(record)) : [];
   view.finished = new Set(state.history.map((record) => record.id));
   if (fresh.length && !state.stopped) say(answers.outcomeWords(fresh[0]));
 }
@@ -880,9 +968,11 @@ function showHistory(records, total) {
   $("history").replaceChildren(...records.map((record) => {
     const row = el("tr");
     const ended = record.ended_at ? new Date(record.ended_at * 1000).toLocaleString() : "";
-    row.append(el("td", record.order.description, "what"), el("td", record.status, record.status),
-      resultCell(record), el("td", record.transcript, "muted said"),
-      el("td", ended, "muted ended"));
+    // Who asked, and how: an edit of the queue says so too.
+    const asked = record.asked ? ` (${record.asked.via}${record.asked.spoken ? ", spoken" : ""})` : "";
+    row.append(el("td", record.order.description, isEdit(record.order) ? "what edit" : "what"),
+      el("td", record.status, record.status), resultCell(record),
+      el("td", `${record.transcript}${asked}`, "muted said"), el("td", ended, "muted ended"));
     return row;
   }));
   const first = view.historyOffset + 1;
@@ -1016,6 +1106,8 @@ $("stop").onclick = () =>
 $("release").onclick = () => api("/api/release", {}).catch(report);
 $("head-release").onclick = () => api("/api/release", {}).catch(report);
 $("resume").onclick = () => api("/api/resume", {}).catch(report);
+$("undo").onclick = () =>
+  api("/api/undo", {}).then((result) => talk("undo", result.answer)).catch(report);
 $("newer").onclick = () => page(view.historyOffset - PAGE);
 $("older").onclick = () => page(view.historyOffset + PAGE);
 document.addEventListener("keydown", (event) => {
