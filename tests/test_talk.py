@@ -8,6 +8,9 @@ from __future__ import annotations
 
 import json
 import re
+import subprocess
+import wave
+from pathlib import Path
 
 import pytest
 
@@ -302,3 +305,28 @@ async def test_edits_survive_a_supervisor_restart_and_undo_after_it(
 
 def is_edit(record: OrderRecord) -> bool:
     return record.order.label == "queue"
+
+
+def test_the_listener_says_the_answers_aloud(stack: Stack, speech: Speak, tmp_path: Path) -> None:
+    """`voicectl listen FILE --speak --speaker ANSWERS.wav`: a question and an edit spoken
+    in one file, each answer said into the WAV file that collects them."""
+    joined = tmp_path / "both.wav"
+    subprocess.run(
+        [
+            "sox",
+            str(speech("what are you doing?", VOICE)),
+            str(speech("pause", VOICE)),
+            str(joined),
+        ],
+        check=True,
+    )
+    heard = tmp_path / "answers.wav"
+    done = stack.voicectl(
+        *("listen", str(joined), "--connect", stack.router, "--awake", "2"),
+        *("--speak", "--speaker", str(heard)),
+    )
+    assert done.returncode == 0, done.stderr
+    assert "spoke: nothing: the queue is empty" in done.stderr
+    assert "spoke: paused; 0 waiting" in done.stderr
+    with wave.open(str(heard)) as answers:
+        assert answers.getnframes() > answers.getframerate()  # more than a second of speech
