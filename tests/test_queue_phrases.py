@@ -5,6 +5,8 @@ refused with their line."""
 
 from __future__ import annotations
 
+import json
+
 import pytest
 
 from voicectl.services.converter.amend import AmendRefused
@@ -13,7 +15,8 @@ from voicectl.services.converter.orders import OrderSet, OrdersInvalid
 from voicectl.services.converter.parser import Parser
 from voicectl.shared.edits import ReplaceEdit, is_edit, read_edit
 
-from .conftest import REPO
+from .conftest import REPO, voicectl
+from .test_docs import block_after
 
 ORDERS = OrderSet.load(REPO / "orders")
 PARSER = Parser(ORDERS)
@@ -197,3 +200,14 @@ def test_the_grammar_lets_an_edit_stand_next_to_an_order() -> None:
     assert "cancel kitchen" in grammar.phrases
     assert "do bathroom first" in grammar.phrases
     assert "<edit>" in grammar.jsgf
+
+
+def test_the_docs_parse_example_prints_what_it_shows() -> None:
+    """docs/orders.md's example of an edit beside an order and a correction, run."""
+    doc = REPO / "docs" / "orders.md"
+    command = block_after(doc, "Try them without a robot", "sh").strip()
+    shown = json.loads(block_after(doc, "Try them without a robot", "json"))
+    text = json.loads(command.removeprefix(".venv/bin/voicectl parse "))
+    done = voicectl("parse", text)
+    assert done.returncode == 0, done.stderr
+    assert json.loads(done.stdout) == shown

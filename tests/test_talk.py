@@ -8,7 +8,9 @@ from __future__ import annotations
 
 import json
 import re
+import shlex
 import subprocess
+import sys
 import wave
 from pathlib import Path
 
@@ -35,6 +37,7 @@ from voicectl.shared.messages import (
 
 from .conftest import REPO, Processes, Speak, Stack
 from .support import Site, on_bus
+from .test_docs import block_after
 from .test_listen import VOICE, Mouth
 
 pytestmark = pytest.mark.e2e
@@ -330,3 +333,19 @@ def test_the_listener_says_the_answers_aloud(stack: Stack, speech: Speak, tmp_pa
     assert "spoke: paused; 0 waiting" in done.stderr
     with wave.open(str(heard)) as answers:
         assert answers.getnframes() > answers.getframerate()  # more than a second of speech
+
+
+def test_the_docs_example_of_an_edit_runs_as_written(stack: Stack, tmp_path: Path) -> None:
+    """docs/listen.md's example, line by line (its /tmp files in the test's own)."""
+    block = block_after(REPO / "docs" / "listen.md", "Try it with a file", "sh")
+    done = None
+    for command in block.strip().splitlines():
+        argv = shlex.split(command.replace("/tmp/", f"{tmp_path}/"))
+        if argv[0] == ".venv/bin/voicectl":
+            argv = [sys.executable, "-m", "voicectl", *argv[1:], "--connect", stack.router]
+        done = subprocess.run(argv, capture_output=True, text=True, cwd=REPO, env=stack.env)
+        assert done.returncode == 0, (command, done.stderr)
+        if "listen" in argv:
+            assert "answer: cancelled reach kitchen; 1 left" in done.stderr
+    assert done is not None
+    assert "voicectl say: next: reach bathroom" in done.stderr

@@ -597,16 +597,17 @@ async def _say(args: argparse.Namespace) -> int:
     result = said.result
     done = Sent(order_ids=said.order_ids, answers=said.answers).done
     _print_said(result, said.order_ids, said.answers)
-    # For a person, on stderr: each answer of the robot, then what was not understood.
-    for answer in said.answers:
-        print(f"voicectl say: {answer.answer}", file=sys.stderr)
+    # One line on stderr, for a person: the robot's answers, then what was not understood.
+    parts = [answer.answer for answer in said.answers]
     problems = "; ".join(_unsaid(error) for error in result.errors)
     if done and problems:
-        print(f"voicectl say: submitted the rest; not understood: {problems}", file=sys.stderr)
+        parts.append(f"submitted the rest; not understood: {problems}")
     elif not done and not said.answers:
         held = " (--partial submits what was understood)" if result.orders else ""
         why = f": {problems}" if problems else ""
-        print(f"voicectl say: nothing submitted{held}{why}", file=sys.stderr)
+        parts.append(f"nothing submitted{held}{why}")
+    if parts:
+        print(f"voicectl say: {' / '.join(parts)}", file=sys.stderr)
     # Exit status follows what happened: 0 when orders went to the robot (with --partial,
     # even though some words made none), the queue changed or a question was answered;
     # 1 when nothing happened (an edit refused: "there is no kitchen in the queue").
