@@ -13,6 +13,14 @@ import pytest
 from .conftest import REPO
 
 QUICK = {
+    "edits": (
+        "--- dev, clean",
+        "commands: ",
+        "non-commands: ",
+        "speech end -> edit applied (answer)",
+        "speech end -> answer's first sound",
+        "baseline: typed -> edit applied",
+    ),
     "e2e": (
         "end of speech -> proposal at /api/events",
         "Send (POST /api/submit) -> first motion",
@@ -39,6 +47,7 @@ QUICK = {
 """What each benchmark's report must hold."""
 
 RUNS = {
+    "edits": ["--split", "dev", "--conditions", "clean", "--sample", "3"],
     "e2e": [
         *("--utterances", "3", "--speakers", "1,2", "--rounds", "1"),
         *("--clients", "5", "--requests", "10"),
