@@ -186,6 +186,22 @@ def test_replace_puts_the_new_order_where_the_old_one_stood(queue: RobotQueue) -
     assert layout(queue) == before
 
 
+def test_the_orders_an_edit_queues_leave_the_edits_request_id_to_its_record(
+    queue: RobotQueue,
+) -> None:
+    """The supervisor remembers an edit's request id as the edit's record, and a retry,
+    also after a restart, answers with that; the orders a correction or "after that"
+    queues are remembered under an id of their own (the store keeps an id's first word)."""
+    three(queue)
+    queue.take_changes()
+    edits.after(queue, AfterEdit(), request(edit("after"), [place("dumpster")]))
+    correction = edits.Request("e2", "r-e2", edit("replace"), [], "no, the base")
+    edits.replace(queue, queue.queue[0], place("base"), correction)
+    _, remembered = queue.take_changes()
+    assert len(remembered) == 2
+    assert not {"r-e1", "r-e2"} & {request_id for request_id, _ in remembered}
+
+
 def test_an_edit_is_recorded_with_who_asked_and_what_came_of_it() -> None:
     asked = Asked(via=Via.VOICE, spoken=True, by="listen on robot")
     made = edits.Request("e1", "r1", edit("cancel"), [], "cancel the kitchen", asked)

@@ -179,7 +179,7 @@ def after(queue: RobotQueue, _edit: AfterEdit, request: Request) -> Applied:
     index = list(queue.queue).index(that) + 1 if that is not None else 0
     try:
         ids = queue.submit(
-            request.request_id, request.orders, request.transcript, request.asked, at=index
+            brought(request), request.orders, request.transcript, request.asked, at=index
         )
     except QueueFull as exc:
         return Applied(str(exc))
@@ -240,10 +240,15 @@ def replace(queue: RobotQueue, target: OrderRecord, new: Order, request: Request
         index = list(queue.queue).index(target)
         undo.reopen.append(Reopened(target, queue.position_of(target.id)))
         queue.remove_queued(target.id, replaced_by(new))
-    ids = queue.submit(request.request_id, [new], request.transcript, request.asked, at=index)
+    ids = queue.submit(brought(request), [new], request.transcript, request.asked, at=index)
     undo.remove.extend(ids)
     answer = f"now {spoken(new.description)}, not {spoken(target.order.description)}"
     return Applied(answer, True, undo, stop=[target.id] if running else [], added=ids)
+
+
+def brought(request: Request) -> str:
+    """The request id of the orders an edit queues: the edit's own is its record's."""
+    return f"{request.request_id}:orders"
 
 
 def revert(queue: RobotQueue, undo: Undo) -> Applied:
