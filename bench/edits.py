@@ -138,7 +138,7 @@ TEST_CASES: list[tuple[str, str, tuple[str, ...]]] = [
     ("where are you", "where are you", RUNNING),
     ("why did it fail?", "why did it fail", QUEUED),
     ("move back one meter, no, two", "move back one meter no two", QUEUED),
-    ("the bathroom, not the kitchen", "the bathroom not the kitchen", QUEUED),
+    ("no, not the bathroom but the dumpster", "no not the bathroom but the dumpster", QUEUED),
     ("take that back", "take that back", QUEUED),
     ("no, the base", "no the base", QUEUED),
 ]

@@ -49,7 +49,7 @@ def made(text: str) -> list[tuple[str, dict[str, object]]]:
             "not the kitchen, the bathroom",
             {"edit": "replace", "which": "kitchen", "instead": "bathroom"},
         ),
-        ("the right not the left", {"edit": "replace", "which": "left", "instead": "right"}),
+        ("no not the left but right", {"edit": "replace", "which": "left", "instead": "right"}),
         ("what are you doing", {"edit": "ask", "question": "doing"}),
         ("What's next?", {"edit": "ask", "question": "next"}),
         ("how many more", {"edit": "ask", "question": "left"}),
