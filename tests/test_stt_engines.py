@@ -56,7 +56,9 @@ ORDERS = REPO / "orders"
 def test_the_shipped_grammar_becomes_a_small_automaton_with_the_same_phrases() -> None:
     grammar = build_grammar(OrderSet.load(ORDERS))
     graph = compile_jsgf(grammar.jsgf)
-    assert graph.states < 100  # pocketsphinx's own compiler made 16,650 of a narrower one
+    # pocketsphinx's own compiler made 16,650 of a narrower one; the orders alone make 75,
+    # the queue's edits (orders/queue.yaml: names spelled out in several commands) the rest
+    assert graph.states < 400
     for phrase in grammar.phrases:
         assert graph.accepts(phrase.split()), phrase
     assert graph.accepts(["please", "turn", "left", "then", "go", "to", "the", "kitchen", "now"])
