@@ -431,6 +431,27 @@ class Ros2Codec:
             return self.read_twist_stamped(raw)
         return self.read_twist(raw)
 
+    def velocity_axes(self, kind: CmdVelType, raw: bytes) -> tuple[float, ...]:
+        """Every axis of a velocity command: linear x, y, z, then angular x, y, z (a
+        holonomic base or a drone moves on those a planar base ignores)."""
+        twist = self._twist_of(kind, raw)
+        linear, angular = twist.linear, twist.angular
+        axes = (linear.x, linear.y, linear.z, angular.x, angular.y, angular.z)
+        return tuple(float(axis) for axis in axes)
+
+    def stilled(self, kind: CmdVelType, raw: bytes) -> bytes:
+        """The velocity command `raw` with every axis zero, its header (a TwistStamped's
+        stamp and frame) kept."""
+        if kind is CmdVelType.STAMPED:
+            header = self._decode(raw, kind.ros_type).header
+            msg = self._types[kind.ros_type](header=header, twist=self._twist(0.0, 0.0))
+            return self._encode(msg, kind.ros_type)
+        return self.twist(0.0, 0.0)
+
+    def _twist_of(self, kind: CmdVelType, raw: bytes) -> Any:
+        msg = self._decode(raw, kind.ros_type)
+        return msg.twist if kind is CmdVelType.STAMPED else msg
+
     # --- nav_msgs/msg/Odometry ----------------------------------------------------------
 
     def odometry(self, pose: Pose2D, linear_x: float, angular_z: float, stamp_s: float) -> bytes:

@@ -13,7 +13,8 @@ from hypothesis import strategies as st
 from PIL import Image as PilImage
 
 from harness.wait import async_wait_until
-from voicectl.services.executor.robot import CONTROL_STEP, SAFE_LIMITS, RobotLink, limited
+from voicectl.services.executor.robot import RobotLink
+from voicectl.services.executor.speed import CONTROL_STEP, SAFE_LIMITS, limited
 from voicectl.services.sim.robot import Bounds
 from voicectl.services.sim.world import floor_plan
 from voicectl.shared.bus import Bus, json_decoder

@@ -24,7 +24,7 @@ from harness.client import robot_key
 from harness.wait import async_wait_until
 from voicectl.shared.bus import json_decoder
 from voicectl.shared.keys import RobotKeys
-from voicectl.shared.kinds import ON_ZENOH
+from voicectl.shared.kinds import ON_ZENOH, CmdVelType
 from voicectl.shared.messages import (
     CancelOrder,
     Done,
@@ -426,3 +426,49 @@ async def test_the_stop_at_start_up_is_in_the_type_the_robot_takes(
         await async_wait_until(executor_online, 30.0, "the executor to come online")
         assert len(sent) >= 3, "no stop at start-up"
         assert all(CODEC.read_twist_stamped(raw) == (0.0, 0.0) for raw in sent)
+
+
+WILD = (
+    ("drive", "nan", "linear speed nan: not a finite number"),
+    ("turn", "inf", "angular speed inf: not a finite number"),
+    ("raw", "-inf", "linear.x -inf: every axis must be a finite number"),
+    ("other", "nan", "angular.z nan: every axis must be a finite number"),
+    ("goal", "nan", "a goal at x nan, y 0.0, yaw 0.0 in 'map': not a finite pose"),
+)
+"""Each way `harness.executors:Wild` asks for what is not a number, and what it is told."""
+
+
+async def test_a_speed_or_goal_that_is_not_a_number_never_moves_the_robot(
+    router: str, start: Start, transport: TransportKind
+) -> None:
+    """Issue 43: `limited(nan, ...)` drove at the top speed. Now a NaN or infinite speed,
+    asked by `drive`, in a user's own Twist bytes on cmd_vel or on another topic, or a goal
+    that is not finite, never reaches the robot: the robot is stopped, the order fails
+    saying why, and the executor, which carries on driving, moves it no more."""
+    start(executor_args=("--executor", "harness.executors:Wild"))
+    heard: dict[str, list[tuple[float, ...]]] = {"cmd_vel": [], "cmd_vel_nav": []}
+    codec = Ros2Codec()
+    async with harness_on(router, transport=transport) as harness:
+        for topic, kept in heard.items():
+            harness.transport.subscribe(
+                topic,
+                "geometry_msgs/msg/Twist",
+                lambda raw: codec.velocity_axes(CmdVelType.TWIST, raw),
+                kept.append,
+            )
+        for how, value, reason in WILD:
+            order_id = await harness.execute(order("wild", how=how, value=value))
+            result = await harness.finished(order_id)
+            assert result.status == OrderStatus.FAILED, (how, result)
+            assert reason in result.message, (how, result.message)
+            ended = asyncio.get_running_loop().time()
+            # The executor tries 0.3 m/s every 50 ms still: a second of odometry at rest.
+            await async_wait_until(
+                lambda ended=ended: len(harness.since(ended + 0.3)) >= 20, 10.0, "1 s of odometry"
+            )
+            assert all(odom.linear_x == 0.0 for odom in harness.since(ended + 0.3)), how
+        for topic, kept in heard.items():
+            assert kept, f"nothing heard on {topic}"
+            assert all(math.isfinite(axis) for axes in kept for axis in axes), topic
+            assert max(abs(axes[0]) for axes in kept) <= 0.5
+        assert heard["cmd_vel_nav"] == [(0.0,) * 6]  # the NaN Twist, stilled

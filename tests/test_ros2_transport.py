@@ -55,8 +55,12 @@ STOP_BOUND = 0.25
 loaded two-core machine, as tests/test_stop.py bounds the other transports: well short of
 any retry or timeout on the way. The issue's 50 ms is a p99, measured by
 bench/stop_transports.py beside the other transports (docs/benchmarks.md)."""
-EXECUTORS = ("--executor", "harness.executors:BlockingNavigator", "--stall-limit", "30")
-"""A navigator that blocks its loop; the watchdog held off, so that STOP is timed alone."""
+EXECUTORS = (
+    *("--executor", "harness.executors:BlockingNavigator", "--stall-limit", "30"),
+    *("--executor", "harness.executors:Wild"),
+)
+"""A navigator that blocks its loop; the watchdog held off, so that STOP is timed alone.
+And an executor that asks for speeds that are not numbers."""
 
 
 @pytest.fixture(params=DISTROS)
@@ -224,6 +228,58 @@ async def test_stop_halts_a_real_ros2_robot_and_cancels_its_goal(dds: DdsRobot, 
             assert math.dist((after[0].x, after[0].y), (after[-1].x, after[-1].y)) < 0.01
         released = await client.ask(Release())
         assert released is not None
+
+
+@pytest.mark.parametrize("dds", ["kilted"], indirect=True)
+async def test_a_speed_that_is_not_a_number_never_reaches_a_real_ros2_robot(
+    dds: DdsRobot,
+) -> None:
+    """Issue 43, on DDS: NaN and infinite speeds asked by `drive`, in an executor's own
+    Twist on cmd_vel or on another topic, never reach the robot: it hears zero, the order
+    fails saying why, and the executor, which carries on driving, moves it no more."""
+    with joined(dds.router) as bus:
+        client = Client(bus, ROBOT)
+        await dds.ready(client)
+        poses: list[tuple[float, RobotPose]] = []
+        bus.subscribe(
+            RobotKeys(ROBOT).pose,
+            json_decoder(RobotPose),
+            lambda _k, p: poses.append((time.monotonic(), p)),
+        )
+        for how, value, reason in (
+            ("drive", "nan", "linear speed nan: not a finite number"),
+            ("raw", "inf", "linear.x inf: every axis must be a finite number"),
+            ("other", "-inf", "angular.z -inf: every axis must be a finite number"),
+        ):
+            asked = time.monotonic()
+            [order_id] = await client.submit(order("wild", how=how, value=value))
+            record = await client.finished(order_id, timeout=WAIT)
+            assert record.status is OrderStatus.FAILED, record
+            assert reason in record.message, record.message
+            settle = time.monotonic() + 0.5
+            # The executor tries 0.3 m/s every 50 ms still: a second of poses at rest.
+            await async_wait_until(
+                lambda settle=settle: [p for at, p in poses if at > settle + 1.0],
+                WAIT,
+                "poses a second after the order",
+            )
+            after = [p for at, p in poses if at > settle]
+            assert math.dist((after[0].x, after[0].y), (after[-1].x, after[-1].y)) < 0.01, how
+            heard = [
+                json.loads(line)
+                for line in dds.space.log("robot").splitlines()
+                if line.startswith("{")
+            ]
+            commands = [e for e in heard if e["event"] in ("moving", "zero") and e["at"] > asked]
+            events = [e["event"] for e in commands]
+            assert "moving" in events, how  # it drove before it asked for what is no number
+            stopped = events.index("zero", events.index("moving"))
+            assert set(events[stopped:]) == {"zero"}, (how, events)
+            assert all(
+                math.isfinite(e["linear"]) and math.isfinite(e["angular"])
+                for e in commands
+                if e["event"] == "moving"
+            )
 
 
 async def test_the_stop_relay_forwards_stops_and_nothing_else(dds: DdsRobot) -> None:

@@ -10,8 +10,9 @@ from voicectl.shared.config import data_dir
 from voicectl.shared.process import add_bus_arguments, positive_float, robot_name
 from voicectl.shared.robot_options import RobotOptions, add_robot_arguments, robot_options
 
-from .robot import RESULT_GRACE, SAFE_LIMITS, SpeedLimits
+from .robot import RESULT_GRACE
 from .runner import STALL_LIMIT
+from .speed import SAFE_LIMITS, SpeedLimits
 
 
 @dataclass(frozen=True)

@@ -8,10 +8,10 @@ its stop). Each order gets an `OrderRobot` (fence.py), a handle onto the link th
 revoked when the order ends, so that an executor that outlives its order can never move the
 robot again; relays.py publishes the pose and the map for voicectl's own panels.
 
-Every velocity the executor publishes goes through `RobotLink.drive`, which holds it to
-the robot's `SpeedLimits` (top speeds, and how fast it may speed up), whatever an order
-asks. Nav2's goals carry no speed: navigation drives at the speeds its own controller is
-configured with, on the robot.
+Every velocity the executor publishes goes through `RobotLink.drive`, which sends it as
+the robot's `SpeedLimits` let it go (speed.py: top speeds, how fast it may speed up, and
+never a speed that is not a finite number), whatever an order asks. A goal whose pose is
+not finite is never sent either.
 """
 
 from __future__ import annotations
@@ -23,9 +23,7 @@ import math
 import time
 from collections.abc import Callable
 
-import msgspec
-
-from voicectl.shared.errors import BusError, OrderFailed
+from voicectl.shared.errors import BusError, OrderFailed, UnsafeCommand
 from voicectl.shared.geometry import compose, map_cell
 from voicectl.shared.messages import TargetPose
 from voicectl.shared.robot import Interface, RobotTransport, Role
@@ -53,6 +51,8 @@ from voicectl.shared.ros2 import (
 )
 from voicectl.shared.throttle import Throttled
 
+from .speed import CONTROL_STEP, SAFE_LIMITS, Refuse, SpeedLimits, Take, command
+
 _LOGGER = logging.getLogger(__name__)
 
 OCCUPANCY_GRID = "nav_msgs/msg/OccupancyGrid"
@@ -71,48 +71,9 @@ PROBE_TIMEOUT = 3.0
 ROBOT_FRAME = "base_link"
 ODOM_FRAME = "odom"
 ODOMETRY = "nav_msgs/msg/Odometry"
-CONTROL_STEP = 0.1
-"""Seconds of speeding up one velocity command may use at most: the first after a pause
-starts from rest, however long the pause."""
 STALE_COMMAND = 0.5
 """Seconds after which the last command no longer says how fast the robot goes (a base's
 cmd_vel watchdog has stopped it, or a stop from elsewhere has): it counts as at rest."""
-
-
-class SpeedLimits(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
-    """How fast the executor lets any order move the robot, whatever the order asks: every
-    velocity command is held to these (`--max-speed` ...). Slowing down is never held back."""
-
-    linear: float = 0.5
-    """m/s, forwards or backwards."""
-    angular: float = 1.5
-    """rad/s, either way."""
-    linear_accel: float = 1.0
-    """m/s², speeding up."""
-    angular_accel: float = 3.0
-    """rad/s², speeding up."""
-
-    def __post_init__(self) -> None:
-        for name in self.__struct_fields__:
-            value = getattr(self, name)
-            if not 0.0 < value < math.inf:
-                raise ValueError(f"speed limit {name} must be a number above 0, not {value}")
-
-
-SAFE_LIMITS = SpeedLimits()
-"""The limits of a robot configured with none: a walking pace, a gentle start."""
-
-
-def limited(wanted: float, last: float, top: float, accel: float, dt: float) -> float:
-    """`wanted` held to `top`, and to speeding up by at most `accel * dt` from `last`;
-    slower than `last` (or zero) at once, and through zero at once when it reverses."""
-    wanted = max(-top, min(top, wanted))
-    same_way = last != 0.0 and (wanted > 0.0) == (last > 0.0)
-    if wanted == 0.0 or (same_way and abs(wanted) <= abs(last)):
-        return wanted
-    base = last if same_way else 0.0
-    step = accel * dt
-    return base + max(-step, min(step, wanted - base))
 
 
 class RobotRevoked(OrderFailed):
@@ -394,8 +355,10 @@ class RobotLink:
             unsubscribe()
 
     def drive(self, linear_x: float, angular_z: float) -> None:
-        """Publish one velocity command on cmd_vel, in the type the robot takes, held to
-        the speed limits. Each waits for room rather than being dropped, and goes first."""
+        """Publish one velocity command on cmd_vel, in the type the robot takes, as the
+        speed limits let it go (`speed.command`). Each waits for room rather than being
+        dropped, and goes first. One the limits refuse (a speed that is not a finite
+        number) is not sent: the robot is stopped, and UnsafeCommand says why."""
         linear_x, angular_z = self._limit(linear_x, angular_z)
         kind = self.cmd_vel_type
         if kind is CmdVelType.TWIST and self.announced_cmd_vel is None and not self._warned_cmd_vel:
@@ -412,25 +375,30 @@ class RobotLink:
         self.transport.publish(self.names.cmd_vel, kind.ros_type, payload, urgent=True)
 
     def _limit(self, linear_x: float, angular_z: float) -> tuple[float, float]:
-        """The command held to `limits`, from the last one sent; remembered as sent."""
+        """The command as the limits let it go, from the last one sent; remembered as
+        sent. A refused one stops the robot and raises UnsafeCommand."""
         now = time.monotonic()
         last_linear, last_angular, at = self._commanded
         if now - at > STALE_COMMAND:
             last_linear = last_angular = 0.0
         dt = min(now - at, CONTROL_STEP)
         top = self.limits
-        linear = limited(linear_x, last_linear, top.linear, top.linear_accel, dt)
-        angular = limited(angular_z, last_angular, top.angular, top.angular_accel, dt)
-        if abs(linear_x) > top.linear or abs(angular_z) > top.angular:
-            self._noise.warning(
-                "speed",
-                "an order asked %g m/s, %g rad/s: held to %g m/s, %g rad/s (--max-speed, "
-                "--max-angular-speed)",
-                linear_x,
-                angular_z,
-                top.linear,
-                top.angular,
-            )
+        match command(linear_x, angular_z, (last_linear, last_angular), top, dt):
+            case Refuse(reason=reason):
+                sent = self.stop_moving()
+                _LOGGER.error("%s: nothing of it sent; %s", reason, sent)
+                raise UnsafeCommand(f"{reason}; the robot was stopped")
+            case Take(linear=linear, angular=angular):
+                if abs(linear_x) > top.linear or abs(angular_z) > top.angular:
+                    self._noise.warning(
+                        "speed",
+                        "an order asked %g m/s, %g rad/s: held to %g m/s, %g rad/s "
+                        "(--max-speed, --max-angular-speed)",
+                        linear_x,
+                        angular_z,
+                        top.linear,
+                        top.angular,
+                    )
         self._commanded = (linear, angular, now)
         return linear, angular
 
@@ -480,13 +448,15 @@ class RobotLink:
         again at every replan, so that it moves with the robot: there it is turned into an
         'odom' goal from the current odometry first.
         """
+        frame, pose = target.frame, Pose2D(x=target.x, y=target.y, yaw=target.yaw)
+        self._refuse_unless_finite(frame, pose)
         distro = await self._known_distro()
         navigation = self.navigation
         if navigation.codec.distro is not distro:  # set with the distribution; kept honest here
             navigation.codec = Ros2Codec(distro)
-        frame, pose = target.frame, Pose2D(x=target.x, y=target.y, yaw=target.yaw)
         if distro is RosDistro.HUMBLE and frame == ROBOT_FRAME:
             pose, frame = compose(await self.next_pose(), pose), ODOM_FRAME
+            self._refuse_unless_finite(frame, pose)  # odometry's own numbers may not be
         goal_id = new_goal_id()
 
         def feedback(message: NavigateFeedback) -> None:
@@ -515,6 +485,15 @@ class RobotLink:
                     on_problem(problem)
                 raise
         _raise_unless_succeeded(result, distro)
+
+    def _refuse_unless_finite(self, frame: str, pose: Pose2D) -> None:
+        """UnsafeCommand, the robot stopped, for a goal pose that is not finite numbers."""
+        if all(math.isfinite(value) for value in (pose.x, pose.y, pose.yaw)):
+            return
+        sent = self.stop_moving()
+        goal = f"x {pose.x}, y {pose.y}, yaw {pose.yaw} in '{frame}'"
+        _LOGGER.error("refused a goal at %s: not a finite pose; %s", goal, sent)
+        raise UnsafeCommand(f"a goal at {goal}: not a finite pose; not sent, the robot stopped")
 
     async def _why_refused(self, target: TargetPose) -> str:
         """What the robot's own map says of a goal navigation refused (Nav2 says nothing):

@@ -371,7 +371,12 @@ class ExecutorService(Service):
             params = order_params(executor, order)
         except ParamsMismatch as exc:
             return Rejected(order_id=order_id, reason=str(exc))
-        robot = OrderRobot(self._robot, order_id, lambda: self.supervisor_lost)
+        robot = OrderRobot(
+            self._robot,
+            order_id,
+            lambda: self.supervisor_lost,
+            on_unsafe=lambda reason: self._fail_unsafe(order_id, reason),
+        )
         task = asyncio.create_task(self._run(order_id, executor, order, robot, params))
         self._running = _Execution(order_id, task, robot)
         return Accepted(order_id=order_id)
@@ -409,6 +414,23 @@ class ExecutorService(Service):
             status, message = OrderStatus.FAILED, f"{type(exc).__name__}: {exc}"
         self._report(order_id, status, message)
 
+    def _fail_unsafe(self, order_id: str, reason: str) -> None:
+        """Order `order_id` asked to move the robot by a value that is not a finite number:
+        the robot is stopped already and the handle revoked; the order fails with `reason`,
+        whatever its executor does with the error (it is cancelled if it goes on)."""
+        running = self._running
+        if running is None or running.order_id != order_id or running.reported:
+            return
+        running.cancel_status, running.cancel_reason = OrderStatus.FAILED, reason
+        running.ended_by = running.ended_by or (OrderStatus.FAILED, reason)
+        if self._loop is not None:  # an executor may drive from a thread of its own
+            self._loop.call_soon_threadsafe(self._end_if_running, running)
+
+    @staticmethod
+    def _end_if_running(running: _Execution) -> None:
+        if not running.task.done() and not running.task.cancelling():
+            running.task.cancel()
+
     def _report(self, order_id: str, status: OrderStatus, message: str) -> None:
         running = self._running
         if running is None or running.order_id != order_id or running.reported:
@@ -422,6 +444,10 @@ class ExecutorService(Service):
             message = why if message == why else f"{why}; it then said: {message}"
         if running.robot.problems:
             message = "; ".join([message, *running.robot.problems])
+        if status is OrderStatus.FAILED and running.robot.commanded:
+            # Whatever failed (a goal it could not even make, an exception), the robot is
+            # not left moving on the order's last command.
+            self._robot.stop_moving()
         _LOGGER.info("order %s %s: %s", order_id, status, message)
         finished = OrderFinished(order_id=order_id, status=status, message=message)
         self._recent[order_id] = finished

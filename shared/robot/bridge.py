@@ -59,7 +59,7 @@ class BridgeTransport(RobotTransport):
 
         return Announcements(BRIDGE_TOKENS, name_of)
 
-    def publish(self, name: str, ros_type: str, payload: bytes, urgent: bool = False) -> None:
+    def send(self, name: str, ros_type: str, payload: bytes, urgent: bool = False) -> None:
         self._bus.publish_bytes(name, payload, urgent=urgent)
 
     def subscribe(

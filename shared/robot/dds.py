@@ -202,7 +202,7 @@ class Ros2Transport(RobotTransport):
         wanted = sum(s.topic_type == ros_type for s in subscribers)
         return publisher is not None and 0 < wanted <= publisher.get_subscription_count()
 
-    def publish(self, name: str, ros_type: str, payload: bytes, urgent: bool = False) -> None:
+    def send(self, name: str, ros_type: str, payload: bytes, urgent: bool = False) -> None:
         self.publisher(name, ros_type).publish(payload)
 
     def subscribe(
