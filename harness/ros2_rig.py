@@ -45,6 +45,7 @@ class DdsRobot:
     processes: Processes
     executor_args: Sequence[str]
     executor: subprocess.Popen[bytes] | None = None
+    relay: subprocess.Popen[bytes] | None = None
 
     def start_inside(self, module: str, *args: str, name: str) -> subprocess.Popen[bytes]:
         return self.space.start(
@@ -84,10 +85,15 @@ class DdsRobot:
 
 @contextlib.contextmanager
 def dds_robot(
-    env: Ros2Env, processes: Processes, logs: Path, executor_args: Sequence[str] = ()
+    env: Ros2Env,
+    processes: Processes,
+    logs: Path,
+    executor_args: Sequence[str] = (),
+    relay: str = "voicectl.services.relay",
 ) -> Iterator[DdsRobot]:
     """Everything above, started; stopped (and the namespace deleted) whatever happens.
-    RuntimeError when no namespace can be made here (not root, no iproute2)."""
+    RuntimeError when no namespace can be made here (not root, no iproute2). `relay`: the
+    module the STOP relay runs (harness.blocking_relay: one whose loop can be blocked)."""
     missing = netns.unavailable()
     if missing is not None:
         raise RuntimeError(missing)
@@ -99,7 +105,7 @@ def dds_robot(
     robot = DdsRobot(env, space, router, inside, processes, executor_args)
     try:
         robot.start_inside("harness.ros2_robot", name="robot")
-        robot.start_inside("voicectl.services.relay", "--connect", inside, "--debug", name="relay")
+        robot.relay = robot.start_inside(relay, "--connect", inside, "--debug", name="relay")
         robot.start_executor()
         processes.start("voicectl.services.supervisor", "--connect", router, "--robot", ROBOT)
         orders = str(REPO / "orders")

@@ -15,6 +15,7 @@ import asyncio
 import json
 import math
 import os
+import signal
 import sys
 import time
 from collections.abc import Iterator
@@ -280,6 +281,67 @@ async def test_a_speed_that_is_not_a_number_never_reaches_a_real_ros2_robot(
                 for e in commands
                 if e["event"] == "moving"
             )
+
+
+@pytest.fixture
+def blocking_relay(processes: Processes, tmp_path: Path) -> Iterator[DdsRobot]:
+    """The robot of `dds` on Kilted, its STOP relay one whose loop can be blocked."""
+    env = env_of("kilted")
+    missing = netns.unavailable()
+    if missing is not None:
+        if os.environ.get("VOICECTL_ROS2") == "required":
+            pytest.fail(missing)
+        pytest.skip(missing)
+    with dds_robot(env, processes, tmp_path, EXECUTORS, relay="harness.blocking_relay") as robot:
+        yield robot
+
+
+async def test_the_relay_stops_the_robot_while_its_own_loop_is_blocked(
+    blocking_relay: DdsRobot,
+) -> None:
+    """Issue 43: the relay's cancel went through its event loop (up to 35 ms behind its
+    zero velocity, once 357 ms). Now a zero velocity and a cancel go from Zenoh's thread
+    straight to DDS, and the cancel's answer comes back from rclpy's: with the relay's
+    loop blocked, both reach the robot and the answer reaches the asker before the loop
+    runs again."""
+    dds = blocking_relay
+    codec = Ros2Codec()
+
+    def said(event: str) -> list[float]:
+        lines = dds.space.log("relay").splitlines()
+        return [
+            json.loads(line)["at"] for line in lines if line.startswith(f'{{"event": "{event}"')
+        ]
+
+    with joined(dds.router) as bus:
+        client = Client(bus, ROBOT)
+        await dds.ready(client)
+        await until_heard(bus, "cmd_vel")
+        far = TargetPose(frame="map", x=8.0)
+        await client.submit(
+            Order(order="goal", label="mbgoal", description="reach x 8", target_pose=far)
+        )
+        await async_wait_until(lambda: dds.events("goal"), WAIT, "a goal at the robot")
+        assert dds.relay is not None
+        os.kill(dds.relay.pid, signal.SIGUSR1)
+        await async_wait_until(lambda: said("blocked"), WAIT, "the relay's loop blocked")
+        asked = time.monotonic()
+        bus.publish_bytes("cmd_vel", codec.twist(0.0, 0.0), urgent=True)
+        answer = await bus.request_bytes(
+            "navigate_to_pose/_action/cancel_goal", codec.cancel_goal_request(), 5.0, urgent=True
+        )
+        answered = time.monotonic()
+        assert codec.read_cancel_goal_response(answer) is not None
+        await async_wait_until(
+            lambda: dds.events("zero", asked) and dds.events("cancel", asked),
+            WAIT,
+            "the stop at the robot",
+        )
+        await async_wait_until(lambda: said("unblocked"), WAIT, "the relay's loop again")
+        unblocked = said("unblocked")[0]
+        assert dds.events("zero", asked)[0] < unblocked
+        assert dds.events("cancel", asked)[0] < unblocked
+        assert answered < unblocked
 
 
 async def test_the_stop_relay_forwards_stops_and_nothing_else(dds: DdsRobot) -> None:

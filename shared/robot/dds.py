@@ -296,6 +296,43 @@ class Ros2Transport(RobotTransport):
         timer.daemon = True
         timer.start()
 
+    def call_now(
+        self,
+        name: str,
+        service_type: str,
+        request: bytes,
+        timeout: float,
+        on_reply: Callable[[bytes | None], None],
+    ) -> None:
+        """Call a service from any thread, waiting for nothing, the loop least of all (a
+        STOP relayed from Zenoh's thread): `on_reply(reply)` on rclpy's thread once the
+        server answers, or `on_reply(None)` once `timeout` seconds have passed without an
+        answer. The client must exist and be matched by then (`client`, made ahead)."""
+        client = self.client(name, service_type)
+        lock = threading.Lock()
+
+        def settle(reply: bytes | None) -> None:
+            if lock.acquire(blocking=False):  # once: the answer or the timeout, first
+                on_reply(reply)
+
+        def answered(done: Any) -> None:  # on rclpy's thread
+            timer.cancel()
+            try:
+                settle(bytes(self._serialize(done.result())))
+            except Exception as exc:
+                _LOGGER.warning("'%s' failed: %s", name, exc)
+                settle(None)
+
+        def expired() -> None:
+            client.remove_pending_request(future)
+            settle(None)
+
+        timer = threading.Timer(timeout, expired)
+        timer.daemon = True
+        future = client.call_async(self._request(client, request))
+        future.add_done_callback(answered)
+        timer.start()
+
     def serve(
         self, name: str, service_type: str, handler: Callable[[bytes], Awaitable[bytes | None]]
     ) -> None:
