@@ -40,9 +40,11 @@ from voicectl.shared.messages import (
     Running,
 )
 from voicectl.shared.process import Service, forever
+from voicectl.shared.throttle import Throttled
 
 from .fence import OrderRobot
 from .framework import Bindings, ExecutionContext, Executor, ParamsMismatch, order_params
+from .owner import OwnerCheck, Refuse
 from .robot import RobotLink
 from .watchdog import LoopWatchdog
 
@@ -114,6 +116,9 @@ class ExecutorService(Service):
         self._loop: asyncio.AbstractEventLoop | None = None
         self._stalled: _Execution | None = None
         """The order halted because the loop stalled under it, until the loop runs again."""
+        self._owner = OwnerCheck(bus, keys.robot)
+        """Orders are taken from the robot's own supervisor only."""
+        self._noise = Throttled(_LOGGER)
 
     async def start(self) -> None:
         self._robot.start()
@@ -179,6 +184,10 @@ class ExecutorService(Service):
     async def handle(self, request: ExecutorRequest) -> Message:
         match request:
             case Execute(order_id=order_id, order=order):
+                match await self._owner.check(request):
+                    case Refuse(reason=reason):
+                        self._noise.warning("sender", "refused order %s: %s", order_id, reason)
+                        return Rejected(order_id=order_id, reason=reason)
                 return self._start(order_id, order)
             case CancelOrder(order_id=order_id):
                 running = self._running
