@@ -380,6 +380,10 @@ class ExecutorInfo(Message):
     only key they hear. '' until the executor has seen their tokens."""
     navigate: str = "navigate_to_pose"
     """The NavigateToPose action's name."""
+    navigation: str = ""
+    """Why navigation orders would fail at once ('navigation unavailable: ...': Nav2's
+    interfaces missing where the executor runs, no navigation announced by the robot);
+    '' when the robot's navigation is there."""
 
 
 class RobotMap(Message):

@@ -299,6 +299,27 @@ async def test_a_rolling_robot_is_known_by_its_hashes_and_its_feedback_read(
         assert remaining[0] == pytest.approx(1.0, abs=0.2)
 
 
+async def test_a_robot_with_navigation_says_it_is_available(
+    router: str, start: Start, transport: TransportKind
+) -> None:
+    """The other side of the one above: the robot's navigate_to_pose announced, the
+    executor holds the navigation token (a part the panel shows) and says so to health."""
+    start()
+    keys = RobotKeys("r1")
+    async with harness_on(router, transport=transport) as harness:
+        await executor_info(harness, lambda info: info.navigation == "")
+
+        def token() -> bool:
+            replies = harness.bus.session.liveliness().get(keys.alive("navigation"), timeout=2)
+            return any(reply.ok is not None for reply in replies)
+
+        await async_wait_until(token, 15.0, "the navigation token")
+        said = await asyncio.to_thread(
+            voicectl, "health", "executor", "--robot", "r1", "--connect", router
+        )
+        assert said.stdout.endswith("; navigation available\n"), said.stdout
+
+
 @RMW_ZENOH_ONLY
 async def test_a_turn_closes_on_odometry(
     router: str, start: Start, transport: TransportKind
@@ -472,3 +493,33 @@ async def test_a_speed_or_goal_that_is_not_a_number_never_moves_the_robot(
             assert all(math.isfinite(axis) for axes in kept for axis in axes), topic
             assert max(abs(axes[0]) for axes in kept) <= 0.5
         assert heard["cmd_vel_nav"] == [(0.0,) * 6]  # the NaN Twist, stilled
+
+
+async def test_a_robot_without_navigation_is_driven_and_says_so(
+    router: str, start: Start, transport: TransportKind
+) -> None:
+    """Issue 43: a robot that announces no navigate_to_pose (cmd_vel and odometry alone):
+    velocity orders run; a navigation order fails at once saying why, instead of waiting
+    for a probe or a goal to time out; `voicectl health` and the panel's parts (the
+    navigation token) say that navigation is unavailable."""
+    start(("--fault", "no-navigation"))
+    keys = RobotKeys("r1")
+    async with harness_on(router, transport=transport) as harness:
+        drive = await harness.finished(await harness.execute(order("drive", distance=0.3)))
+        assert drive.status == OrderStatus.SUCCEEDED, drive
+        failed = await harness.finished(await harness.execute(goal("map", 2.0)))
+        assert failed.status == OrderStatus.FAILED
+        assert failed.message == (
+            "navigation unavailable: the robot announces no 'navigate_to_pose' action on the "
+            f"{transport} transport (is Nav2 running, under that name? --navigate names it)"
+        )
+        await executor_info(harness, lambda info: info.navigation == failed.message)
+        said = await asyncio.to_thread(
+            voicectl, "health", "executor", "--robot", "r1", "--connect", router
+        )
+        assert said.returncode == 0, said.stderr
+        assert said.stdout == (
+            f"executor of robot 'r1' is up ({keys.alive('executor')}); {failed.message}\n"
+        )
+        tokens = harness.bus.session.liveliness().get(keys.alive("navigation"), timeout=2.0)
+        assert not [reply for reply in tokens if reply.ok is not None]

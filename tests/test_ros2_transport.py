@@ -344,6 +344,70 @@ async def test_the_relay_stops_the_robot_while_its_own_loop_is_blocked(
         assert answered < unblocked
 
 
+@pytest.fixture
+def without_nav2(processes: Processes, tmp_path: Path) -> Iterator[DdsRobot]:
+    """A robot of real ROS 2 with cmd_vel and odometry and no Nav2 (harness/ros2_robot.py
+    --no-nav2); its executor and relay installed as a new user would, `pip install
+    'voicectl[ros2]'`: PyPI's Kilted wheels alone, which carry no nav2_msgs."""
+    env, bare = env_of("kilted"), env_of("kilted", bare=True)
+    missing = netns.unavailable()
+    if missing is not None:
+        if os.environ.get("VOICECTL_ROS2") == "required":
+            pytest.fail(missing)
+        pytest.skip(missing)
+    with dds_robot(env, processes, tmp_path, robot_args=("--no-nav2",), voicectl_env=bare) as robot:
+        yield robot
+
+
+async def test_a_robot_without_nav2_is_driven_by_an_executor_installed_from_pypi(
+    without_nav2: DdsRobot,
+) -> None:
+    """Issue 43: where nav2_msgs cannot be imported, `voicectl executor --transport ros2`
+    died at start, telling to pip install what was just installed. Now it runs: velocity
+    orders drive the robot, a navigation order fails at once saying that Nav2's interfaces
+    are missing and how a robot gets them, `voicectl health` says navigation is
+    unavailable, and STOP stops the robot."""
+    dds = without_nav2
+    bare = dds.voicectl_env
+    assert bare is not None
+    probe = "import importlib.util; print(importlib.util.find_spec('nav2_msgs'))"
+    found = await asyncio.to_thread(
+        dds.space.run, str(bare.python), "-c", probe, env=bare.environ()
+    )
+    assert found.strip() == "None"  # as on PyPI: no nav2_msgs anywhere in that venv
+    with joined(dds.router) as bus:
+        client = Client(bus, ROBOT)
+        await dds.ready(client)
+        asked = time.monotonic()
+        [drive] = await client.submit(order("drive", distance=0.4))
+        record = await client.finished(drive, timeout=WAIT)
+        assert record.status is OrderStatus.SUCCEEDED, record
+        assert dds.events("moving", asked)
+        target = TargetPose(frame="map", x=2.0)
+        [goal] = await client.submit(
+            Order(order="goal", label="mbgoal", description="reach x 2", target_pose=target)
+        )
+        failed = await client.finished(goal, timeout=WAIT)
+        assert failed.status is OrderStatus.FAILED
+        reason = failed.message
+        assert reason.startswith(
+            "navigation unavailable: Nav2's interfaces are missing where the executor runs "
+            "(no nav2_msgs); no ROS 2 type nav2_msgs/action/NavigateToPose_FeedbackMessage"
+        ), reason
+        assert "apt install ros-$ROS_DISTRO-nav2-msgs" in reason
+        assert "from no Python package index" in reason
+        assert "pip install" not in reason  # the wrong hint of the issue
+        said = await asyncio.to_thread(
+            voicectl, "health", "executor", "--robot", ROBOT, "--connect", dds.router
+        )
+        assert said.returncode == 0, said.stderr
+        assert said.stdout.rstrip().endswith(reason), said.stdout
+        stopping = time.monotonic()
+        stopped = await VoicectlClient(bus).stop(ROBOT)
+        assert stopped.confirmed, stopped.detail
+        await async_wait_until(lambda: dds.events("zero", stopping), WAIT, "zero velocity")
+
+
 async def test_the_stop_relay_forwards_stops_and_nothing_else(dds: DdsRobot) -> None:
     """On the bridge's keys, a velocity that is not zero goes nowhere; a zero one reaches
     the robot, in the type its cmd_vel takes."""

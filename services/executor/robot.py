@@ -31,6 +31,7 @@ from voicectl.shared.robot.action import ActionClient
 from voicectl.shared.robot.stop import RobotStop
 from voicectl.shared.robot_options import RobotOptions
 from voicectl.shared.ros2 import (
+    NAVIGATE_FEEDBACK,
     NAVIGATION_ERRORS,
     SAME_RESULT,
     CameraType,
@@ -116,8 +117,10 @@ class RobotLink:
         self._distro_checked = False
         self._probing: asyncio.Task[None] | None = None
         self._probe_again = False
-        self.navigation_seen = False
-        """Whether the robot's NavigateToPose server has shown itself (announced or answered)."""
+        self._navigation_seen = False
+        self.navigation_missing = transport.lacks(NAVIGATE_FEEDBACK)
+        """Why this process cannot speak Nav2's NavigateToPose at all (on DDS, nav2_msgs
+        is not installed here); None when it can."""
         self.announced_cmd_vel: CmdVelType | None = None
         """What the robot's graph says its cmd_vel subscribers take."""
         self._cmd_vel_hashes: dict[CmdVelType, str] = {}
@@ -169,19 +172,57 @@ class RobotLink:
         """Call `listener(pose)` on the loop for every odometry pose."""
         self._pose_listeners.append(listener)
 
+    @property
+    def navigation_seen(self) -> bool:
+        """Whether the robot's NavigateToPose server is there: announced (and not gone
+        since), or it answered."""
+        return self._navigation_seen
+
+    @navigation_seen.setter
+    def navigation_seen(self, seen: bool) -> None:
+        if seen != self._navigation_seen:
+            self._navigation_seen = seen
+            self._on_change()
+
+    @property
+    def navigation_problem(self) -> str | None:
+        """Why a navigation order would fail before anything is sent, in one line: Nav2's
+        interfaces missing here, no navigation announced by the robot, or a distribution
+        other than the configured one; None while nothing says so."""
+        if self.navigation_missing is not None:
+            return (
+                "navigation unavailable: Nav2's interfaces are missing where the executor "
+                f"runs (no nav2_msgs); {self.navigation_missing}"
+            )
+        if not self.navigation_seen:
+            return (
+                f"navigation unavailable: the robot announces no "
+                f"'{self.names.topic(self.names.navigate_name)}' action on the "
+                f"{self.transport.kind} transport (is Nav2 running, under that name? "
+                "--navigate names it)"
+            )
+        return self.distro_problem
+
     def start(self) -> None:
         codec = self.codec
         names = self.names
         self.transport.subscribe(names.odom, ODOMETRY, codec.read_odometry, self._on_odom)
-        self.navigation.follow()
+        if self.navigation_missing is None:
+            self.navigation.follow()
+        else:  # velocity orders run all the same; navigation orders fail at once
+            _LOGGER.warning("%s", self.navigation_problem)
         self.transport.discover(self._on_interface)
         self._probe_soon()
 
     def _on_interface(self, interface: Interface, present: bool) -> None:
+        names = self.names
         if not present:
+            if interface.role is Role.ACTION_SERVER and interface.name == names.topic(
+                names.navigate_name
+            ):
+                self.navigation_seen = False  # Nav2 has gone (or its bridge)
             return
         self._adopt_announced_distro()
-        names = self.names
         match interface.role:
             case Role.SUBSCRIBER if interface.name == names.cmd_vel:
                 self._learn_cmd_vel(interface.ros_type, interface.type_hash)
@@ -241,7 +282,7 @@ class RobotLink:
     def _probe_soon(self) -> None:
         """Probe the distribution now, or again once the probe under way has failed (a
         server announced meanwhile may answer where the first probe found none)."""
-        if self._distro_checked:
+        if self._distro_checked or self.navigation_missing is not None:
             return
         if self._probing is not None and not self._probing.done():
             self._probe_again = True
@@ -268,6 +309,7 @@ class RobotLink:
         except CdrError as exc:
             self.distro_problem = f"navigation's get_result reply is in no known layout: {exc}"
             _LOGGER.error("%s", self.distro_problem)
+            self._on_change()
             return
         self._distro_checked = True
         configured = self.options.distro
@@ -282,6 +324,7 @@ class RobotLink:
                 f"as --distro says; restart the executor with --distro {found} (or auto)"
             )
             _LOGGER.error("%s", self.distro_problem)
+            self._on_change()
             return
         if self.distro is not found:
             self.distro = found
@@ -450,6 +493,9 @@ class RobotLink:
         """
         frame, pose = target.frame, Pose2D(x=target.x, y=target.y, yaw=target.yaw)
         self._refuse_unless_finite(frame, pose)
+        unavailable = self.navigation_problem
+        if unavailable is not None:
+            raise OrderFailed(unavailable)
         distro = await self._known_distro()
         navigation = self.navigation
         if navigation.codec.distro is not distro:  # set with the distribution; kept honest here

@@ -116,6 +116,8 @@ class ExecutorService(Service):
         self._loop: asyncio.AbstractEventLoop | None = None
         self._stalled: _Execution | None = None
         """The order halted because the loop stalled under it, until the loop runs again."""
+        self._navigation: Callable[[], None] | None = None
+        """Withdraws the navigation token, while it is held."""
         self._owner = OwnerCheck(bus, keys.robot)
         """Orders are taken from the robot's own supervisor only."""
         self._noise = Throttled(_LOGGER)
@@ -159,9 +161,25 @@ class ExecutorService(Service):
             cmd_vel_type=robot.cmd_vel_type,
             cmd_vel_hash=robot.cmd_vel_hash,
             navigate=robot.names.navigate_name,
+            navigation=robot.navigation_problem or "",
         )
-        if self._info is not None:
+        if self._info is not None:  # started
             self._info.publish(info)
+            self._say_navigation(robot.navigation_problem is None)
+
+    def _say_navigation(self, available: bool) -> None:
+        """Hold the robot's navigation token (`alive/navigation`, a part the panel shows)
+        while navigation is there, and say when that changes."""
+        if available == (self._navigation is not None):
+            return
+        if available:
+            self._navigation = self._bus.announce(self._keys.alive("navigation"))
+            _LOGGER.info("the robot's navigation is available")
+        else:
+            assert self._navigation is not None
+            self._navigation()
+            self._navigation = None
+            _LOGGER.warning("%s", self._robot.navigation_problem)
 
     async def end_stray_motion(self) -> None:
         """At start nothing of this executor runs: whatever moves the robot (a goal an

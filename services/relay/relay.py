@@ -36,6 +36,9 @@ NODE = "voicectl_stop_relay"
 """The ROS node the relay appears as on the robot's graph."""
 READY_WAIT = 30.0
 """Seconds the relay waits for the robot before it says it reaches none."""
+NAVIGATION_WAIT = 5.0
+"""Seconds the relay waits, once cmd_vel is matched, for navigation's cancel service to
+show before it says the robot has none (a robot without Nav2)."""
 _TWIST_SIZE = 52
 """Bytes of a Twist's CDR: anything longer on cmd_vel is a TwistStamped."""
 
@@ -67,26 +70,39 @@ class StopRelay(Service):
 
     async def run(self) -> None:
         """Say the relay is ready once DDS has matched it with the robot's cmd_vel
-        subscribers and navigation's cancel service (stops relayed before go out all the
-        same, but may reach no one)."""
+        subscribers and navigation's cancel service, or with cmd_vel alone where the robot
+        shows no navigation within `NAVIGATION_WAIT` of that (stops relayed before go out
+        all the same, but may reach no one)."""
         dds, names = self._dds, self._names
         assert dds is not None
         cancel = dds.client(names.navigate("cancel_goal"), CANCEL_GOAL)
         loop = asyncio.get_running_loop()
         deadline = loop.time() + READY_WAIT
-        while not self._matched() or not cancel.service_is_ready():
+        while not self._matched():
             if loop.time() > deadline:
                 _LOGGER.warning(
-                    "after %g s the robot has no cmd_vel subscriber or cancel service that "
-                    "this relay reaches on DDS: is it up, in domain %d?",
+                    "after %g s the robot has no cmd_vel subscriber that this relay reaches "
+                    "on DDS: is it up, in domain %d?",
                     READY_WAIT,
                     self._domain_id,
                 )
+                await forever()
+            await asyncio.sleep(0.05)
+        deadline = min(deadline, loop.time() + NAVIGATION_WAIT)
+        while not cancel.service_is_ready():
+            if loop.time() > deadline:
                 break
             await asyncio.sleep(0.05)
-        else:
+        if cancel.service_is_ready():
             _LOGGER.info(
                 "STOP relay ready: zero velocity to '%s', cancels to '%s'",
+                names.cmd_vel,
+                names.navigate("cancel_goal"),
+            )
+        else:
+            _LOGGER.info(
+                "STOP relay ready: zero velocity to '%s'; the robot shows no navigation to "
+                "cancel ('%s' has no server; cancels go to it if one comes)",
                 names.cmd_vel,
                 names.navigate("cancel_goal"),
             )

@@ -116,6 +116,9 @@ class SimFault(enum.StrEnum):
     """No get_result is ever answered."""
     GOAL_ABORTS = "goal-aborts"
     """Every goal aborts after a second, with an error code on Jazzy."""
+    NO_NAVIGATION = "no-navigation"
+    """No Nav2 at all: no navigate_to_pose action is served or announced (a robot driven
+    by cmd_vel alone)."""
 
 
 @dataclass(frozen=True)
@@ -204,17 +207,21 @@ class SimNode(Service):
             lambda raw: self._codec.read_velocity(kind, raw),
             self._on_cmd_vel,
         )
-        transport.serve(names.navigate("send_goal"), NAVIGATE_SEND_GOAL, self._on_send_goal)
-        transport.serve(names.navigate("get_result"), NAVIGATE_GET_RESULT, self._on_get_result)
-        transport.serve(names.navigate("cancel_goal"), CANCEL_GOAL, self._on_cancel_goal)
-        for interface in (
+        offered = [
             Interface(Role.SUBSCRIBER, names.cmd_vel, kind.ros_type),
             Interface(Role.PUBLISHER, names.odom, ODOMETRY),
             Interface(Role.PUBLISHER, names.tf, TF),
             Interface(Role.PUBLISHER, names.camera_image, self._config.camera_type.ros_type),
             Interface(Role.PUBLISHER, names.map, OCCUPANCY_GRID),
-            Interface(Role.ACTION_SERVER, names.topic(names.navigate_name), NAVIGATE_TO_POSE),
-        ):
+        ]
+        if SimFault.NO_NAVIGATION not in self._config.faults:
+            transport.serve(names.navigate("send_goal"), NAVIGATE_SEND_GOAL, self._on_send_goal)
+            transport.serve(names.navigate("get_result"), NAVIGATE_GET_RESULT, self._on_get_result)
+            transport.serve(names.navigate("cancel_goal"), CANCEL_GOAL, self._on_cancel_goal)
+            offered.append(
+                Interface(Role.ACTION_SERVER, names.topic(names.navigate_name), NAVIGATE_TO_POSE)
+            )
+        for interface in offered:
             transport.offer(interface)
         faults = ", ".join(sorted(self._config.faults)) or "none"
         _LOGGER.info(

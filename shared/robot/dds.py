@@ -6,7 +6,9 @@ PyPI's wheels (`pip install 'voicectl[ros2]'`); rclpy is imported only when this
 transport is opened. What crosses the seam stays CDR bytes: publications go out raw
 (`publish` of serialized bytes), subscriptions come in raw, and a service call's request is
 read into rclpy's type only to be sent. Types are found by their ROS names in the
-installed interface packages (Nav2's `nav2_msgs` must be installed for navigation).
+installed interface packages: a robot whose environment has no `nav2_msgs` (no Nav2, or
+PyPI's wheels alone) is driven all the same, and its navigation is said to be unavailable
+(`lacks`, services/executor/robot.py).
 
 QoS as rcl and rcl_action set it, and as voicectl's other transports announce it:
 publications and service calls reliable and volatile, 10 deep; an action's status
@@ -64,6 +66,18 @@ INSTALL_HINT = (
     "the ros2 transport needs rclpy and the robot's interface packages: source the "
     "robot's ROS 2 (. /opt/ros/$ROS_DISTRO/setup.bash) or pip install 'voicectl[ros2]'"
 )
+FROM_THE_EXTRA = frozenset(
+    {
+        "builtin_interfaces",
+        "std_msgs",
+        "geometry_msgs",
+        "nav_msgs",
+        "sensor_msgs",
+        "action_msgs",
+        "unique_identifier_msgs",
+    }
+)
+"""The interface packages `pip install 'voicectl[ros2]'` brings (PyPI's Kilted wheels)."""
 _MEMBERS = (
     ("_SendGoal", ("Impl", "SendGoalService")),
     ("_GetResult", ("Impl", "GetResultService")),
@@ -86,7 +100,23 @@ def interface_class(ros_type: str) -> Any:
                 return found
         return getattr(module, name)
     except (ImportError, AttributeError) as exc:
-        raise BusError(f"no ROS 2 type {ros_type} here ({exc}); {INSTALL_HINT}") from exc
+        raise BusError(f"no ROS 2 type {ros_type} here ({exc}): {install_hint(package)}") from exc
+
+
+def install_hint(package: str) -> str:
+    """How the interface package `package` gets where this process runs, in words."""
+    apt = f"apt install ros-$ROS_DISTRO-{package.replace('_', '-')}"
+    if package == "nav2_msgs":
+        return (
+            "Nav2's interfaces come with Nav2, from no Python package index: start the "
+            "executor where the robot's ROS 2 with Nav2 is sourced (. /opt/ros/$ROS_DISTRO/"
+            f"setup.bash; {apt} installs them), or build nav2_msgs into its environment"
+        )
+    pip = ", or pip install 'voicectl[ros2]'" if package in FROM_THE_EXTRA else ""
+    return (
+        f"the ROS package {package} is not installed here: source the robot's ROS 2 "
+        f"(. /opt/ros/$ROS_DISTRO/setup.bash; {apt} installs it){pip}"
+    )
 
 
 class Ros2Transport(RobotTransport):
@@ -157,6 +187,13 @@ class Ros2Transport(RobotTransport):
     @classmethod
     def prepare(cls, distro: RosDistro, ros_types: Iterable[str]) -> None:
         pass  # nothing is built per type: rclpy's type support is the robot's
+
+    def lacks(self, ros_type: str) -> str | None:
+        try:
+            interface_class(ros_type)
+        except BusError as exc:
+            return str(exc)
+        return None
 
     def _spin(self) -> None:
         try:
@@ -307,8 +344,13 @@ class Ros2Transport(RobotTransport):
         """Call a service from any thread, waiting for nothing, the loop least of all (a
         STOP relayed from Zenoh's thread): `on_reply(reply)` on rclpy's thread once the
         server answers, or `on_reply(None)` once `timeout` seconds have passed without an
-        answer. The client must exist and be matched by then (`client`, made ahead)."""
+        answer, and at once where the graph shows no server (a robot without Nav2): a
+        request DDS has not matched with a server reaches none. The client is made ahead
+        (`client`), so that it is matched by then."""
         client = self.client(name, service_type)
+        if not client.service_is_ready():
+            on_reply(None)
+            return
         lock = threading.Lock()
 
         def settle(reply: bytes | None) -> None:

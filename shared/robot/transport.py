@@ -189,6 +189,12 @@ class RobotTransport(abc.ABC):
         was configured; None where they tell nothing (the bridge, DDS)."""
         return None
 
+    def lacks(self, ros_type: str) -> str | None:
+        """Why this process cannot send or read messages of `ros_type` on this transport
+        at all, in one line (DDS: its interface package is not installed here); None when
+        it can (the layouts on Zenoh carry CDR that voicectl writes itself)."""
+        return None
+
     @abc.abstractmethod
     def subscriber_types(self, name: str) -> list[str]:
         """The ROS types the robot's subscribers of topic `name` have announced, as far as
