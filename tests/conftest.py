@@ -189,11 +189,14 @@ class Stack:
 
 @contextmanager
 def started_stack(
-    data: Path, transport: TransportKind = TransportKind.BRIDGE, orders: Path = REPO / "orders"
+    data: Path,
+    transport: TransportKind = TransportKind.BRIDGE,
+    orders: Path = REPO / "orders",
+    extra: tuple[str, ...] = (),
 ) -> Iterator[Stack]:
     """`voicectl up` with its data in `data`, the simulator ten times faster than life and
-    the `orders` (the shipped ones by default), once it says it is ready; stopped with
-    SIGINT, as a person would, and its output printed, on leaving."""
+    the `orders` (the shipped ones by default), and its `extra` flags, once it says it is
+    ready; stopped with SIGINT, as a person would, and its output printed, on leaving."""
     router_port, port = free_ports(2)
     router = f"tcp/127.0.0.1:{router_port}"
     env = {**os.environ, "VOICECTL_DATA": str(data), "PYTHONUNBUFFERED": "1"}
@@ -214,6 +217,7 @@ def started_stack(
             transport.value,
             "--orders",
             str(orders),
+            *extra,
         ],
         stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT,

@@ -38,7 +38,7 @@ from voicectl.shared.messages import (
 )
 from voicectl.shared.robot import TransportKind, open_transport
 from voicectl.shared.robot.keys import RobotNames
-from voicectl.shared.ros2 import Ros2Codec, RosDistro
+from voicectl.shared.ros2 import SPEED_LIMIT, Ros2Codec, RosDistro
 
 from .conftest import Processes, voicectl
 from .support import (
@@ -523,3 +523,24 @@ async def test_a_robot_without_navigation_is_driven_and_says_so(
         )
         tokens = harness.bus.session.liveliness().get(keys.alive("navigation"), timeout=2.0)
         assert not [reply for reply in tokens if reply.ok is not None]
+
+
+async def test_nav2_is_told_the_speed_limit_before_each_goal(
+    router: str, start: Start, transport: TransportKind
+) -> None:
+    """Issue 43: Nav2's goals carry no speed, and the executor's limits never reached
+    navigation. Now, before each goal, the executor's top speed goes on Nav2's
+    speed_limit topic (nav2_msgs/SpeedLimit, m/s), and the robot's navigation (the
+    simulator plays Nav2's controller server) drives no faster."""
+    start(executor_args=("--max-speed", "0.2"))
+    heard: list[tuple[float, bool]] = []
+    async with harness_on(router, transport=transport) as harness:
+        harness.transport.subscribe(
+            RobotNames().speed_limit, SPEED_LIMIT, CODEC.read_speed_limit, heard.append
+        )
+        begin = asyncio.get_running_loop().time()
+        result = await harness.finished(await harness.execute(goal("map", 1.0)))
+        assert result.status == OrderStatus.SUCCEEDED, result
+        assert heard == [(0.2, False)]
+        driven = [odom.linear_x for odom in harness.since(begin)]
+        assert 0.15 < max(driven) <= 0.2 + 1e-9, max(driven)

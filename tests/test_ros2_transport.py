@@ -159,6 +159,12 @@ async def test_a_real_ros2_robot_is_driven_by_voice_and_its_progress_reaches_the
             and s.state.current.progress is not None
             for s in states
         )
+        # Nav2 was told the executor's top speed (the default, 0.5 m/s) before each goal.
+        heard = [
+            json.loads(line) for line in dds.space.log("robot").splitlines() if line[:1] == "{"
+        ]
+        limits = [(e["limit"], e["percentage"]) for e in heard if e["event"] == "speed_limit"]
+        assert limits == [(0.5, False)] * 2, limits
         # The kitchen of orders/demo.yaml is at (3, 5).
         await async_wait_until(lambda: poses, 5.0, "the robot's pose")
         assert math.dist((poses[-1].x, poses[-1].y), (3.0, 5.0)) < 0.1, poses[-1]

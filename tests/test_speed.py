@@ -9,6 +9,7 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from voicectl.services.executor.config import limit_flags, limits_of, parse_args
 from voicectl.services.executor.speed import (
     AS_ASKED,
     CONTROL_STEP,
@@ -133,3 +134,18 @@ def test_each_rule_of_the_table(
 def test_limits_are_positive_finite_numbers(value: float) -> None:
     with pytest.raises(ValueError, match="must be a number above 0"):
         SpeedLimits(linear=value)
+
+
+def test_limits_come_from_the_flags_else_the_environment_else_the_safe_ones() -> None:
+    """The executor's limits (and `voicectl up`'s, which passes them on as flags)."""
+    args = parse_args(["--max-speed", "0.3"])
+    environ = {"VOICECTL_MAX_SPEED": "0.9", "VOICECTL_MAX_ANGULAR_SPEED": "0.7"}
+    assert limits_of(args, environ) == SpeedLimits(linear=0.3, angular=0.7)
+    assert limits_of(parse_args([]), {}) == SAFE_LIMITS
+    assert limits_of(parse_args([]), {"VOICECTL_MAX_ACCEL": " "}) == SAFE_LIMITS
+    with pytest.raises(ValueError, match=r"^VOICECTL_MAX_SPEED: 'fast' is not a number above 0$"):
+        limits_of(parse_args([]), {"VOICECTL_MAX_SPEED": "fast"})
+    flags = limit_flags(SpeedLimits(linear=0.3, angular=0.7))
+    assert limits_of(parse_args(flags), {"VOICECTL_MAX_SPEED": "0.9"}) == SpeedLimits(
+        linear=0.3, angular=0.7
+    )

@@ -11,7 +11,8 @@ robot again; relays.py publishes the pose and the map for voicectl's own panels.
 Every velocity the executor publishes goes through `RobotLink.drive`, which sends it as
 the robot's `SpeedLimits` let it go (speed.py: top speeds, how fast it may speed up, and
 never a speed that is not a finite number), whatever an order asks. A goal whose pose is
-not finite is never sent either.
+not finite is never sent either. Nav2's goals carry no speed: before each goal, Nav2's
+controller is told the top linear speed on its `speed_limit` topic.
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ from voicectl.shared.ros2 import (
     NAVIGATE_FEEDBACK,
     NAVIGATION_ERRORS,
     SAME_RESULT,
+    SPEED_LIMIT,
     CameraType,
     CdrError,
     CmdVelType,
@@ -503,6 +505,7 @@ class RobotLink:
         if distro is RosDistro.HUMBLE and frame == ROBOT_FRAME:
             pose, frame = compose(await self.next_pose(), pose), ODOM_FRAME
             self._refuse_unless_finite(frame, pose)  # odometry's own numbers may not be
+        await self._limit_navigation()
         goal_id = new_goal_id()
 
         def feedback(message: NavigateFeedback) -> None:
@@ -531,6 +534,22 @@ class RobotLink:
                     on_problem(problem)
                 raise
         _raise_unless_succeeded(result, distro)
+
+    async def _limit_navigation(self) -> None:
+        """Hold Nav2's controller to the top linear speed of `limits` for the goal about
+        to be sent: its speed_limit topic (m/s), which Nav2 keeps until told otherwise. Nav2
+        takes no angular limit there. Where it cannot be sent, the goal goes all the same,
+        at the speeds Nav2 is configured with, and the log says so. Off the loop: a DDS
+        publisher's first message waits for DDS to match it."""
+        name = self.names.speed_limit
+        missing = self.transport.lacks(SPEED_LIMIT)
+        try:
+            if missing is not None:
+                raise BusError(missing)
+            payload = self.codec.speed_limit(self.limits.linear, time.time())
+            await asyncio.to_thread(self.transport.publish, name, SPEED_LIMIT, payload)
+        except BusError as exc:
+            self._noise.warning("speed_limit", "Nav2's speed limit not sent on '%s': %s", name, exc)
 
     def _refuse_unless_finite(self, frame: str, pose: Pose2D) -> None:
         """UnsafeCommand, the robot stopped, for a goal pose that is not finite numbers."""
