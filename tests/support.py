@@ -114,6 +114,11 @@ class ExecutorHarness:
         self._decode = json_decoder(ExecutorReply)
         self.running: OrderRecord | None = None
         """The order it says it runs, as a supervisor would: the last one offered."""
+        self.asked = 0
+        """How many times the executor asked it (`GetState`)."""
+        self.hold: asyncio.Event | None = None
+        """While set and not set yet, its answers wait for it: an executor's check of who
+        sent an order held in flight."""
         bus.announce(self.keys.supervisor_owner(str(bus.session.zid())))
         bus.serve(self.keys.supervisor, json_decoder(SupervisorRequest), self._as_supervisor)
         loop = asyncio.get_running_loop()
@@ -130,7 +135,11 @@ class ExecutorHarness:
 
     async def _as_supervisor(self, request: SupervisorRequest) -> Message:
         if isinstance(request, GetState):
-            return StateReply(state=State(robot=self.keys.robot, current=self.running))
+            self.asked += 1
+            state = State(robot=self.keys.robot, current=self.running)
+            if self.hold is not None:
+                await self.hold.wait()
+            return StateReply(state=state)
         return Failed(reason="the tests' stand-in supervisor answers GetState only")
 
     async def ready(self) -> None:

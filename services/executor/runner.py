@@ -58,6 +58,16 @@ SUPERVISOR_LOST = "supervisor lost: robot stopped (no one could STOP it)"
 """How an order that commanded the robot ends when the supervisor goes."""
 
 
+class _Offered:
+    """An order offered and being checked against who supervises the robot (`OwnerCheck`,
+    a moment on the bus): not started yet. A cancel or a halt that comes meanwhile, which
+    would have found it running had it started at once, withdraws it: it never starts."""
+
+    def __init__(self) -> None:
+        self.withdrawn = ""
+        """Why it will not start, once something has withdrawn it."""
+
+
 class _Execution:
     """The order being executed, the task that runs it and its robot handle."""
 
@@ -118,6 +128,8 @@ class ExecutorService(Service):
         """The order halted because the loop stalled under it, until the loop runs again."""
         self._navigation: Callable[[], None] | None = None
         """Withdraws the navigation token, while it is held."""
+        self._offered: dict[str, _Offered] = {}
+        """Orders offered and being checked, by id."""
         self._owner = OwnerCheck(bus, keys.robot)
         """Orders are taken from the robot's own supervisor only."""
         self._noise = Throttled(_LOGGER)
@@ -202,7 +214,15 @@ class ExecutorService(Service):
     async def handle(self, request: ExecutorRequest) -> Message:
         match request:
             case Execute(order_id=order_id, order=order):
-                match await self._owner.check(request):
+                offered = self._offered[order_id] = _Offered()
+                try:
+                    verdict = await self._owner.check(request)
+                finally:
+                    if self._offered.get(order_id) is offered:
+                        del self._offered[order_id]
+                if offered.withdrawn:
+                    return Rejected(order_id=order_id, reason=offered.withdrawn)
+                match verdict:
                     case Refuse(reason=reason):
                         self._noise.warning("sender", "refused order %s: %s", order_id, reason)
                         return Rejected(order_id=order_id, reason=reason)
@@ -210,6 +230,10 @@ class ExecutorService(Service):
             case CancelOrder(order_id=order_id):
                 running = self._running
                 if running is None or running.order_id != order_id:
+                    checked = self._offered.get(order_id)
+                    if checked is not None:  # offered, still being checked: it never starts
+                        checked.withdrawn = "cancelled before it started"
+                        return self._finished(order_id, OrderStatus.CANCELLED, "cancelled")
                     # Finished as the cancel arrived? Then say how, so it is recorded right.
                     finished = self._recent.get(order_id)
                     if finished is not None:
@@ -237,6 +261,8 @@ class ExecutorService(Service):
         run again; the coroutine returned cancels the robot's goals, waits for the order to
         end, and says what the robot did not confirm (None if it did)."""
         self._robot.stop_moving()
+        for offered in self._offered.values():
+            offered.withdrawn = f"{why} before it started"
         running = self._running
         if running is not None:
             # Revoked at once, without the cancel deadline: whatever the executor does
@@ -475,12 +501,17 @@ class ExecutorService(Service):
             # Whatever failed (a goal it could not even make, an exception), the robot is
             # not left moving on the order's last command.
             self._robot.stop_moving()
+        self._finished(order_id, status, message)
+
+    def _finished(self, order_id: str, status: OrderStatus, message: str) -> OrderFinished:
+        """Say how order `order_id` ended (kept for a cancel that crosses its end)."""
         _LOGGER.info("order %s %s: %s", order_id, status, message)
         finished = OrderFinished(order_id=order_id, status=status, message=message)
         self._recent[order_id] = finished
         while len(self._recent) > RECENT_RESULTS:
             self._recent.popitem(last=False)
         self._bus.publish(self._keys.executor_events, finished)
+        return finished
 
     def _forget_abandoned(self, task: asyncio.Task[None]) -> None:
         order_id = self.abandoned.pop(task, None)
