@@ -128,7 +128,7 @@ def login(page: Any, stack: Stack) -> None:
     page.goto(f"{address}#token={token}")
     expect(page.locator("#panel")).to_be_visible()
     assert "token" not in page.url  # the page took the token and dropped the fragment
-    for part in ("converter", "stt", "supervisor", "executor", "robot"):
+    for part in ("converter", "stt", "supervisor", "executor", "robot", "navigation"):
         expect(page.locator(f'#parts [data-part="{part}"]')).to_have_class("badge online")
 
 
