@@ -297,9 +297,7 @@ def blocking_relay(processes: Processes, tmp_path: Path) -> Iterator[DdsRobot]:
     env = env_of("kilted")
     missing = netns.unavailable()
     if missing is not None:
-        if os.environ.get("VOICECTL_ROS2") == "required":
-            pytest.fail(missing)
-        pytest.skip(missing)
+        missing_here(missing)
     with dds_robot(env, processes, tmp_path, EXECUTORS, relay="harness.blocking_relay") as robot:
         yield robot
 
@@ -360,9 +358,7 @@ def without_nav2(processes: Processes, tmp_path: Path) -> Iterator[DdsRobot]:
     env, bare = env_of("kilted"), env_of("kilted", bare=True)
     missing = netns.unavailable()
     if missing is not None:
-        if os.environ.get("VOICECTL_ROS2") == "required":
-            pytest.fail(missing)
-        pytest.skip(missing)
+        missing_here(missing)
     with dds_robot(env, processes, tmp_path, robot_args=("--no-nav2",), voicectl_env=bare) as robot:
         yield robot
 
