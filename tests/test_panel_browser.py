@@ -231,7 +231,7 @@ def test_speak_a_command_and_a_non_command(stack: Stack, speech: Speak, tmp_path
         login(page, stack)
         # what the recogniser listens with is shown beside the microphone
         expect(page.locator("#stt-summary")).to_have_text("Ready to listen")
-        expect(page.locator("#stt-status")).to_contain_text("moonshine · grammar ")
+        expect(page.locator("#stt-status")).to_contain_text("whisper · grammar ")
         expect(page.locator("#stt-status")).to_contain_text("listening for")
         page.click("#mic")
         expect(page.locator("#mic")).to_have_attribute("aria-pressed", "true")
