@@ -256,6 +256,11 @@ def fed(stdin_pipe: int, data: bytes, close: bool = True) -> threading.Thread:
     return writer
 
 
+def _write_all(fd: int, data: bytes) -> None:
+    while data:
+        data = data[os.write(fd, data) :]
+
+
 @pytest.mark.parametrize(
     ("kind", "said"),
     [
