@@ -241,18 +241,20 @@ def offline(
     cpu = sum(r.cpu for _, r in pairs)
     audio = sum(r.audio for _, r in pairs)
     print(f"real-time factor, every ear: {cpu / max(audio, 1e-9):.3f} ({audio:.0f} s of audio)")
-    asked = [u for u, r in pairs if any(third_asked(f) for f in r.finals)]
+    grammar = build_grammar(orders)
+    vocabulary = frozenset(grammar.words) - frozenset(grammar.skip_words)
+    asked = [u for u, r in pairs if any(third_asked(f, vocabulary) for f in r.finals)]
     clean = [u for u, _ in pairs if u.condition == "clean"]
     print(
         f"the third ear asked for {len(asked)} of {len(pairs)} utterances "
         f"({sum(u.condition == 'clean' for u in asked)} of {len(clean)} clean)"
     )
     for title, ears in VIEWS:
-        outcomes = [ears_view(u, r, parser, SHIPPED, ears) for u, r in pairs]
+        outcomes = [ears_view(u, r, parser, SHIPPED, ears, vocabulary) for u, r in pairs]
         report(f"{options.name}, offline: {title}", outcomes, parser)
         misses(outcomes, parser)
     if args.sweep:
-        sweep(pairs, parser)
+        sweep(pairs, parser, vocabulary)
 
 
 VIEWS = [
@@ -268,24 +270,31 @@ VIEWS = [
 recorded with --whisper-when always), +w Whisper only where the recogniser asks it."""
 
 
-def third_asked(final: Final) -> bool:
+def third_asked(final: Final, vocabulary: frozenset[str]) -> bool:
     """Whether the recogniser would have asked the third ear for this utterance."""
     if final.third is None or final.transcription is None:
         return False
-    if final.third.asked != "always":
-        return True
-    heard = GrammarHeard(final.text, final.rejection, bool(final.doubts), final.noisy)
+    if not final.third.asked.startswith("always"):
+        return True  # recorded as the recogniser asked it
+    heard = GrammarHeard(final.text, final.rejection, bool(final.doubts), final.noisy, vocabulary)
     return bool(why_ask(heard, final.transcription))
 
 
 def ears_view(
-    utterance: Utterance, record: Record, parser: Parser, rule: Rule, ears: str
+    utterance: Utterance,
+    record: Record,
+    parser: Parser,
+    rule: Rule,
+    ears: str,
+    vocabulary: frozenset[str],
 ) -> Outcome:
     """What the file becomes when heard by `ears` (`VIEWS`): each utterance the recogniser
     found in it is decided on its own, as the service decides them, and the file's orders
     are those of every utterance that became orders (a command cut in two whose halves
     both make orders is as wrong as any other wrong order)."""
-    outcomes = [_heard_as(utterance, final, parser, rule, ears) for final in record.finals]
+    outcomes = [
+        _heard_as(utterance, final, parser, rule, ears, vocabulary) for final in record.finals
+    ]
     taken = [outcome for outcome in outcomes if not outcome.rejected]
     if not taken:
         return Outcome(utterance, " / ".join(o.text for o in outcomes if o.text))
@@ -297,13 +306,20 @@ def ears_view(
     return joined
 
 
-def _heard_as(utterance: Utterance, final: Final, parser: Parser, rule: Rule, ears: str) -> Outcome:
+def _heard_as(
+    utterance: Utterance,
+    final: Final,
+    parser: Parser,
+    rule: Rule,
+    ears: str,
+    vocabulary: frozenset[str],
+) -> Outcome:
     transcript = transcript_of(final)
     grammar = grammar_reading(transcript, parser) if "g" in ears else Reading(GRAMMAR, "")
     free = []
     if "m" in ears and final.transcription is not None:
         free.append(free_reading(final.transcription, parser))
-    wanted = "w" in ears and (not ears.endswith("+w") or third_asked(final))
+    wanted = "w" in ears and (not ears.endswith("+w") or third_asked(final, vocabulary))
     if wanted and final.third is not None:
         free.append(free_reading(final.third, parser))
     if ears in ("m", "w"):
@@ -330,7 +346,9 @@ def from_decision(utterance: Utterance, decision: Decision, heard: str) -> Outco
     return outcome
 
 
-def sweep(pairs: list[tuple[Utterance, Record]], parser: Parser) -> None:
+def sweep(
+    pairs: list[tuple[Utterance, Record]], parser: Parser, vocabulary: frozenset[str]
+) -> None:
     """Every rule of a small grid, one line each: what the decision would have been."""
     print("rule sweep: commands right + doubt, wrong orders, non-commands accepted (+ doubt)")
     grid = itertools.product(
@@ -338,7 +356,7 @@ def sweep(pairs: list[tuple[Utterance, Record]], parser: Parser) -> None:
     )
     for support, majority, ask, lone in grid:
         rule = Rule(support=support, majority=majority, ask=ask, lone=lone)
-        n = score([ears_view(u, r, parser, rule, "gm+w") for u, r in pairs], parser)
+        n = score([ears_view(u, r, parser, rule, "gm+w", vocabulary) for u, r in pairs], parser)
         accepted = n["chatter"] - n["chatter_refused"] - n["chatter_doubt"]
         print(
             f"  support {support:5.1f} majority {majority!s:<5} ask {ask!s:<5} lone {lone:<9}: "

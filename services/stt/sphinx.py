@@ -132,6 +132,8 @@ class GrammarHeard:
     """It doubts a value of its result."""
     noisy: bool
     """The room is noisy (`NOISY_SPREAD`)."""
+    vocabulary: frozenset[str] = frozenset()
+    """The words of the orders' commands, skip words aside."""
 
 
 class Listener(Protocol):
@@ -587,8 +589,13 @@ class SphinxRecogniser:
         transcription = third = None
         noisy = self._room.spread() < NOISY_SPREAD
         if self._listener is not None:
+            compiled = self._engine.compiled()
             heard = GrammarHeard(
-                result.text, self._rejected(result), bool(result.verdict.doubts), noisy
+                result.text,
+                self._rejected(result),
+                bool(result.verdict.doubts),
+                noisy,
+                frozenset(compiled.graph.words) - compiled.skip_words,
             )
             transcription, third = self._listener.result(bytes(utterance.raw), heard)
         self._prior = result.mean
