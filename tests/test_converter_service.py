@@ -134,7 +134,7 @@ async def test_queries_answer_a_recogniser_that_starts_late(
         status = converter.statuses[0]
         assert status.ok
         assert status.errors == []
-        assert status.orders == 8 + 19  # and orders/queue.yaml's edits and questions
+        assert status.orders == 8 + 18  # and orders/queue.yaml's edits and questions
         assert len(status.sources) == 4
         await async_wait_until(lambda: converter.grammars, WAIT, "the grammar at start")
         with joined(router) as late:
