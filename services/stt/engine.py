@@ -70,6 +70,8 @@ class Final(Struct, frozen=True, tag=True):
     """What the third ear heard, when it was asked (Whisper)."""
     noisy: bool = False
     """The room was noisy when the utterance ended."""
+    alone: bool = False
+    """Heard by the language's one ear (`transcription`), no grammar's ear beside it."""
 
 
 RecognitionEvent = SpeechStarted | Heard | Final
@@ -88,15 +90,20 @@ class Recogniser(Protocol):
 
 class Engine(Protocol):
     name: str
+    languages: frozenset[str]
+    """What its recognisers can hear (ISO 639-1)."""
 
     def use_grammar(self, grammar: Grammar) -> list[str]:
         """Compile `grammar` for recognisers made from now on; returns the words it
         cannot pronounce. Raises EngineError when the grammar cannot be used."""
 
-    def recogniser(self, max_utterance: float, segment: bool = True) -> Recogniser:
-        """A recogniser for one stream, with the grammar in use now. Utterances longer
-        than `max_utterance` seconds are cut; with `segment` False the whole stream is one
-        utterance (offline transcription). Raises EngineError before any grammar."""
+    def recogniser(
+        self, max_utterance: float, segment: bool = True, language: str = "en"
+    ) -> Recogniser:
+        """A recogniser for one stream in `language`, with that language's grammar in use
+        now. Utterances longer than `max_utterance` seconds are cut; with `segment` False
+        the whole stream is one utterance (offline transcription). Raises EngineError
+        before any grammar, or for a language it does not hear."""
 
     def check(self, pcm: bytes, phrase: str) -> PhraseCheck:
         """Whether `pcm` says `phrase`, by an ear bound to no grammar; `checked` False

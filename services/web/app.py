@@ -78,6 +78,8 @@ class SubmitBody(msgspec.Struct, forbid_unknown_fields=True):
 
 class TextBody(msgspec.Struct, forbid_unknown_fields=True):
     text: str
+    language: Annotated[str, msgspec.Meta(pattern="^([a-z]{2,3})?$")] = ""
+    """The language it is written in (the panel's); empty: the converter's default."""
 
 
 class SpeechBody(msgspec.Struct, forbid_unknown_fields=True):
@@ -280,9 +282,9 @@ class Panel:
         assert self._client is not None, "the app has not started"
         return self._client
 
-    async def _ask_converter(self, text: str) -> ParseResult:
+    async def _ask_converter(self, text: str, language: str = "") -> ParseResult:
         with _as_api_errors():
-            return await self.client.parse(text)
+            return await self.client.parse(text, language)
 
     async def _ask_supervisor(self, keys: RobotKeys, request: Message) -> SupervisorReply:
         with _as_api_errors():
@@ -294,7 +296,7 @@ class Panel:
 
     async def _parse(self, request: Request) -> object:
         body = await self._body(request, TextBody)
-        return await self._ask_converter(body.text)
+        return await self._ask_converter(body.text, body.language)
 
     async def _submit(self, request: Request) -> object:
         keys = self._robot(request)
@@ -312,7 +314,7 @@ class Panel:
         keys = self._robot(request)
         body = await self._body(request, TextBody)
         with _as_api_errors():
-            said = await self.client.say(keys.robot, body.text)
+            said = await self.client.say(keys.robot, body.text, language=body.language)
         result = said.result
         return {"orders": result.orders, "errors": result.errors, "order_ids": said.order_ids}
 
