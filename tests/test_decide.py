@@ -426,6 +426,7 @@ def an_alone_reading(draw: st.DrawFn) -> Reading:
         confidence=draw(st.sampled_from([0.3, 0.85, 0.99])),
         no_speech=draw(st.sampled_from([None, 0.01, 0.5])),
         second=draw(st.sampled_from([None, False, True])),
+        prompted=draw(st.booleans()),
     )
     return replace(reading, evidence=evidence)
 
@@ -444,6 +445,7 @@ def test_one_ear_alone_is_sent_only_on_its_own_evidence(reading: Reading, rule: 
     if not decision.confirm and not decision.doubts:  # sent by itself
         assert rule.alone == "evidence"
         assert reading.evidence.passes(rule)
+        assert not reading.evidence.prompted  # a prompted decode's orders need a yes
     if decision.confirm:  # read back: a question, never sent by itself
         assert decision.doubts
     if rule.alone == "confirm":
@@ -485,3 +487,19 @@ def test_a_lone_transcript_is_confirmed_with_the_whole_sentence() -> None:
         ),
     )
     assert decide(*readings(other, parser), rule=Rule(alone="evidence")).confirm
+    # Orders only the prompted decode heard ("kira la izquierda" unprompted) are asked.
+    rescued = msgspec.structs.replace(
+        transcript,
+        transcription=msgspec.structs.replace(
+            transcript.transcription,
+            text="Kira la izquierda y luego vea la cocina.",
+            second="gira la izquierda y luego vea la cocina",
+        ),
+    )
+    decision = decide(*readings(rescued, parser), rule=Rule(alone="evidence"))
+    assert decision.confirm
+    assert [(o.order, o.case) for o in decision.orders] == [
+        ("rotation", "left"),
+        ("goal", "kitchen"),
+    ]
+    assert decision.reason.endswith("(prompted with the orders' words): confirm it")

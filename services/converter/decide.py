@@ -106,10 +106,14 @@ class Evidence:
     second: bool | None
     """Whether its second decode (prompted with the orders' words) made the same orders;
     None when it made none (its first words held no word of the orders)."""
+    prompted: bool = False
+    """The orders are the prompted decode's, the first having made none: the prompt may
+    have put them there, so they are never sent without a yes."""
 
     def passes(self, rule: Rule) -> bool:
         return (
-            self.second is True
+            not self.prompted
+            and self.second is True
             and self.confidence >= rule.alone_confidence
             and self.no_speech is not None
             and self.no_speech <= rule.alone_no_speech
@@ -239,12 +243,14 @@ def alone_reading(heard: Transcription, parser: Parser) -> Reading:
     model's confidence and no-speech probability, and whether a second decode of it made
     the same orders."""
     reading = free_reading(heard, parser)
-    second = None
-    if heard.second is not None:
-        again = free_reading(msgspec.structs.replace(heard, text=heard.second), parser)
-        second = bool(reading.orders) and again.orders == reading.orders and again.accepted
-    evidence = Evidence(heard.confidence, heard.no_speech, second)
-    return replace(reading, evidence=evidence)
+    if heard.second is None:
+        return replace(reading, evidence=Evidence(heard.confidence, heard.no_speech, None))
+    again = free_reading(msgspec.structs.replace(heard, text=heard.second), parser)
+    if not reading.claims and again.claims:  # heard as orders only with the prompt
+        evidence = Evidence(heard.confidence, heard.no_speech, None, prompted=True)
+        return replace(again, evidence=evidence)
+    second = reading.claims and again.claims and again.orders == reading.orders
+    return replace(reading, evidence=Evidence(heard.confidence, heard.no_speech, second))
 
 
 def not_a_command(
@@ -433,6 +439,8 @@ def _lone(reading: Reading, hearings: list[Hearing], rule: Rule) -> Decision:
     doubts = _merged(reading.doubts, _teens_or_tens(reading.text))
     evidence = reading.evidence
     said = f"{reading.ear} alone heard {_said(reading)}"
+    if evidence is not None and evidence.prompted:
+        said += " (prompted with the orders' words)"
     if rule.alone == "evidence" and evidence is not None and evidence.passes(rule):
         return _take(replace(reading, doubts=doubts), hearings, f"{said}, and again")
     if not doubts:

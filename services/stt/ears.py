@@ -53,7 +53,10 @@ AGREED = -0.5
 """Moonshine finding the grammar's words at least this likely beside its own (nats a
 token) is the two ears agreeing; below it, the third ear is asked."""
 PROMPT_WORDS = 60
-"""At most this many of the orders' words prompt the second decode of a lone ear."""
+"""At most this many of the orders' words (numbers aside) prompt the second decode of a
+lone ear. Prompted, Whisper base wrote "gira la izquierda" for Kokoro's Spanish voice that
+it heard unprompted as "kira la izquierda"; it also wrote a German "warte zehn Sekunden"
+from the prompt that nobody said: a prompted decode is never sent without a yes."""
 WHEN = ("doubt", "always")
 """When the third ear hears an utterance: when the first two leave a doubt (`why_ask`), or
 always (bench/stt.py records every ear's reading, to choose the rule on the dev split)."""
@@ -282,7 +285,8 @@ class _Alone:
     Whisper, told the language, started when the speech pauses as Moonshine is; at the
     end, when its words hold a word of the orders, a second decode prompted with the
     orders' words. Both, with the model's own no-speech probability and confidence, are
-    the evidence the converter weighs (decide.py's `Rule.alone`)."""
+    the evidence the converter weighs (decide.py's `Rule.alone`). The run at the pause only
+    tells the endpointer whether a number may follow (`paused_text`)."""
 
     def __init__(self, model: Whisper, pool: ThreadPoolExecutor, runs: Runs, language: str) -> None:
         self._model = model
@@ -315,18 +319,17 @@ class _Alone:
     def result(
         self, audio: bytes, grammar: GrammarHeard
     ) -> tuple[Transcription, Transcription | None]:
-        heard = None
-        run, self._run = self._run, None
-        if run is not None:
-            with contextlib.suppress(Cancelled):
-                heard = run.result()
-        if heard is None:
-            self._runs.at_end += 1
-            heard = self._model.transcribe(audio, self._language)
+        # The run started at the pause is not taken: its audio ends where the voice
+        # activity detector stopped flagging speech, 80 to 120 ms before the voice did,
+        # which cut the last syllable ("cocina" heard as "coc"); with no other ear to make
+        # up for it, the one ear hears the whole utterance again.
+        self.drop()
+        self._runs.at_end += 1
+        heard = self._model.transcribe(audio, self._language)
         self._runs.third += 1
         second = None
         if heard.text and _holds_command_word(heard.text, grammar.vocabulary):
-            prompt = ", ".join(sorted(grammar.vocabulary)[:PROMPT_WORDS])
+            prompt = ", ".join(sorted(grammar.vocabulary - grammar.numbers)[:PROMPT_WORDS])
             second = self._model.transcribe(audio, self._language, prompt).text
         _LOGGER.debug(
             "whisper alone (%s) heard %r in %.3f s, then %r",

@@ -234,11 +234,15 @@ def load_here(options: EngineOptions) -> Engine:
 
 
 def finals(
-    engine: Engine, pcm: bytes, max_utterance: float = 15.0, segment: bool = True
+    engine: Engine,
+    pcm: bytes,
+    max_utterance: float = 15.0,
+    segment: bool = True,
+    language: str = "en",
 ) -> list[Final]:
     """What one stream of `pcm` comes to, sent in 20 ms frames as a microphone sends it:
     its final results, in order (`voicectl transcribe`, the tests, the speech benchmark)."""
-    recogniser = engine.recogniser(max_utterance, segment)
+    recogniser = engine.recogniser(max_utterance, segment, language)
     try:
         events = [e for frame in frames(pcm) for e in recogniser.accept(frame)]
         events += recogniser.finish()
