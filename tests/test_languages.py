@@ -26,6 +26,8 @@ from voicectl.shared.errors import OrdersFileError
 from voicectl.shared.keys import ConverterKeys, RobotKeys
 from voicectl.shared.messages import (
     ConverterReply,
+    Grammar,
+    OrdersStatus,
     ParseReply,
     ParseRequest,
     Proposal,
@@ -329,3 +331,32 @@ def test_a_mixed_up_file_stops_the_converter_at_start_in_one_line(
     assert process.returncode == 2
     last = processes.log(process).strip().splitlines()[-1]
     assert last.startswith(f"voicectl converter: {path}: says language: de, but its aliases")
+
+
+async def test_a_recogniser_that_starts_late_gets_every_languages_grammar(
+    router: str, processes: Processes
+) -> None:
+    async with scenario(router, processes, ORDERS) as converter:
+        await async_wait_until(
+            lambda: {g.language for g in converter.grammars} == {"de", "en", "es"},
+            WAIT,
+            "the converter's grammars",
+        )
+        with joined(router) as late:
+            # As a recogniser does (services/stt/service.py): the languages from the
+            # status, then each language's grammar on its own key, both with history.
+            got: dict[str, str] = {}
+
+            def follow(_key: str, status: OrdersStatus) -> None:
+                for language in status.languages:
+                    late.subscribe(
+                        ConverterKeys().grammar(language),
+                        json_decoder(Grammar),
+                        lambda _k, grammar: got.setdefault(grammar.language, grammar.version),
+                        history=True,
+                    )
+
+            late.subscribe(ConverterKeys().status, json_decoder(OrdersStatus), follow, history=True)
+            await async_wait_until(
+                lambda: set(got) == {"de", "en", "es"}, WAIT, f"every grammar (got {got})"
+            )

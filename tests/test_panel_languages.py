@@ -44,6 +44,7 @@ def browser_in(
         try:
             page = browser.new_page()
             page.set_default_timeout(WAIT)
+            page.on("pageerror", lambda error: print("pageerror:", error))  # shown on failure
             yield page
         finally:
             browser.close()

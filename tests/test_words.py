@@ -18,6 +18,9 @@ from voicectl.shared.messages import Doubt, Order, OrderRecord, OrderStatus, Pro
 from .conftest import REPO
 
 STATIC = REPO / "services" / "web" / "static"
+GIVEN = {"heard.rejected": {"text"}}
+"""Values the panel gives a sentence that English does not show: English shows the
+converter's reason for refused speech, the others the words heard."""
 
 
 def order(description: str) -> Order:
@@ -31,10 +34,9 @@ def test_every_language_has_every_word() -> None:
         assert set(own) == set(english), language
         for key, entry in own.items():
             assert type(entry) is type(english[key]), (language, key)
-            if isinstance(entry, str):  # the same values in braces as the English sentence
-                assert set(re.findall(r"\{(\w+)\}", entry)) == set(
-                    re.findall(r"\{(\w+)\}", english[key])
-                ), (language, key)
+            if isinstance(entry, str):  # values in braces the code gives the sentence
+                given = set(re.findall(r"\{(\w+)\}", english[key])) | GIVEN.get(key, set())
+                assert set(re.findall(r"\{(\w+)\}", entry)) <= given, (language, key)
 
 
 @pytest.fixture

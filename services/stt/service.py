@@ -30,6 +30,7 @@ from voicectl.shared.messages import (
     CheckPhrase,
     Grammar,
     Message,
+    OrdersStatus,
     PartialTranscript,
     SessionEnded,
     SttStatus,
@@ -44,6 +45,9 @@ from .checks import PhraseChecks
 from .engine import Engine, EngineError, Final, Heard, Recogniser, RecognitionEvent, SpeechStarted
 
 _LOGGER = logging.getLogger(__name__)
+
+MAX_LANGUAGES = 32
+"""Languages whose grammar one recogniser follows at most: each is a subscription."""
 
 
 @dataclass(frozen=True)
@@ -271,6 +275,8 @@ class SttService(Service):
         self._grammars: dict[str, str] = {}
         """Version of the grammar in use, per language; none before the first."""
         self._wanted: dict[str, Grammar] = {}
+        self._following: set[str] = set()
+        """The languages whose grammar it subscribes to."""
         self._compiling: asyncio.Task[None] | None = None
         self._status: Latest | None = None
         self._unpronounceable: list[str] = []
@@ -286,8 +292,9 @@ class SttService(Service):
     async def start(self) -> None:
         self._status = self.bus.latest(self._keys.stt_status)
         self._publish_status("waiting for the converter's grammar")
+        self._follow(self.language)
         self.bus.subscribe(
-            self._converter.grammars, json_decoder(Grammar), self._on_grammar, history=True
+            self._converter.status, json_decoder(OrdersStatus), self._on_orders, history=True
         )
         self._loop = asyncio.get_running_loop()
         self.bus.subscribe(
@@ -348,6 +355,24 @@ class SttService(Service):
     def _grammar(self) -> str:
         """The version of the grammar its own language is heard with; '' before it."""
         return self._grammars.get(self.language, "")
+
+    def _on_orders(self, _key: str, status: OrdersStatus) -> None:
+        """The converter's orders are in these languages: follow the grammar of each this
+        engine hears. One key per language, each asked for its history: a late subscriber
+        to all of them at once (`grammar/*`) was given only some (zenoh 1.10)."""
+        for language in status.languages[:MAX_LANGUAGES]:
+            if language in self.engine.languages:
+                self._follow(language)
+
+    def _follow(self, language: str) -> None:
+        if language in self._following or len(self._following) >= MAX_LANGUAGES:
+            return
+        try:
+            key = self._converter.grammar(language)
+        except ValueError:
+            return  # no language code: a converter on this bus does not send it
+        self._following.add(language)
+        self.bus.subscribe(key, json_decoder(Grammar), self._on_grammar, history=True)
 
     def _on_grammar(self, _key: str, grammar: Grammar) -> None:
         language = grammar.language

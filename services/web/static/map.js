@@ -323,9 +323,9 @@ function draw(svg, scene, onPlace) {
     const others = scene.places.filter((other) => other !== place)
       .map((other) => ({ x: other.pose.x, y: -other.pose.y }));
     // At a gap that clears a robot standing on the place.
-    const label = place.title || place.name; // in the panel's language
-    const spot = placeLabel(taken, place.pose.x, -place.pose.y, label, size, mark * 3.4,
-      placeOrder(place, scene.places), others, textWidth(svg, label, size));
+    const title = place.title || place.name; // in the panel's language
+    const spot = placeLabel(taken, place.pose.x, -place.pose.y, title, size, mark * 3.4,
+      placeOrder(place, scene.places), others, textWidth(svg, title, size));
     // One target for the mouse: the circle, its label and the gap between them.
     const label = taken[taken.length - 1];
     const left = Math.min(label.x, place.pose.x - mark * 2.2);
@@ -333,7 +333,7 @@ function draw(svg, scene, onPlace) {
     group.append(node("rect", { class: "hit", x: left, y: top,
       width: Math.max(label.x + label.w, place.pose.x + mark * 2.2) - left,
       height: Math.max(label.y + label.h, -place.pose.y + mark * 2.2) - top }));
-    group.append(node("text", { x: spot.x, y: spot.y, "font-size": size, class: "label" }, label));
+    group.append(node("text", { x: spot.x, y: spot.y, "font-size": size, class: "label" }, title));
     group.onclick = () => onPlace(place);
     group.onkeydown = (event) => {
       if (event.key === "Enter" || event.key === " ") { event.preventDefault(); onPlace(place); }

@@ -541,7 +541,7 @@ function propose(proposal) {
     // Why, in plain words, on the line that showed what was heard ("I heard '…': not a
     // command"); a suggestion, if the converter had one, below it.
     const [why] = proposal.errors;
-    if (why) showHeard(why.reason, "rejected");
+    if (why) showHeard(t("heard.rejected", { reason: why.reason, text: proposal.transcript }), "rejected");
     showErrors(proposal.transcript, (why && why.candidates.length) ? [{ ...why, reason: t("errors.didYouMean") }] : []);
     showDoubt(null);
     return;
@@ -625,7 +625,7 @@ function showErrors(said, errors) {
   // other suggestions with it, if they still apply).
   $("errors").replaceChildren(...errors.map((error) => {
     const item = el("li");
-    item.append(el("strong", error.text || said || t("heard.nothing")), ` ${error.reason}`);
+    item.append(el("strong", error.text || said || t("heard.nothing")), ` ${t("errors.reason", { reason: error.reason })}`);
     for (const phrase of suggestions(error)) {
       const fixed = error.text && said && said.includes(error.text) ? said.replace(error.text, phrase) : phrase;
       item.append(" ", button(phrase, "suggestion", () => addText(fixed),
