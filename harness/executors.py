@@ -5,6 +5,7 @@ own module."""
 from __future__ import annotations
 
 import asyncio
+import math
 import time
 from typing import Annotated
 
@@ -163,3 +164,48 @@ class RawVelocity(Executor):
         finally:
             robot.drive(0.0, 0.0)
         return "published"
+
+
+class Wild(Executor):
+    """An executor whose arithmetic went wrong: drives at 0.3 m/s until the robot moves,
+    then asks for `value` ('nan', 'inf', '-inf': a number no robot may be sent) the way
+    `how` says: 'drive' (the linear speed of `drive`), 'turn' (its angular speed), 'raw'
+    (its own Twist bytes on cmd_vel), 'other' (a Twist on the topic `topic`), 'goal' (a
+    navigation goal whose x it is, forced into the frozen TargetPose). Then it carries on
+    driving at 0.3 m/s, swallowing whatever the robot handle raises, as careless code
+    would: only the handle keeps it from moving the robot."""
+
+    labels = ("wild",)
+
+    async def execute(self, order: Order, ctx: ExecutionContext) -> str | None:
+        robot = ctx.robot
+        value = float(str(order.params.get("value", "nan")))
+        how = str(order.params.get("how", "drive"))
+        start = await robot.next_pose()
+        while math.hypot((pose := await robot.next_pose()).x - start.x, pose.y - start.y) < 0.1:
+            robot.drive(0.3, 0.0)
+        try:
+            match how:
+                case "drive":
+                    robot.drive(value, 0.0)
+                case "turn":
+                    robot.drive(0.3, value)
+                case "raw":
+                    twist = robot.codec.twist(value, 0.0)
+                    robot.publish(robot.names.cmd_vel, "geometry_msgs/msg/Twist", twist)
+                case "other":
+                    topic = robot.names.topic(str(order.params.get("topic", "cmd_vel_nav")))
+                    twist = robot.codec.twist(0.2, value)
+                    robot.publish(topic, "geometry_msgs/msg/Twist", twist)
+                case "goal":
+                    target = TargetPose(frame="map", x=1.0)
+                    msgspec.structs.force_setattr(target, "x", value)
+                    await robot.navigate(target, lambda _pose, _left: None)
+        except Exception as exc:
+            ctx.progress(f"swallowed: {exc}")
+        while True:
+            try:
+                robot.drive(0.3, 0.0)
+            except Exception as exc:
+                ctx.progress(f"swallowed: {exc}")
+            await asyncio.sleep(0.05)

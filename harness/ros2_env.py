@@ -7,11 +7,13 @@ any of that changes. Needs cmake, ninja and a C/C++ compiler (scripts/ros2-env i
 them on Debian).
 
     python -m harness.ros2_env make [--distro jazzy|kilted]...   make what is missing
+                                                                 (Kilted's bare venv too)
     python -m harness.ros2_env path DISTRO                        the venv's python
 
 What the wheels leave out, done here in one place:
-- nav2_msgs is not on PyPI: its NavigateToPose (as Nav2's jazzy and kilted branches
-  define it) is built with cmake/ninja and the rosidl generators of the wheels;
+- nav2_msgs is not on PyPI: its NavigateToPose and SpeedLimit (as Nav2's jazzy and
+  kilted branches define them) are built with cmake/ninja and the rosidl generators of
+  the wheels;
 - the wheels' metadata omits packages their CMake files need (`BUILD` below);
 - `AMENT_PREFIX_PATH` must name the venv for the generators to find the interfaces;
 - the wheels' CMake files name the Python of the machine that built them
@@ -83,6 +85,9 @@ ROLLING_NAVIGATE_TO_POSE = (
 """Nav2's main branch (Rolling): two more feedback fields. No wheels carry Rolling: the
 type hashes rosidl computes for it are made (into `ROLLING`, beside Kilted's venv), and its
 Python types under another package name (`ROLLING_NAV2_MSGS`)."""
+SPEED_LIMIT = "std_msgs/Header header\nbool percentage\nfloat64 speed_limit\n"
+"""nav2_msgs/msg/SpeedLimit, the same in Humble's Nav2 and since: what Nav2's controller
+server takes on `speed_limit`."""
 ROLLING = "rolling"
 ROLLING_NAV2_MSGS = "rolling_nav2_msgs"
 """Rolling's NavigateToPose built into Kilted's venv under this package name."""
@@ -182,8 +187,11 @@ def built(distro: Distro) -> tuple[Interfaces, ...]:
     return (
         Interfaces(
             "nav2_msgs",
-            (("action/NavigateToPose.action", distro.navigate_to_pose),),
-            ("builtin_interfaces", "geometry_msgs", "action_msgs"),
+            (
+                ("action/NavigateToPose.action", distro.navigate_to_pose),
+                ("msg/SpeedLimit.msg", SPEED_LIMIT),
+            ),
+            ("builtin_interfaces", "std_msgs", "geometry_msgs", "action_msgs"),
         ),
         # What a base's driver publishes on /tf; PyPI has no tf2_msgs either.
         Interfaces(
@@ -235,17 +243,24 @@ def voicectl_dependencies() -> list[str]:
         return list(tomllib.load(file)["project"]["dependencies"])
 
 
-def key(distro: Distro) -> str:
+def key(distro: Distro, bare: bool = False) -> str:
     """What a venv is made of, hashed: its folder's name ends with it."""
     recipe = {
         "recipe": RECIPE,
         "python": list(sys.version_info[:2]),
         "runtime": distro.runtime,
-        "build": distro.build,
         "voicectl": voicectl_dependencies(),
-        "interfaces": [[i.files, i.package_xml(), i.cmake_lists()] for i in built(distro)],
     }
+    if not bare:
+        recipe["build"] = distro.build
+        recipe["interfaces"] = [[i.files, i.package_xml(), i.cmake_lists()] for i in built(distro)]
     return hashlib.sha256(json.dumps(recipe, sort_keys=True).encode()).hexdigest()[:12]
+
+
+BARE = ("kilted",)
+"""Distributions of which a bare venv is made too: the wheels alone, as `pip install
+'voicectl[ros2]'` gives a new user (Kilted's), with no nav2_msgs (no index has it): what
+the executor of a robot without Nav2 runs on."""
 
 
 @dataclass(frozen=True)
@@ -289,23 +304,29 @@ class Ros2Env:
         return env
 
 
-def location(distro: str) -> Ros2Env:
-    """Where the venv of `distro` is (or would be) in the cache."""
+def _flavour(distro: str, bare: bool) -> str:
+    """The start of a venv's folder name: 'kilted', or 'kilted-bare'."""
+    return f"{distro}-bare" if bare else distro
+
+
+def location(distro: str, bare: bool = False) -> Ros2Env:
+    """Where the venv of `distro` (its bare one: `BARE`) is, or would be, in the cache."""
     spec = DISTROS[distro]
     major, minor = sys.version_info[:2]
-    return Ros2Env(distro, cache_root() / f"{distro}-py{major}{minor}-{key(spec)}")
+    name = f"{_flavour(distro, bare)}-py{major}{minor}-{key(spec, bare)}"
+    return Ros2Env(distro, cache_root() / name)
 
 
-def find(distro: str) -> Ros2Env | None:
+def find(distro: str, bare: bool = False) -> Ros2Env | None:
     """The made venv of `distro`, None if it has not been made (`make`)."""
-    env = location(distro)
+    env = location(distro, bare)
     return env if env.ready else None
 
 
-def make(distro: str, log: Path | None = None) -> Ros2Env:
-    """The venv of `distro`, made now unless the cache has it; RuntimeError, with the
-    failing step's output, when a step fails."""
-    env = location(distro)
+def make(distro: str, log: Path | None = None, bare: bool = False) -> Ros2Env:
+    """The venv of `distro` (`bare`: the wheels alone), made now unless the cache has it;
+    RuntimeError, with the failing step's output, when a step fails."""
+    env = location(distro, bare)
     if env.ready:
         return env
     env.root.parent.mkdir(parents=True, exist_ok=True)
@@ -315,10 +336,10 @@ def make(distro: str, log: Path | None = None) -> Ros2Env:
         shutil.rmtree(env.root, ignore_errors=True)  # what a failed or killed make left
         env.root.mkdir()
         started = time.monotonic()
-        _build(DISTROS[distro], env, log or env.root / "make.log")
-        made = {"distro": distro, "seconds": round(time.monotonic() - started, 1)}
+        _build(DISTROS[distro], env, log or env.root / "make.log", bare)
+        made = {"distro": distro, "bare": bare, "seconds": round(time.monotonic() - started, 1)}
         (env.root / "ready.json").write_text(json.dumps(made) + "\n")
-    _remove_stale(distro, keep=env.root)
+    _remove_stale(_flavour(distro, bare), keep=env.root)
     return env
 
 
@@ -332,15 +353,15 @@ def _locked(path: Path) -> Iterator[None]:
             fcntl.flock(held, fcntl.LOCK_UN)
 
 
-def _remove_stale(distro: str, keep: Path) -> None:
-    """Older venvs of the distribution (another recipe or pins): 300 MB each."""
-    for other in cache_root().glob(f"{distro}-py*"):
+def _remove_stale(flavour: str, keep: Path) -> None:
+    """Older venvs of the distribution's flavour (another recipe or pins): 300 MB each."""
+    for other in cache_root().glob(f"{flavour}-py*"):
         if other != keep and other.is_dir():
             shutil.rmtree(other, ignore_errors=True)
             other.with_suffix(".lock").unlink(missing_ok=True)
 
 
-def _build(distro: Distro, env: Ros2Env, log: Path) -> None:
+def _build(distro: Distro, env: Ros2Env, log: Path, bare: bool = False) -> None:
     with log.open("a") as out:
 
         def run(
@@ -363,6 +384,16 @@ def _build(distro: Distro, env: Ros2Env, log: Path) -> None:
         base: str = getattr(sys, "_base_executable", sys.executable)
         run("venv", [base, "-m", "venv", env.prefix])
         pip: list[str | Path] = [env.python, "-m", "pip", "install", "--disable-pip-version-check"]
+        if bare:
+            run("wheels", [*pip, *distro.runtime, *voicectl_dependencies()])
+            check = "import rclpy, geometry_msgs.msg, nav_msgs.msg, action_msgs.srv"
+            run("import check", [env.python, "-c", check], env.environ())
+            absent = (
+                "import importlib.util, sys; "
+                "sys.exit(importlib.util.find_spec('nav2_msgs') is not None)"
+            )
+            run("no nav2_msgs", [env.python, "-c", absent], env.environ())
+            return
         packages = [*distro.runtime, *distro.build, *voicectl_dependencies()]
         run("wheels", [*pip, *packages])
         _point_cmake_at(env)
@@ -397,7 +428,10 @@ def _build(distro: Distro, env: Ros2Env, log: Path) -> None:
             into = env.root / interfaces.described_only / "share" / interfaces.name
             shutil.copytree(described, into)
         shutil.rmtree(env.root / "build", ignore_errors=True)
-        check = "import rclpy, nav2_msgs.action, tf2_msgs.msg, nav_msgs.msg, sensor_msgs.msg"
+        check = (
+            "import rclpy, nav2_msgs.action, nav2_msgs.msg, tf2_msgs.msg, nav_msgs.msg, "
+            "sensor_msgs.msg"
+        )
         run("import check", [env.python, "-c", check], env.environ())
 
 
@@ -440,15 +474,16 @@ def main(argv: list[str] | None = None) -> int:
         print(found.python)
         return 0
     for distro in args.distro or list(DISTROS):
-        started = time.monotonic()
-        cached = find(distro) is not None
-        try:
-            env = make(distro)
-        except RuntimeError as exc:
-            print(exc, file=sys.stderr)
-            return 1
-        took = "cached" if cached else f"made in {time.monotonic() - started:.0f} s"
-        print(f"ROS 2 {distro}: {env.python} ({took})")
+        for bare in (False, True) if distro in BARE else (False,):
+            started = time.monotonic()
+            cached = find(distro, bare) is not None
+            try:
+                env = make(distro, bare=bare)
+            except RuntimeError as exc:
+                print(exc, file=sys.stderr)
+                return 1
+            took = "cached" if cached else f"made in {time.monotonic() - started:.0f} s"
+            print(f"ROS 2 {_flavour(distro, bare)}: {env.python} ({took})")
     return 0
 
 

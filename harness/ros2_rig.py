@@ -44,12 +44,17 @@ class DdsRobot:
     """Where processes inside reach it."""
     processes: Processes
     executor_args: Sequence[str]
+    voicectl_env: Ros2Env | None = None
+    """Where voicectl's own processes inside (the executor, the relay) run; None: `env`,
+    the robot's."""
     executor: subprocess.Popen[bytes] | None = None
+    relay: subprocess.Popen[bytes] | None = None
 
-    def start_inside(self, module: str, *args: str, name: str) -> subprocess.Popen[bytes]:
-        return self.space.start(
-            module, *args, name=name, python=self.env.python, env=self.env.environ()
-        )
+    def start_inside(
+        self, module: str, *args: str, name: str, env: Ros2Env | None = None
+    ) -> subprocess.Popen[bytes]:
+        env = env or self.env
+        return self.space.start(module, *args, name=name, python=env.python, env=env.environ())
 
     def start_executor(self) -> None:
         self.executor = self.start_inside(
@@ -57,6 +62,7 @@ class DdsRobot:
             *("--transport", "ros2", "--robot", ROBOT, "--connect", self.inside),
             *self.executor_args,
             name="executor",
+            env=self.voicectl_env,
         )
 
     def events(self, what: str, since: float = 0.0) -> list[float]:
@@ -84,10 +90,19 @@ class DdsRobot:
 
 @contextlib.contextmanager
 def dds_robot(
-    env: Ros2Env, processes: Processes, logs: Path, executor_args: Sequence[str] = ()
+    env: Ros2Env,
+    processes: Processes,
+    logs: Path,
+    executor_args: Sequence[str] = (),
+    relay: str = "voicectl.services.relay",
+    robot_args: Sequence[str] = (),
+    voicectl_env: Ros2Env | None = None,
 ) -> Iterator[DdsRobot]:
     """Everything above, started; stopped (and the namespace deleted) whatever happens.
-    RuntimeError when no namespace can be made here (not root, no iproute2)."""
+    RuntimeError when no namespace can be made here (not root, no iproute2). `relay`: the
+    module the STOP relay runs (harness.blocking_relay: one whose loop can be blocked);
+    `robot_args`: harness/ros2_robot.py's (--no-nav2); `voicectl_env`: where the executor
+    and the relay run, when not in the robot's venv (a bare one: `ros2_env.BARE`)."""
     missing = netns.unavailable()
     if missing is not None:
         raise RuntimeError(missing)
@@ -96,10 +111,12 @@ def dds_robot(
     inside = space.socket()
     options = BusOptions(mode="router", connect=[], listen=[router, inside])
     session = zenoh.open(options.zenoh_config())
-    robot = DdsRobot(env, space, router, inside, processes, executor_args)
+    robot = DdsRobot(env, space, router, inside, processes, executor_args, voicectl_env)
     try:
-        robot.start_inside("harness.ros2_robot", name="robot")
-        robot.start_inside("voicectl.services.relay", "--connect", inside, "--debug", name="relay")
+        robot.start_inside("harness.ros2_robot", *robot_args, name="robot")
+        robot.relay = robot.start_inside(
+            relay, "--connect", inside, "--debug", name="relay", env=voicectl_env
+        )
         robot.start_executor()
         processes.start("voicectl.services.supervisor", "--connect", router, "--robot", ROBOT)
         orders = str(REPO / "orders")

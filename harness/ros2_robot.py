@@ -2,7 +2,7 @@
 robot shows on DDS, with nothing of voicectl inside. Run in a venv of
 harness/ros2_env.py, in a network namespace with only loopback up:
 
-    python -m harness.ros2_robot [--namespace bot1] [--cmd-vel-type twist|stamped]
+    python -m harness.ros2_robot [--namespace bot1] [--cmd-vel-type twist|stamped] [--no-nav2]
 
 - ``cmd_vel`` (Twist or TwistStamped) in, integrated into ``odom`` (nav_msgs/Odometry) at
   20 Hz; a velocity older than 0.5 s counts as zero, as a base's watchdog does;
@@ -10,12 +10,16 @@ harness/ros2_env.py, in a network namespace with only loopback up:
 - Nav2's ``navigate_to_pose`` action server: goals in map, odom or base_link (others
   refused), driven to at 0.5 m/s and 1.5 rad/s with feedback at 10 Hz, cancellable, and
   aborted with FollowPath's "failed to make progress" (105) when outside ±10 m; while a
-  goal runs, cmd_vel is ignored (Nav2 is the one driving).
+  goal runs, cmd_vel is ignored (Nav2 is the one driving). Its controller takes a limit on
+  ``speed_limit`` (nav2_msgs/SpeedLimit, in m/s or in percent; 0 lifts it), as Nav2's
+  controller server does. With ``--no-nav2``, none of this: a robot driven by cmd_vel
+  alone, which imports nothing of Nav2.
 
 What the tests time is said on stdout, one JSON line each, stamped with CLOCK_MONOTONIC
 (the same clock in every process of the machine): ``{"event": "zero", "at": ...}`` for
 each zero velocity (``"moving"`` for any other), ``{"event": "cancel", ...}`` for each
 cancel request, ``"goal"``, ``"succeeded"``, ``"canceled"`` and ``"aborted"`` for goals,
+``{"event": "speed_limit", "limit": ..., "percentage": ...}`` for each speed limit,
 ``{"event": "ready"}`` once everything is declared.
 """
 
@@ -31,7 +35,6 @@ from typing import Any
 
 import rclpy
 from geometry_msgs.msg import Twist, TwistStamped
-from nav2_msgs.action import NavigateToPose
 from nav_msgs.msg import OccupancyGrid, Odometry
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
@@ -63,7 +66,7 @@ def wrap(angle: float) -> float:
 
 
 class StandIn:
-    def __init__(self, namespace: str, stamped: bool) -> None:
+    def __init__(self, namespace: str, stamped: bool, nav2: bool = True) -> None:
         prefix = f"/{namespace}" if namespace else ""
         self.node = rclpy.create_node("robot_standin")
         group = ReentrantCallbackGroup()
@@ -81,15 +84,23 @@ class StandIn:
         latched = QoSProfile(depth=1, durability=DurabilityPolicy.TRANSIENT_LOCAL)
         self.map = node.create_publisher(OccupancyGrid, f"{prefix}/map", latched)
         self.map.publish(self.floor())
-        ActionServer(
-            node,
-            NavigateToPose,
-            f"{prefix}/navigate_to_pose",
-            self.execute,
-            goal_callback=self.on_goal,
-            cancel_callback=self.on_cancel,
-            callback_group=group,
-        )
+        self.top_speed = MAX_LINEAR
+        """What the controller drives at, at most: its own limit, or the last speed limit."""
+        if nav2:
+            from nav2_msgs.action import NavigateToPose
+            from nav2_msgs.msg import SpeedLimit
+
+            self.navigate_type: Any = NavigateToPose
+            ActionServer(
+                node,
+                NavigateToPose,
+                f"{prefix}/navigate_to_pose",
+                self.execute,
+                goal_callback=self.on_goal,
+                cancel_callback=self.on_cancel,
+                callback_group=group,
+            )
+            node.create_subscription(SpeedLimit, f"{prefix}/speed_limit", self.on_speed_limit, 10)
         node.create_timer(TICK, self.tick, callback_group=group)
 
     @staticmethod
@@ -135,6 +146,19 @@ class StandIn:
         odom.twist.twist.linear.x, odom.twist.twist.angular.z = linear, angular
         self.odom.publish(odom)
 
+    def on_speed_limit(self, message: Any) -> None:
+        """As Nav2's controllers take it: 0 lifts the limit, else m/s or percent of top."""
+        say("speed_limit", limit=message.speed_limit, percentage=message.percentage)
+        limit = message.speed_limit
+        if limit <= 0.0:
+            top = MAX_LINEAR
+        elif message.percentage:
+            top = MAX_LINEAR * min(limit, 100.0) / 100.0
+        else:
+            top = min(MAX_LINEAR, limit)
+        with self.lock:
+            self.top_speed = top
+
     def on_goal(self, goal: Any) -> GoalResponse:
         frame = goal.pose.header.frame_id
         accepted = frame in FRAMES
@@ -160,7 +184,7 @@ class StandIn:
         """Drive to the goal, as Nav2 does: one goal at a time, a newer one preempts it."""
         tx, ty, tyaw = self.target(handle.request)
         started = time.monotonic()
-        result = NavigateToPose.Result()
+        result = self.navigate_type.Result()
         with self.lock:
             self.active = handle
             self.navigating = True
@@ -192,8 +216,9 @@ class StandIn:
                     say("succeeded")
                     return result
                 angular = max(-MAX_ANGULAR, min(MAX_ANGULAR, 3.0 * turn))
-                linear = min(MAX_LINEAR, distance) if distance > 0.05 and abs(turn) < 0.3 else 0.0
                 with self.lock:
+                    top = self.top_speed
+                    linear = min(top, distance) if distance > 0.05 and abs(turn) < 0.3 else 0.0
                     self.command = (linear, angular)
                 handle.publish_feedback(self.feedback(x, y, yaw, distance, started))
                 time.sleep(2 * TICK)  # the controller's period, not a wait for anyone
@@ -204,9 +229,8 @@ class StandIn:
                     self.navigating = False
                     self.command = (0.0, 0.0)
 
-    @staticmethod
-    def feedback(x: float, y: float, yaw: float, distance: float, started: float) -> Any:
-        feedback = NavigateToPose.Feedback()
+    def feedback(self, x: float, y: float, yaw: float, distance: float, started: float) -> Any:
+        feedback = self.navigate_type.Feedback()
         feedback.current_pose.header.frame_id = "map"
         feedback.current_pose.pose.position.x = x
         feedback.current_pose.pose.position.y = y
@@ -223,9 +247,10 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m harness.ros2_robot", description=__doc__)
     parser.add_argument("--namespace", default="")
     parser.add_argument("--cmd-vel-type", choices=("twist", "stamped"), default="twist")
+    parser.add_argument("--no-nav2", action="store_true", help="no navigation at all")
     args = parser.parse_args(argv)
     rclpy.init()
-    stand_in = StandIn(args.namespace, args.cmd_vel_type == "stamped")
+    stand_in = StandIn(args.namespace, args.cmd_vel_type == "stamped", nav2=not args.no_nav2)
     executor = MultiThreadedExecutor(num_threads=4)
     executor.add_node(stand_in.node)
     say("ready")

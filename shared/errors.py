@@ -17,6 +17,12 @@ class OrderFailed(VoicectlError):
     """Raised by an executor to end its order as failed with this message."""
 
 
+class UnsafeCommand(OrderFailed):
+    """A command that would move the robot by a value that is not a finite number (a NaN
+    or infinite speed, goal, distance or angle): never sent; zero velocity went out
+    instead, and the order that asked fails."""
+
+
 class ServiceError(VoicectlError):
     """A service that cannot start, or must stop: its text is the process's last line
     (`run_service`), and the process exits with code 2."""

@@ -9,6 +9,7 @@ that older and newer services can talk.
 
 from __future__ import annotations
 
+import math
 from enum import StrEnum
 from typing import Annotated, Literal
 
@@ -48,6 +49,12 @@ class TargetPose(Data):
     yaw: float = 0.0
     """Heading in radians, counter-clockwise."""
 
+    def __post_init__(self) -> None:
+        for axis in ("x", "y", "yaw"):
+            value = getattr(self, axis)
+            if not math.isfinite(value):
+                raise ValueError(f"a target pose's {axis} must be a finite number, not {value}")
+
 
 class Order(Data, kw_only=True):
     """One thing for the robot to do, as the converter made it from words."""
@@ -66,6 +73,11 @@ class Order(Data, kw_only=True):
     confirm: bool = False
     """The orders file asks for a spoken yes before it runs, when no one presses Send
     (`voicectl listen`); the panel's Send is itself the confirmation."""
+
+    def __post_init__(self) -> None:
+        for name, value in self.params.items():
+            if isinstance(value, float) and not math.isfinite(value):
+                raise ValueError(f"parameter '{name}' must be a finite number, not {value}")
 
 
 class ParseProblem(Data, omit_defaults=True):
@@ -429,6 +441,10 @@ class ExecutorInfo(Message):
     only key they hear. '' until the executor has seen their tokens."""
     navigate: str = "navigate_to_pose"
     """The NavigateToPose action's name."""
+    navigation: str = ""
+    """Why navigation orders would fail at once ('navigation unavailable: ...': Nav2's
+    interfaces missing where the executor runs, no navigation announced by the robot);
+    '' when the robot's navigation is there."""
 
 
 class RobotMap(Message):

@@ -93,6 +93,7 @@ def _add_rest(group: argparse._ArgumentGroup, detect: bool) -> None:
         ("--camera", names.camera_name, "camera topic"),
         ("--navigate", names.navigate_name, "Nav2 NavigateToPose action"),
         ("--map", names.map_name, "occupancy grid (a Nav2 robot's map)"),
+        ("--speed-limit", names.speed_limit_name, "Nav2 controller's speed limit topic"),
     ):
         group.add_argument(
             flag,
@@ -127,6 +128,7 @@ def robot_options(args: argparse.Namespace) -> RobotOptions:
             camera_name=args.camera,
             navigate_name=args.navigate,
             map_name=args.map,
+            speed_limit_name=args.speed_limit,
         ),
         transport=chosen(TransportKind, getattr(args, "transport", TransportKind.ROS2)),
         domain_id=args.domain_id,

@@ -257,6 +257,15 @@ _CANCEL_REQUEST = """
 action_msgs/msg/GoalInfo goal_info
 """
 
+SPEED_LIMIT = "nav2_msgs/msg/SpeedLimit"
+"""What Nav2's controller server takes on its `speed_limit` topic: a top linear speed, in
+m/s or in percent of its own (0: none), for whatever goal it follows."""
+_SPEED_LIMIT = """
+std_msgs/Header header
+bool percentage
+float64 speed_limit
+"""
+
 _CANCEL_RESPONSE = """
 int8 ERROR_NONE=0
 int8 ERROR_REJECTED=1
@@ -275,6 +284,7 @@ def _definitions(distro: RosDistro) -> dict[str, str]:
         f"{NAVIGATE_TO_POSE}_Feedback": _NAV_FEEDBACK[distro],
         f"{CANCEL_GOAL}_Request": _CANCEL_REQUEST,
         f"{CANCEL_GOAL}_Response": _CANCEL_RESPONSE,
+        SPEED_LIMIT: _SPEED_LIMIT,
     }
     for suffix, text in _ACTION_WRAPPERS.items():
         texts[f"{NAVIGATE_TO_POSE}{suffix}"] = text.format(action=NAVIGATE_TO_POSE)
@@ -430,6 +440,42 @@ class Ros2Codec:
         if kind is CmdVelType.STAMPED:
             return self.read_twist_stamped(raw)
         return self.read_twist(raw)
+
+    # --- nav2_msgs/msg/SpeedLimit ---------------------------------------------------------
+
+    def speed_limit(self, limit: float, stamp_s: float = 0.0, percentage: bool = False) -> bytes:
+        """Nav2's controller held to `limit` m/s (`percentage`: percent of its own top speed;
+        0: no limit)."""
+        msg = self._types[SPEED_LIMIT](
+            header=self._header(stamp_s, ""), percentage=percentage, speed_limit=limit
+        )
+        return self._encode(msg, SPEED_LIMIT)
+
+    def read_speed_limit(self, raw: bytes) -> tuple[float, bool]:
+        """(the limit, whether it is in percent) of a SpeedLimit."""
+        msg = self._decode(raw, SPEED_LIMIT)
+        return float(msg.speed_limit), bool(msg.percentage)
+
+    def velocity_axes(self, kind: CmdVelType, raw: bytes) -> tuple[float, ...]:
+        """Every axis of a velocity command: linear x, y, z, then angular x, y, z (a
+        holonomic base or a drone moves on those a planar base ignores)."""
+        twist = self._twist_of(kind, raw)
+        linear, angular = twist.linear, twist.angular
+        axes = (linear.x, linear.y, linear.z, angular.x, angular.y, angular.z)
+        return tuple(float(axis) for axis in axes)
+
+    def stilled(self, kind: CmdVelType, raw: bytes) -> bytes:
+        """The velocity command `raw` with every axis zero, its header (a TwistStamped's
+        stamp and frame) kept."""
+        if kind is CmdVelType.STAMPED:
+            header = self._decode(raw, kind.ros_type).header
+            msg = self._types[kind.ros_type](header=header, twist=self._twist(0.0, 0.0))
+            return self._encode(msg, kind.ros_type)
+        return self.twist(0.0, 0.0)
+
+    def _twist_of(self, kind: CmdVelType, raw: bytes) -> Any:
+        msg = self._decode(raw, kind.ros_type)
+        return msg.twist if kind is CmdVelType.STAMPED else msg
 
     # --- nav_msgs/msg/Odometry ----------------------------------------------------------
 

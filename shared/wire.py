@@ -381,6 +381,35 @@ class Wire:
         queryable = self._session.declare_queryable(key, _direct(on_query), complete=complete)
         self._closers.callback(queryable.undeclare)
 
+    def serve_bytes_now(
+        self, key: str, handler: Callable[[bytes, Callable[[bytes | None], None]], None]
+    ) -> None:
+        """Answer CDR queries on `key` without the loop: `handler(payload, reply)` runs on
+        Zenoh's own thread and must be quick; it (or whichever thread it hands the work
+        to) calls `reply(answer)` once, from any thread, or `reply(None)` to leave the
+        query unanswered. For what must not wait for a loop: a STOP's cancel."""
+
+        def on_query(query: zenoh.Query) -> None:
+            raw = query.payload.to_bytes() if query.payload is not None else b""
+            lock = threading.Lock()
+
+            def reply(answer: bytes | None) -> None:
+                if not lock.acquire(blocking=False):
+                    return  # answered already
+                try:
+                    if answer is not None:
+                        query.reply(query.key_expr, answer, encoding=CDR)
+                finally:
+                    query.drop()
+
+            try:
+                handler(raw, reply)
+            except Exception:
+                _LOGGER.exception("query on %s failed", key)
+                reply(None)
+
+        self.queryable(key, on_query)
+
     def serve_bytes(
         self,
         key: str,

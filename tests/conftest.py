@@ -206,9 +206,9 @@ def started_stack(
     flags: Sequence[str] = (),
 ) -> Iterator[Stack]:
     """`voicectl up` (`command`, run in `cwd`: this checkout's by default) with its data in
-    `data`, the simulator ten times faster than life and the `orders` (None: the ones the
-    command ships), once it says it is ready; stopped with SIGINT, as a person would, and
-    its output printed, on leaving."""
+    `data`, the simulator ten times faster than life, the `orders` (None: the ones the
+    command ships) and its other `flags`, once it says it is ready; stopped with SIGINT, as a
+    person would, and its output printed, on leaving."""
     router_port, port = free_ports(2)
     router = f"tcp/127.0.0.1:{router_port}"
     env = {**os.environ, "VOICECTL_DATA": str(data), "PYTHONUNBUFFERED": "1"}

@@ -24,15 +24,15 @@ DISTROS = tuple(ros2_env.DISTROS)
 """Every distribution the tests run real ROS 2 of: jazzy, kilted."""
 
 
-def env_of(distro: str) -> ros2_env.Ros2Env:
-    """The made venv of `distro`; skips the test when real ROS 2 was not asked for, fails
-    it when it was asked for and is not made."""
+def env_of(distro: str, bare: bool = False) -> ros2_env.Ros2Env:
+    """The made venv of `distro` (`bare`: PyPI's wheels alone, no nav2_msgs); skips the
+    test when real ROS 2 was not asked for, fails it when it was asked for and is not made."""
     wanted = os.environ.get("VOICECTL_ROS2", "")
     if not wanted:
         pytest.skip("real ROS 2 runs in scripts/test-ros2 (or with VOICECTL_ROS2=1)")
-    found = ros2_env.find(distro)
+    found = ros2_env.find(distro, bare)
     if found is None:
-        missing_here(f"ROS 2 {distro} is not made: run scripts/ros2-env")
+        missing_here(f"ROS 2 {distro}{' (bare)' if bare else ''} is not made: run scripts/ros2-env")
     return found
 
 

@@ -23,11 +23,18 @@ from voicectl.shared.messages import (
     Execute,
     ExecutorEvent,
     ExecutorReply,
+    Failed,
+    GetState,
     Halt,
     Message,
     Order,
     OrderFinished,
+    OrderRecord,
+    OrderStatus,
     Running,
+    State,
+    StateReply,
+    SupervisorRequest,
     TargetPose,
 )
 from voicectl.shared.robot import TransportKind, open_transport
@@ -83,7 +90,12 @@ TURN_LEFT = Order(
 
 class ExecutorHarness:
     """Sends orders straight to an executor, in the supervisor's seat, and keeps what it
-    reports and the robot's odometry (with the loop time each arrived)."""
+    reports and the robot's odometry (with the loop time each arrived).
+
+    The executor takes orders only from its robot's supervisor (services/executor/owner.py):
+    the harness is one as far as that rule goes, a stand-in at the bus seam. It holds the
+    robot's owner token and answers `GetState` on the robot's request key with the order
+    it offers as the one it runs, and nothing else."""
 
     def __init__(
         self,
@@ -100,6 +112,15 @@ class ExecutorHarness:
         self.events: dict[str, list[ExecutorEvent]] = {}
         self.odometry: list[tuple[float, Odometry]] = []
         self._decode = json_decoder(ExecutorReply)
+        self.running: OrderRecord | None = None
+        """The order it says it runs, as a supervisor would: the last one offered."""
+        self.asked = 0
+        """How many times the executor asked it (`GetState`)."""
+        self.hold: asyncio.Event | None = None
+        """While set and not set yet, its answers wait for it: an executor's check of who
+        sent an order held in flight."""
+        bus.announce(self.keys.supervisor_owner(str(bus.session.zid())))
+        bus.serve(self.keys.supervisor, json_decoder(SupervisorRequest), self._as_supervisor)
         loop = asyncio.get_running_loop()
         bus.subscribe(self.keys.executor_events, json_decoder(ExecutorEvent), self._on_event)
         self.transport.subscribe(
@@ -111,6 +132,15 @@ class ExecutorHarness:
 
     def _on_event(self, _key: str, event: ExecutorEvent) -> None:
         self.events.setdefault(event.order_id, []).append(event)
+
+    async def _as_supervisor(self, request: SupervisorRequest) -> Message:
+        if isinstance(request, GetState):
+            self.asked += 1
+            state = State(robot=self.keys.robot, current=self.running)
+            if self.hold is not None:
+                await self.hold.wait()
+            return StateReply(state=state)
+        return Failed(reason="the tests' stand-in supervisor answers GetState only")
 
     async def ready(self) -> None:
         def up() -> bool:
@@ -124,6 +154,7 @@ class ExecutorHarness:
     async def offer(self, order: Order) -> tuple[str, ExecutorReply]:
         """Send `order` for execution: its id and the executor's answer."""
         order_id = uuid.uuid4().hex[:12]
+        self.running = OrderRecord(id=order_id, order=order, status=OrderStatus.RUNNING)
         reply = await self.bus.request(
             self.keys.executor_execute, Execute(order_id=order_id, order=order), self._decode
         )

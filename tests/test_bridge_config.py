@@ -83,6 +83,7 @@ def test_every_option_is_one_the_bridge_knows(bridge: dict[str, Any]) -> None:
 )
 def test_what_voicectl_uses_is_routed(bridge: dict[str, Any], keys: RobotNames) -> None:
     assert allowed(bridge, "subscribers", f"/{keys.cmd_vel_name}")
+    assert allowed(bridge, "subscribers", f"/{keys.speed_limit_name}")  # Nav2's controller's
     assert allowed(bridge, "publishers", f"/{keys.odom_name}")
     assert allowed(bridge, "publishers", f"/{keys.camera_name}")
     assert allowed(bridge, "action_servers", f"/{keys.navigate_name}")

@@ -32,6 +32,9 @@ from harness.ports import free_port
 from harness.wait import wait_until
 from voicectl.bus_secrets import CONTAINER_DIR, DEFAULT_ROBOT, BusRobot, client_files
 from voicectl.cli import SERVICES, build_parser
+from voicectl.services.executor.config import limits_of
+from voicectl.services.executor.config import parse_args as parse_executor_args
+from voicectl.services.executor.speed import SAFE_LIMITS, SpeedLimits
 from voicectl.shared.bus import BusOptions
 
 from .conftest import REPO, voicectl
@@ -153,6 +156,16 @@ def test_the_robot_runs_its_executor_next_to_the_bridge_instead_of_the_simulator
     assert robot == {"robot-router", "robot-executor", "robot-listen", "bridge"}
     assert SERVICES_COMPOSED["robot-executor"]["command"][0] == "executor"
     assert "sim" not in enabled({"host", "robot"})
+
+
+def test_the_robot_s_speed_limits_reach_its_executor() -> None:
+    """Issue 43: the robot profile took no speed limits. Set where `docker compose` runs,
+    they reach the robot's executor; unset, it holds the safe ones."""
+    given = {"VOICECTL_MAX_SPEED": "0.3", "VOICECTL_MAX_ANGULAR_SPEED": "0.8"}
+    for env, expected in ((given, SpeedLimits(linear=0.3, angular=0.8)), ({}, SAFE_LIMITS)):
+        executor = load("compose.yaml", env=env)["robot-executor"]
+        args = parse_executor_args(executor["command"][1:])
+        assert limits_of(args, executor["environment"]) == expected
 
 
 DOCUMENTED_PROFILES = [{"host", "sim"}, {"host", "robot"}, {"host"}, {"robot"}]

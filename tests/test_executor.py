@@ -13,7 +13,8 @@ from hypothesis import strategies as st
 from PIL import Image as PilImage
 
 from harness.wait import async_wait_until
-from voicectl.services.executor.robot import CONTROL_STEP, SAFE_LIMITS, RobotLink, limited
+from voicectl.services.executor.robot import RobotLink
+from voicectl.services.executor.speed import CONTROL_STEP, SAFE_LIMITS, limited
 from voicectl.services.sim.robot import Bounds
 from voicectl.services.sim.world import floor_plan
 from voicectl.shared.bus import Bus, json_decoder
@@ -26,6 +27,7 @@ from voicectl.shared.messages import (
     Failed,
     Halt,
     Order,
+    OrderFinished,
     OrderProgress,
     OrderStatus,
     Rejected,
@@ -261,6 +263,32 @@ async def test_each_executor_key_takes_only_its_own_requests(robot: tuple[str, P
         assert isinstance(wrong_key, Failed)
         assert wrong_key.reason.startswith("undecodable request")
         assert pytest.approx(0.0) == harness.pose().linear_x  # and nothing moved
+
+
+async def test_an_order_cancelled_while_its_sender_is_checked_never_starts(
+    robot: tuple[str, Path],
+) -> None:
+    """Before it takes an order, the executor asks who supervises the robot: a moment on
+    the bus. A cancel that comes meanwhile (it would have found the order running had it
+    started at once) withdraws it: the cancel is answered as the order's end, and the
+    order never starts. (Seen: a cancel answered 'not running here', then the order ran.)"""
+    async with harness_on(robot[0]) as harness:
+        harness.hold = asyncio.Event()
+        offering = asyncio.ensure_future(harness.offer(order("drive", distance=1.0)))
+        await async_wait_until(lambda: harness.asked, 10.0, "the executor to ask who sent it")
+        assert harness.running is not None
+        order_id = harness.running.id
+        cancelled = await harness.control(CancelOrder(order_id=order_id))
+        assert cancelled == OrderFinished(
+            order_id=order_id, status=OrderStatus.CANCELLED, message="cancelled"
+        )
+        since = asyncio.get_running_loop().time()
+        harness.hold.set()
+        offered_id, refused = await offering
+        assert offered_id == order_id
+        assert refused == Rejected(order_id=order_id, reason="cancelled before it started")
+        await async_wait_until(lambda: len(harness.since(since)) >= 10, 10.0, "odometry")
+        assert all(odom.linear_x == 0.0 for odom in harness.since(since))
 
 
 async def test_an_order_cancelled_as_a_pose_arrives_is_cancelled(router: str) -> None:

@@ -167,16 +167,20 @@ def test_an_unusable_file_is_one_line(
 
 @pytest.fixture
 def stdin_pipe(monkeypatch: pytest.MonkeyPatch) -> Iterator[int]:
-    """Standard input as a pipe; yields its writing end."""
+    """Standard input as a pipe; yields its writing end. A test may close that end; the
+    teardown closes it only if the number still names this pipe (a closed number is soon
+    another file's, maybe the next test's pipe)."""
     read_end, write_end = os.pipe()
+    ours = os.fstat(write_end).st_ino
     reader = os.fdopen(read_end, "r")
     monkeypatch.setattr(sys, "stdin", reader)
     try:
         yield write_end
     finally:
-        reader.close()
-        with contextlib.suppress(OSError):  # the test may have closed it
-            os.close(write_end)
+        reader.close()  # a writer still blocked on the pipe gets EPIPE and ends
+        with contextlib.suppress(OSError):
+            if os.fstat(write_end).st_ino == ours:
+                os.close(write_end)
 
 
 def test_raw_pcm_on_standard_input_passes_unchanged(stdin_pipe: int) -> None:
@@ -232,14 +236,20 @@ def encoded(speech: Path, kind: str) -> bytes:
 
 
 def fed(stdin_pipe: int, data: bytes, close: bool = True) -> threading.Thread:
-    """A writer of `data` into standard input (closed after it unless `close` is False)."""
+    """A writer of `data` into standard input (closed after it unless `close` is False).
+    It writes through a descriptor of its own, so that, left blocked after its test, it
+    can never write into a number the next test reuses."""
+    own = os.dup(stdin_pipe)
+    if close:  # the end of `data` is the end of the stream: only `own` keeps it open
+        os.close(stdin_pipe)
 
     def write() -> None:
         # The reader may refuse the stream before it is all written: the pipe breaks.
-        with contextlib.suppress(OSError):
-            _write_all(stdin_pipe, data)
-            if close:
-                os.close(stdin_pipe)
+        try:
+            with contextlib.suppress(OSError):
+                _write_all(own, data)
+        finally:
+            os.close(own)
 
     writer = threading.Thread(target=write, daemon=True)
     writer.start()

@@ -103,6 +103,19 @@ def test_an_alias_that_is_a_regex_is_not_what_a_person_reads() -> None:
             "parameter 'speeds' must be a string, number or boolean",
         ),
         ("orderz: {}\n", "expected a mapping with an 'orders' mapping"),
+        (
+            "orders:\n  go: {voice_alias: go, label: x, frame: map, x: .nan}\n",
+            "f.yaml: order 'go': parameter 'x' must be a finite number, got nan",
+        ),
+        (
+            "orders:\n  go:\n    voice_alias: go\n    label: x\n    cases:\n"
+            "      far: {voice_alias: far, frame: map, yaw: -.inf}\n",
+            "f.yaml: order 'go' case 'far': parameter 'yaw' must be a finite number, got -inf",
+        ),
+        (
+            "orders:\n  go: {voice_alias: go, label: drive, distance: .inf}\n",
+            "f.yaml: order 'go': parameter 'distance' must be a finite number, got inf",
+        ),
     ],
 )
 def test_bad_orders_fail_in_one_line_naming_file_order_and_key(text: str, message: str) -> None:

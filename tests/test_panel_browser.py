@@ -128,7 +128,7 @@ def login(page: Any, stack: Stack) -> None:
     page.goto(f"{address}#token={token}")
     expect(page.locator("#panel")).to_be_visible()
     assert "token" not in page.url  # the page took the token and dropped the fragment
-    for part in ("converter", "stt", "supervisor", "executor", "robot"):
+    for part in ("converter", "stt", "supervisor", "executor", "robot", "navigation"):
         expect(page.locator(f'#parts [data-part="{part}"]')).to_have_class("badge online")
 
 
@@ -231,7 +231,7 @@ def test_speak_a_command_and_a_non_command(stack: Stack, speech: Speak, tmp_path
         login(page, stack)
         # what the recogniser listens with is shown beside the microphone
         expect(page.locator("#stt-summary")).to_have_text("Ready to listen")
-        expect(page.locator("#stt-status")).to_contain_text("moonshine · grammar ")
+        expect(page.locator("#stt-status")).to_contain_text("whisper · grammar ")
         expect(page.locator("#stt-status")).to_contain_text("listening for")
         page.click("#mic")
         expect(page.locator("#mic")).to_have_attribute("aria-pressed", "true")

@@ -24,7 +24,7 @@ from harness.client import robot_key
 from harness.wait import async_wait_until
 from voicectl.shared.bus import json_decoder
 from voicectl.shared.keys import RobotKeys
-from voicectl.shared.kinds import ON_ZENOH
+from voicectl.shared.kinds import ON_ZENOH, CmdVelType
 from voicectl.shared.messages import (
     CancelOrder,
     Done,
@@ -38,7 +38,7 @@ from voicectl.shared.messages import (
 )
 from voicectl.shared.robot import TransportKind, open_transport
 from voicectl.shared.robot.keys import RobotNames
-from voicectl.shared.ros2 import Ros2Codec, RosDistro
+from voicectl.shared.ros2 import SPEED_LIMIT, Ros2Codec, RosDistro
 
 from .conftest import Processes, voicectl
 from .support import (
@@ -299,6 +299,27 @@ async def test_a_rolling_robot_is_known_by_its_hashes_and_its_feedback_read(
         assert remaining[0] == pytest.approx(1.0, abs=0.2)
 
 
+async def test_a_robot_with_navigation_says_it_is_available(
+    router: str, start: Start, transport: TransportKind
+) -> None:
+    """The other side of the one above: the robot's navigate_to_pose announced, the
+    executor holds the navigation token (a part the panel shows) and says so to health."""
+    start()
+    keys = RobotKeys("r1")
+    async with harness_on(router, transport=transport) as harness:
+        await executor_info(harness, lambda info: info.navigation == "")
+
+        def token() -> bool:
+            replies = harness.bus.session.liveliness().get(keys.alive("navigation"), timeout=2)
+            return any(reply.ok is not None for reply in replies)
+
+        await async_wait_until(token, 15.0, "the navigation token")
+        said = await asyncio.to_thread(
+            voicectl, "health", "executor", "--robot", "r1", "--connect", router
+        )
+        assert said.stdout.endswith("; navigation available\n"), said.stdout
+
+
 @RMW_ZENOH_ONLY
 async def test_a_turn_closes_on_odometry(
     router: str, start: Start, transport: TransportKind
@@ -426,3 +447,100 @@ async def test_the_stop_at_start_up_is_in_the_type_the_robot_takes(
         await async_wait_until(executor_online, 30.0, "the executor to come online")
         assert len(sent) >= 3, "no stop at start-up"
         assert all(CODEC.read_twist_stamped(raw) == (0.0, 0.0) for raw in sent)
+
+
+WILD = (
+    ("drive", "nan", "linear speed nan: not a finite number"),
+    ("turn", "inf", "angular speed inf: not a finite number"),
+    ("raw", "-inf", "linear.x -inf: every axis must be a finite number"),
+    ("other", "nan", "angular.z nan: every axis must be a finite number"),
+    ("goal", "nan", "a goal at x nan, y 0.0, yaw 0.0 in 'map': not a finite pose"),
+)
+"""Each way `harness.executors:Wild` asks for what is not a number, and what it is told."""
+
+
+async def test_a_speed_or_goal_that_is_not_a_number_never_moves_the_robot(
+    router: str, start: Start, transport: TransportKind
+) -> None:
+    """Issue 43: `limited(nan, ...)` drove at the top speed. Now a NaN or infinite speed,
+    asked by `drive`, in a user's own Twist bytes on cmd_vel or on another topic, or a goal
+    that is not finite, never reaches the robot: the robot is stopped, the order fails
+    saying why, and the executor, which carries on driving, moves it no more."""
+    start(executor_args=("--executor", "harness.executors:Wild"))
+    heard: dict[str, list[tuple[float, ...]]] = {"cmd_vel": [], "cmd_vel_nav": []}
+    codec = Ros2Codec()
+    async with harness_on(router, transport=transport) as harness:
+        for topic, kept in heard.items():
+            harness.transport.subscribe(
+                topic,
+                "geometry_msgs/msg/Twist",
+                lambda raw: codec.velocity_axes(CmdVelType.TWIST, raw),
+                kept.append,
+            )
+        for how, value, reason in WILD:
+            order_id = await harness.execute(order("wild", how=how, value=value))
+            result = await harness.finished(order_id)
+            assert result.status == OrderStatus.FAILED, (how, result)
+            assert reason in result.message, (how, result.message)
+            ended = asyncio.get_running_loop().time()
+            # The executor tries 0.3 m/s every 50 ms still: a second of odometry at rest.
+            await async_wait_until(
+                lambda ended=ended: len(harness.since(ended + 0.3)) >= 20, 10.0, "1 s of odometry"
+            )
+            assert all(odom.linear_x == 0.0 for odom in harness.since(ended + 0.3)), how
+        for topic, kept in heard.items():
+            assert kept, f"nothing heard on {topic}"
+            assert all(math.isfinite(axis) for axes in kept for axis in axes), topic
+            assert max(abs(axes[0]) for axes in kept) <= 0.5
+        assert heard["cmd_vel_nav"] == [(0.0,) * 6]  # the NaN Twist, stilled
+
+
+async def test_a_robot_without_navigation_is_driven_and_says_so(
+    router: str, start: Start, transport: TransportKind
+) -> None:
+    """Issue 43: a robot that announces no navigate_to_pose (cmd_vel and odometry alone):
+    velocity orders run; a navigation order fails at once saying why, instead of waiting
+    for a probe or a goal to time out; `voicectl health` and the panel's parts (the
+    navigation token) say that navigation is unavailable."""
+    start(("--fault", "no-navigation"))
+    keys = RobotKeys("r1")
+    async with harness_on(router, transport=transport) as harness:
+        drive = await harness.finished(await harness.execute(order("drive", distance=0.3)))
+        assert drive.status == OrderStatus.SUCCEEDED, drive
+        failed = await harness.finished(await harness.execute(goal("map", 2.0)))
+        assert failed.status == OrderStatus.FAILED
+        assert failed.message == (
+            "navigation unavailable: the robot announces no 'navigate_to_pose' action on the "
+            f"{transport} transport (is Nav2 running, under that name? --navigate names it)"
+        )
+        await executor_info(harness, lambda info: info.navigation == failed.message)
+        said = await asyncio.to_thread(
+            voicectl, "health", "executor", "--robot", "r1", "--connect", router
+        )
+        assert said.returncode == 0, said.stderr
+        assert said.stdout == (
+            f"executor of robot 'r1' is up ({keys.alive('executor')}); {failed.message}\n"
+        )
+        tokens = harness.bus.session.liveliness().get(keys.alive("navigation"), timeout=2.0)
+        assert not [reply for reply in tokens if reply.ok is not None]
+
+
+async def test_nav2_is_told_the_speed_limit_before_each_goal(
+    router: str, start: Start, transport: TransportKind
+) -> None:
+    """Issue 43: Nav2's goals carry no speed, and the executor's limits never reached
+    navigation. Now, before each goal, the executor's top speed goes on Nav2's
+    speed_limit topic (nav2_msgs/SpeedLimit, m/s), and the robot's navigation (the
+    simulator plays Nav2's controller server) drives no faster."""
+    start(executor_args=("--max-speed", "0.2"))
+    heard: list[tuple[float, bool]] = []
+    async with harness_on(router, transport=transport) as harness:
+        harness.transport.subscribe(
+            RobotNames().speed_limit, SPEED_LIMIT, CODEC.read_speed_limit, heard.append
+        )
+        begin = asyncio.get_running_loop().time()
+        result = await harness.finished(await harness.execute(goal("map", 1.0)))
+        assert result.status == OrderStatus.SUCCEEDED, result
+        assert heard == [(0.2, False)]
+        driven = [odom.linear_x for odom in harness.since(begin)]
+        assert 0.15 < max(driven) <= 0.2 + 1e-9, max(driven)

@@ -25,6 +25,7 @@ from voicectl.shared.ros2 import (
     NAVIGATE_GET_RESULT,
     NAVIGATE_SEND_GOAL,
     SERVICES,
+    SPEED_LIMIT,
     CancelCode,
     CdrError,
     GoalStatus,
@@ -227,6 +228,14 @@ def cases() -> list[Case]:
             tuple(c.read_feedback(c.feedback(GOAL_ID, POSE, 1.5, 3.25, FRAME, STAMP))),
         ),
         Case(
+            "speed limit",
+            SPEED_LIMIT,
+            c.speed_limit(0.35, STAMP),
+            {"header": header(STAMP, ""), "percentage": False, "speed_limit": 0.35},
+            c.read_speed_limit,
+            (0.35, False),
+        ),
+        Case(
             "cancel every goal",
             f"{CANCEL_GOAL}_Request",
             c.cancel_goal_request(),
@@ -407,6 +416,7 @@ HASHED = sorted(
         "sensor_msgs/msg/CompressedImage",
         "action_msgs/msg/GoalStatusArray",
         NAVIGATE_FEEDBACK,
+        SPEED_LIMIT,
         *SERVICES,
     }
 )

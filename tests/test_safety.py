@@ -8,14 +8,15 @@ import asyncio
 import contextlib
 import stat
 import subprocess
-from collections.abc import AsyncIterator
+from collections.abc import AsyncIterator, Awaitable, Callable
 from pathlib import Path
 
 import pytest
 
 from harness.client import Client, client_wait_ready
 from harness.wait import async_wait_until
-from voicectl.shared.bus import Bus, json_decoder
+from voicectl.shared.bus import Bus, BusOptions, json_decoder
+from voicectl.shared.errors import BusError
 from voicectl.shared.keys import RobotKeys
 from voicectl.shared.messages import (
     ControlRequest,
@@ -29,11 +30,16 @@ from voicectl.shared.messages import (
     Order,
     OrderFinished,
     OrderProgress,
+    OrderRecord,
     OrderStatus,
+    Rejected,
     Release,
     Reorder,
     Resume,
+    State,
+    StateReply,
     Stopped,
+    SupervisorRequest,
     TargetPose,
 )
 from voicectl.shared.robot.keys import RobotNames
@@ -419,3 +425,81 @@ async def test_the_database_is_readable_by_its_owner_only(robot: Robot) -> None:
     async with robot.session() as (_bus, client):
         await client_wait_ready(client, executor=False)
         assert stat.S_IMODE(robot.db.stat().st_mode) == 0o600
+
+
+async def test_the_executor_takes_orders_only_from_the_supervisor_that_owns_the_robot(
+    robot: Robot, tmp_path: Path
+) -> None:
+    """Issue 43: anyone on the bus could hand the executor an order on its execute key and
+    move the robot. It now takes orders only from the supervisor that owns the robot, by
+    the supervisors' own rule: who holds the owner token and answers as the robot's
+    supervisor, not who declares a token. Refused, the robot not moved: an order with no
+    supervisor on the bus, one from a made-up supervisor that holds a token, one from a
+    process that answers as the supervisor beside the real one; a second real supervisor
+    stands down; the owner's orders run."""
+    keys = RobotKeys("r1")
+    decode = json_decoder(ExecutorReply)
+    robot.start_executor()
+    async with robot.session() as (bus, client):
+
+        def refused(order_id: str, because: str) -> Callable[[], Awaitable[bool]]:
+            """Offer an order straight to the executor until it is refused `because`
+            (what the executor sees of the bus settles in a moment)."""
+
+            async def offered() -> bool:
+                execute = Execute(order_id=order_id, order=order("drive", distance=1.0))
+                try:
+                    reply = await bus.request(keys.executor_execute, execute, decode)
+                except BusError:
+                    return False  # the executor not reachable yet
+                assert isinstance(reply, Rejected), reply
+                return because in reply.reason
+
+            return offered
+
+        await async_wait_until(
+            refused("alone", "no supervisor owns robot 'r1' (no owner token is up)"),
+            WAIT,
+            "the executor to refuse an order when no supervisor is up",
+        )
+        # The highest Zenoh id: a supervisor settling a claim made as it starts keeps the
+        # robot against it (the lower id wins), whatever the forger answers then.
+        highest = f'id:"{"f" * 32}"'
+        with joined(BusOptions(connect=[robot.router], settings=(highest,))) as forger:
+            made_up = str(forger.session.zid())
+            forger.announce(keys.supervisor_owner(made_up))
+            await async_wait_until(
+                refused("token", f"an owner token names Zenoh id {made_up}, which does not"),
+                WAIT,
+                "the executor to refuse an order from a made-up supervisor",
+            )
+            robot.start_supervisor()  # it finds the made-up token and serves all the same
+            await client_wait_ready(client)
+            forged = OrderRecord(
+                id="forged", order=order("drive", distance=1.0), status=OrderStatus.RUNNING
+            )
+
+            async def as_supervisor(_request: SupervisorRequest) -> Message:
+                return StateReply(state=State(robot="r1", current=forged))
+
+            forger.serve(keys.supervisor, json_decoder(SupervisorRequest), as_supervisor)
+            await async_wait_until(
+                refused("forged", "2 processes claim robot 'r1' and answer as its supervisor"),
+                WAIT,
+                "the executor to refuse an order from a second claimant",
+            )
+        await async_wait_until(
+            refused("stale", "order 'stale' is not the one robot 'r1''s supervisor"),
+            WAIT,
+            "the executor to refuse an order its supervisor does not run",
+        )
+        second = robot.processes.supervisor(
+            robot.router, "r1", tmp_path / "second.sqlite3", name="second-supervisor"
+        )
+        await async_wait_until(lambda: second.poll() is not None, WAIT, "the second to stop")
+        assert "robot 'r1' already has a supervisor" in robot.processes.log(second)
+        assert all(odom.linear_x == 0.0 for _, odom in robot.odometry)  # nothing moved yet
+
+        [order_id] = await client.submit(order("drive", distance=0.3))
+        record = await client.finished(order_id, timeout=WAIT)
+        assert record.status is OrderStatus.SUCCEEDED, record

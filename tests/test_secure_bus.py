@@ -493,3 +493,14 @@ def test_secrets_are_made_once_and_a_client_config_travels(
     unknown = voicectl("bus-secrets", str(site.secrets), "--client", "nobody")
     assert unknown.returncode == 1
     assert unknown.stderr.startswith("voicectl bus-secrets: no client 'nobody' in ")
+
+
+def test_the_secured_router_notices_a_lost_link_as_soon_as_the_open_one() -> None:
+    """The secured router template kept Zenoh's 10 s lease while the open router says 3 s:
+    a robot cut off from a secured bus went unnoticed for 10 s."""
+    import json5
+
+    secured = json5.loads((REPO / "voicectl" / "secure-router.json5").read_text())
+    plain = json5.loads((REPO / "deploy" / "zenoh" / "router.json5").read_text())
+    lease = plain["transport"]["link"]["tx"]["lease"]
+    assert secured["transport"]["link"]["tx"]["lease"] == lease == 3000

@@ -22,8 +22,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+from voicectl.services.converter.decide import decide, readings
 from voicectl.services.converter.grammar import build_grammar
 from voicectl.services.converter.orders import OrderSet
+from voicectl.services.converter.parser import Parser
 from voicectl.services.stt.audio import frames, read_wav
 from voicectl.services.stt.engine import (
     Engine,
@@ -41,6 +43,7 @@ from voicectl.services.stt.lexicon import (
     variants,
 )
 from voicectl.services.stt.load import load_engine
+from voicectl.services.stt.service import transcript_of
 from voicectl.services.stt.wordgraph import GrammarError, compile_jsgf
 from voicectl.shared.errors import AudioError
 from voicectl.shared.messages import FRAME_BYTES, AudioChunk, AudioMessage
@@ -386,6 +389,31 @@ def test_the_recogniser_switches_grammars_between_utterances(
     assert texts[0] == [("turn left", "")]
     assert texts[1][0][0] != "turn left"
     assert texts[1][0][1] != ""  # forced towards "reach kitchen" or nothing: either way rejected
+
+
+def test_a_pause_before_a_number_does_not_end_the_command(
+    local_engine: Engine, speech: Speak
+) -> None:
+    """ "Turn left" and "turn left forty five degrees" are different orders: a person who
+    pauses 0.3 s before the number is heard as one utterance (ended at the pause, it was
+    "turn left"), while a longer silence still ends "turn left" on its own."""
+    local_engine.use_grammar(build_grammar(OrderSet.load(ORDERS)))
+    parser = Parser(OrderSet.load(ORDERS))
+    turn = read_wav(speech("turn left", "flite:slt"))
+    number = read_wav(speech("forty five degrees", "flite:slt"))
+    lead, tail = (int(0.5 * 16000) * 2, int(0.6 * 16000) * 2)
+
+    def said(pause: float) -> list[list[str]]:
+        """The orders of each utterance the recogniser found."""
+        pcm = bytes(lead) + turn[lead:-tail] + bytes(int(pause * 16000) * 2) + number[lead:]
+        decided = [decide(*readings(transcript_of(f), parser)) for f in finals(local_engine, pcm)]
+        return [[o.description for o in d.orders] for d in decided]
+
+    assert said(0.3) == [["turn left 45 degrees"]]
+    apart = said(1.2)
+    assert len(apart) == 2
+    assert apart[0] == ["turn left"]
+    assert apart[1] != ["turn left 45 degrees"]
 
 
 def test_worker_processes_decode_sessions_at_once_as_one_process_does(

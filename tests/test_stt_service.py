@@ -219,7 +219,7 @@ async def test_commands_joined_by_and_with_silence_after_become_two_orders(
         proposal = await listener.proposal("and")
         assert [o.description for o in proposal.orders] == ["turn right", "move forward 1 m"]
         assert not proposal.rejected, proposal.errors
-        assert [h.ear for h in proposal.hearings] == ["grammar", "moonshine"]
+        assert [h.ear for h in proposal.hearings][:2] == ["grammar", "moonshine"]
         assert proposal.decision
         [final] = await listener.final("and")
         assert final.transcription is not None

@@ -391,7 +391,13 @@ async def test_the_state_never_says_stopped_beside_a_running_order(site: Site) -
             lambda _key, update: published.append(update.state),
         )
         (running,) = await client.submit(order("stubborn", seconds=3))
-        await client.wait_state(lambda s: s.current is not None, "the order to run")
+        # Running on the executor, not only sent: a STOP that overtakes the order on its
+        # way withdraws it unrun, and then the executor has no words of its own on it.
+        await async_wait_until(
+            lambda: f"executing {running}" in site.processes.log(executor),
+            30.0,
+            "the executor to run the order",
+        )
         assert isinstance(await client.ask(EmergencyStop()), Stopped)
         state = await client.state()
         assert (state.stopped, state.current) == (True, None)

@@ -19,13 +19,17 @@ from typing import Any
 
 import pytest
 
+from harness.client import Client
 from harness.ports import free_port, free_ports
 from harness.wait import wait_until
 from voicectl.shared.bus import Bus
 from voicectl.shared.keys import RobotKeys
+from voicectl.shared.messages import OrderStatus
+from voicectl.shared.robot.keys import RobotNames
+from voicectl.shared.ros2 import Ros2Codec
 from voicectl.stack import Child, port_in_use, wait_for_port
 
-from .conftest import REPO, Stack, voicectl
+from .conftest import REPO, Stack, started_stack, voicectl
 from .support import on_bus
 from .test_hints import BARE_PATH, hint, run_as_written
 
@@ -349,3 +353,33 @@ def interrupted(process: subprocess.Popen[Any], reader: threading.Thread) -> Ite
         if process.poll() is None:
             os.killpg(process.pid, signal.SIGKILL)
             process.wait()
+
+
+def test_the_speed_limits_of_up_reach_its_executor_and_nav2(tmp_path: Path) -> None:
+    """Issue 43: `voicectl up` took no speed limits. Its --max-speed (or VOICECTL_MAX_SPEED)
+    now reaches its executor, which tells the robot's navigation (the simulator plays Nav2's
+    controller) before each goal: "reach the kitchen" drives at 0.2 m/s at most."""
+    extra = ("--no-stt", "--no-web", "--max-speed", "0.2")
+    with started_stack(tmp_path / "data", flags=extra) as stack:
+
+        async def drive(bus: Bus) -> list[float]:
+            loop = asyncio.get_running_loop()
+            driven: list[tuple[float, float]] = []
+            bus.subscribe(
+                RobotNames().odom,
+                Ros2Codec().read_odometry,
+                lambda _key, odom: driven.append((loop.time(), odom.linear_x)),
+            )
+            said = await asyncio.to_thread(
+                stack.voicectl, "say", "--connect", stack.router, "reach the kitchen"
+            )
+            assert said.returncode == 0, said.stderr
+            [order_id] = json.loads(said.stdout)["order_ids"]
+            client = Client(bus, "robot")
+            record = await client.finished(order_id, timeout=60.0)
+            assert record.status is OrderStatus.SUCCEEDED, record
+            return [speed for _, speed in driven]
+
+        driven = on_bus(stack.router, drive)
+    assert 0.15 < max(driven) <= 0.2 + 1e-9, max(driven)
+    assert any("navigation held to 0.2 m/s (speed_limit)" in line for line in stack.output)

@@ -177,7 +177,9 @@ def test_the_event_stream_starts_with_what_is_known(router: str) -> None:
     assert frames[0] == {
         "type": "parts",
         "robot": "robot",
-        "parts": dict.fromkeys(["converter", "stt", "supervisor", "executor", "robot"], False),
+        "parts": dict.fromkeys(
+            ["converter", "stt", "supervisor", "executor", "robot", "navigation"], False
+        ),
     }
     assert frames[1] == {"type": "robots", "robots": ["robot"]}
 

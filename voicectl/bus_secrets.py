@@ -219,8 +219,9 @@ def robot_access(robot: BusRobot) -> dict[str, list[dict[str, Any]]]:
     says, asks = f"{executor}/says", f"{executor}/asks"
     side_says = f"{side}/says"
     rules = [
-        _rule(says, SAYS, [*keys.executor_says, names.any_cmd_vel]),
-        _rule(asks, ["query"], [names.any_action]),
+        _rule(says, SAYS, [*keys.executor_says, names.any_cmd_vel, names.any_speed_limit]),
+        # The robot's actions; and its supervisor, whom alone it takes orders from.
+        _rule(asks, ["query"], [names.any_action, keys.supervisor]),
         _rule(side_says, SAYS, [names.everything, *bridge_tokens(robot.namespace)]),
     ]
     return {

@@ -15,6 +15,7 @@ from typing import NoReturn
 import msgspec
 
 from voicectl.services.converter.shipped import shipped_orders
+from voicectl.services.executor.config import add_limit_arguments, limit_flags, limits_of
 from voicectl.services.stt.config import add_engine_arguments, engine_options
 from voicectl.services.web.tls import add_tls_arguments, tls_problem
 from voicectl.shared.bus import DEFAULT_ROUTER, Bus
@@ -113,6 +114,7 @@ def build_parser() -> argparse.ArgumentParser:
     up.add_argument("--no-stt", action="store_true", help="do not start speech recognition")
     add_tls_arguments(up)
     add_engine_arguments(up)
+    add_limit_arguments(up)
     up.add_argument(
         "--executor",
         action="append",
@@ -377,6 +379,11 @@ def _up(args: argparse.Namespace) -> int:
     if busy:
         print(f"voicectl up: {busy}", file=sys.stderr)
         return 2
+    try:
+        limits = limit_flags(limits_of(args))
+    except ValueError as exc:
+        print(f"voicectl up: {exc}", file=sys.stderr)
+        return 2
     connect = ["--connect", args.router]
     robot = ["--robot", args.robot]
     transport = ["--transport", args.transport]
@@ -392,7 +399,7 @@ def _up(args: argparse.Namespace) -> int:
         Child("supervisor", ["voicectl.services.supervisor", *robot, *connect]),
         Child(
             "executor",
-            ["voicectl.services.executor", *robot, *transport, *connect]
+            ["voicectl.services.executor", *robot, *transport, *limits, *connect]
             + [arg for spec in args.executor for arg in ("--executor", spec)]
             + [arg for path in args.executors for arg in ("--executors", path)],
         ),

@@ -4,8 +4,10 @@ every service of the stack, a line each.
 Exit status 0 when it is (all are) and 1 when it is not (one is not), for container
 healthchecks (Docker reserves every other status) and scripts. A service is up when its
 liveliness token is on the bus (converter, stt, supervisor, executor, sim), the router
-when a session to it opens, and the panel when its health address answers. Needs only
-what a robot installs.
+when a session to it opens, and the panel when its health address answers. The
+executor's line also says whether the robot's navigation is available, as the executor
+last said (its `ExecutorInfo`): a robot without Nav2 is up all the same. Needs only what
+a robot installs.
 """
 
 from __future__ import annotations
@@ -20,9 +22,10 @@ import urllib.request
 
 import zenoh
 
-from voicectl.shared.bus import Bus
+from voicectl.shared.bus import Bus, json_decoder
 from voicectl.shared.errors import BusError
 from voicectl.shared.keys import ConverterKeys, RobotKeys
+from voicectl.shared.messages import ExecutorInfo
 from voicectl.shared.process import add_bus_arguments, argument_type, bus_options, robot_name
 from voicectl.shared.robot.keys import RobotNames, check_ros_name
 
@@ -138,6 +141,11 @@ async def _check_bus(args: argparse.Namespace, services: list[str]) -> list[tupl
                     if key is not None
                 )
             )
+            executor = RobotKeys(args.robot).alive("executor")
+            up = dict(zip([key for key in keys if key is not None], present, strict=True))
+            navigation = None
+            if up.get(executor):  # what it says of its robot's navigation
+                navigation = await _navigation(bus, args.robot, args.timeout)
     except BusError as exc:  # no router: nothing behind it can be up either
         return [
             (False, f"{_subject(args, service)} is not reachable: {exc}") for service in services
@@ -148,12 +156,36 @@ async def _check_bus(args: argparse.Namespace, services: list[str]) -> list[tupl
         if key is None:
             results.append((True, f"router at {options.where} is up"))
         elif next(answers):
-            results.append((True, f"{_subject(args, service)} is up ({key})"))
+            said = f"{_subject(args, service)} is up ({key})"
+            if service == "executor" and navigation is not None:
+                said += f"; {navigation or 'navigation available'}"
+            results.append((True, said))
         else:
             results.append(
                 (False, f"{_subject(args, service)} is not up: no liveliness token on {key}")
             )
     return results
+
+
+async def _navigation(bus: Bus, robot: str, timeout: float) -> str | None:
+    """What `robot`'s executor last said of its navigation ('' available, else why not,
+    'navigation unavailable: ...'); None when it said nothing within `timeout` seconds."""
+    said: asyncio.Future[ExecutorInfo] = asyncio.get_running_loop().create_future()
+
+    def heard(_key: str, info: ExecutorInfo) -> None:
+        if not said.done():
+            said.set_result(info)
+
+    stop = bus.subscribe(
+        RobotKeys(robot).executor_info, json_decoder(ExecutorInfo), heard, history=True
+    )
+    try:
+        async with asyncio.timeout(timeout):
+            return (await said).navigation
+    except TimeoutError:
+        return None
+    finally:
+        stop()
 
 
 def _token_present(session: zenoh.Session, key: str, timeout: float) -> bool:

@@ -11,6 +11,7 @@ the line; it also stops at the first error, where this reports every bad order.
 
 from __future__ import annotations
 
+import math
 import re
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -351,6 +352,10 @@ def _values(spec: dict[str, Any]) -> dict[str, ParamValue]:
                 f"parameter '{key}' must be a string, number or boolean, "
                 f"got {type(value).__name__}",
                 _line(spec, key),
+            )
+        if isinstance(value, float) and not math.isfinite(value):
+            raise _Problem(
+                f"parameter '{key}' must be a finite number, got {value!r}", _line(spec, key)
             )
         values[key] = value
     return values

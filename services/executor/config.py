@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import os
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -10,8 +12,9 @@ from voicectl.shared.config import data_dir
 from voicectl.shared.process import add_bus_arguments, positive_float, robot_name
 from voicectl.shared.robot_options import RobotOptions, add_robot_arguments, robot_options
 
-from .robot import RESULT_GRACE, SAFE_LIMITS, SpeedLimits
+from .robot import RESULT_GRACE
 from .runner import STALL_LIMIT
+from .speed import SAFE_LIMITS, SpeedLimits
 
 
 @dataclass(frozen=True)
@@ -49,12 +52,7 @@ class ExecutorConfig:
             cancel_deadline=args.cancel_deadline,
             stall_limit=args.stall_limit,
             result_grace=args.result_grace,
-            limits=SpeedLimits(
-                linear=args.limit_linear,
-                angular=args.limit_angular,
-                linear_accel=args.limit_linear_accel,
-                angular_accel=args.limit_angular_accel,
-            ),
+            limits=args.limits,
         )
 
 
@@ -111,24 +109,65 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         help="how long navigation's result may stay out of reach (a link down) before the "
         f"goal is cancelled and the order fails (default: {RESULT_GRACE:g})",
     )
-    limits = parser.add_argument_group(
-        "speed limits", "held to by every velocity the executor sends, whatever an order asks"
+    add_limit_arguments(parser)
+    add_bus_arguments(parser)
+    add_robot_arguments(parser, detect=True)
+    args = parser.parse_args(argv)
+    try:
+        args.limits = limits_of(args)
+    except ValueError as exc:
+        parser.error(str(exc))
+    return args
+
+
+LIMITS = (
+    ("--max-speed", "linear", "m/s", "VOICECTL_MAX_SPEED"),
+    ("--max-angular-speed", "angular", "rad/s", "VOICECTL_MAX_ANGULAR_SPEED"),
+    ("--max-accel", "linear_accel", "m/s², speeding up", "VOICECTL_MAX_ACCEL"),
+    ("--max-angular-accel", "angular_accel", "rad/s², speeding up", "VOICECTL_MAX_ANGULAR_ACCEL"),
+)
+"""The speed limits' flags, their `SpeedLimits` fields, units and environment variables."""
+
+
+def add_limit_arguments(parser: argparse.ArgumentParser) -> None:
+    """The speed limits' flags (the executor's, and `voicectl up`'s, which passes them on)."""
+    group = parser.add_argument_group(
+        "speed limits",
+        "held to by every velocity the executor sends, whatever an order asks; Nav2's "
+        "controller gets the top speed on its speed_limit topic before each goal. Each "
+        "flag has an environment variable: VOICECTL_MAX_SPEED, ...; a flag wins over it",
     )
-    for flag, limit, unit in (
-        ("--max-speed", "linear", "m/s"),
-        ("--max-angular-speed", "angular", "rad/s"),
-        ("--max-accel", "linear_accel", "m/s², speeding up"),
-        ("--max-angular-accel", "angular_accel", "rad/s², speeding up"),
-    ):
-        default = getattr(SAFE_LIMITS, limit)
-        limits.add_argument(
+    for flag, limit, unit, variable in LIMITS:
+        group.add_argument(
             flag,
             dest=f"limit_{limit}",
             type=positive_float,
-            default=default,
+            default=None,
             metavar=unit.split(",")[0],
-            help=f"{unit} (default: {default:g})",
+            help=f"{unit} (default: ${variable}, else {getattr(SAFE_LIMITS, limit):g})",
         )
-    add_bus_arguments(parser)
-    add_robot_arguments(parser, detect=True)
-    return parser.parse_args(argv)
+
+
+def limits_of(args: argparse.Namespace, environ: Mapping[str, str] = os.environ) -> SpeedLimits:
+    """The limits the flags give, else their environment variables, else `SAFE_LIMITS`;
+    ValueError naming the variable whose value is not a number above 0."""
+    values: dict[str, float] = {}
+    for _flag, limit, _unit, variable in LIMITS:
+        given: float | None = getattr(args, f"limit_{limit}")
+        text = environ.get(variable, "").strip()
+        if given is None and text:
+            try:
+                given = positive_float(text)
+            except argparse.ArgumentTypeError as exc:
+                raise ValueError(f"{variable}: {exc}") from None
+        values[limit] = given if given is not None else getattr(SAFE_LIMITS, limit)
+    return SpeedLimits(**values)
+
+
+def limit_flags(limits: SpeedLimits) -> list[str]:
+    """`limits` as the executor's flags, for whoever starts one (`voicectl up`)."""
+    return [
+        part
+        for flag, limit, _unit, _variable in LIMITS
+        for part in (flag, repr(getattr(limits, limit)))
+    ]

@@ -6,9 +6,10 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable
 
-from voicectl.shared.errors import OrderFailed
+from voicectl.shared.errors import OrderFailed, UnsafeCommand
 from voicectl.shared.messages import TargetPose
 from voicectl.shared.robot.keys import RobotNames
+from voicectl.shared.robot.velocity import unsafe_velocity
 from voicectl.shared.ros2 import (
     CdrError,
     CmdVelType,
@@ -34,15 +35,25 @@ class OrderRobot:
 
     The handle also notes whether the order has commanded the robot (anything but
     reading it or stopping it), and refuses commands while `unsupervised()` says no one
-    could STOP the robot: they raise OrderFailed and send nothing."""
+    could STOP the robot: they raise OrderFailed and send nothing.
+
+    A command with a speed or a goal that is not a finite number is never sent: the robot
+    is stopped, the handle revoked, `on_unsafe(reason)` told (the order fails, whatever
+    the executor does with the UnsafeCommand raised)."""
 
     def __init__(
-        self, link: RobotLink, order_id: str, unsupervised: Callable[[], bool] = lambda: False
+        self,
+        link: RobotLink,
+        order_id: str,
+        unsupervised: Callable[[], bool] = lambda: False,
+        on_unsafe: Callable[[str], None] = lambda _reason: None,
     ) -> None:
         self._link = link
         self._order_id = order_id
         self._revoked = False
         self._unsupervised = unsupervised
+        self._on_unsafe = on_unsafe
+        """Told why, when the order asked something unsafe (`UnsafeCommand`): it fails."""
         self.commanded = False
         """Whether the order has moved the robot, navigated, or sent it anything else."""
         self.problems: list[str] = []
@@ -85,13 +96,24 @@ class OrderRobot:
     def codec(self) -> Ros2Codec:
         return self._link.codec
 
+    def _unsafe(self, refused: UnsafeCommand) -> UnsafeCommand:
+        """The order asked something no robot may be sent: stopped, revoked, failed."""
+        self._link.stop_moving()
+        self.revoke()
+        self._on_unsafe(str(refused))
+        return refused
+
     def drive(self, linear_x: float, angular_z: float) -> None:
         """Publish one velocity command on the robot's cmd_vel (a zero one is a stop,
         always allowed, even once the handle is revoked)."""
         if linear_x == 0.0 and angular_z == 0.0:
             self._link.drive(0.0, 0.0)  # even revoked: an executor's clean-up may stop
             return
-        self._command().drive(linear_x, angular_z)
+        link = self._command()
+        try:
+            link.drive(linear_x, angular_z)
+        except UnsafeCommand as exc:
+            raise self._unsafe(exc) from None
 
     async def next_pose(self, timeout: float = 5.0) -> Pose2D:
         return await self._live().next_pose(timeout)
@@ -102,16 +124,30 @@ class OrderRobot:
     async def navigate(
         self, target: TargetPose, on_feedback: Callable[[Pose2D, float], None]
     ) -> None:
-        await self._command().navigate(target, on_feedback, self.problems.append)
+        link = self._command()
+        try:
+            await link.navigate(target, on_feedback, self.problems.append)
+        except UnsafeCommand as exc:
+            raise self._unsafe(exc) from None
 
     def publish(self, name: str, ros_type: str, payload: bytes) -> None:
         """Publish CDR bytes on any other topic of the robot (`names.topic("name")`, of
         ROS type `ros_type`): any topic may move it. A velocity on cmd_vel goes as `drive`
-        sends it, held to the speed limits (OrderFailed if it cannot be read)."""
+        sends it, held to the speed limits (OrderFailed if it cannot be read); a velocity
+        on any topic with an axis that is not a finite number is refused."""
         link = self._command()
+        try:
+            self._publish(link, name, ros_type, payload)
+        except UnsafeCommand as exc:
+            raise self._unsafe(exc) from None
+
+    def _publish(self, link: RobotLink, name: str, ros_type: str, payload: bytes) -> None:
         if name != link.names.cmd_vel:
-            link.transport.publish(name, ros_type, payload)
+            link.transport.publish(name, ros_type, payload)  # refuses what is not finite
             return
+        unsafe = unsafe_velocity(ros_type, payload)
+        if unsafe is not None:
+            raise UnsafeCommand(f"refused {unsafe} on '{name}'; the robot was stopped")
         kind = CmdVelType.of(ros_type)
         try:
             if kind is None:

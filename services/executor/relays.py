@@ -89,7 +89,13 @@ class MapRelay:
 
     async def _relay(self, grid: OccupancyGrid) -> None:
         png = await asyncio.to_thread(map_png, grid)  # a large map takes a while
-        origin = TargetPose(frame=grid.frame, x=grid.origin.x, y=grid.origin.y, yaw=grid.origin.yaw)
+        try:
+            origin = TargetPose(
+                frame=grid.frame, x=grid.origin.x, y=grid.origin.y, yaw=grid.origin.yaw
+            )
+        except ValueError as exc:  # a robot's map whose origin is not finite numbers
+            _LOGGER.warning("the robot's map is not relayed: its origin is unusable: %s", exc)
+            return
         self._latest.publish(
             RobotMap(
                 width=grid.width,

@@ -8,10 +8,11 @@ its stop). Each order gets an `OrderRobot` (fence.py), a handle onto the link th
 revoked when the order ends, so that an executor that outlives its order can never move the
 robot again; relays.py publishes the pose and the map for voicectl's own panels.
 
-Every velocity the executor publishes goes through `RobotLink.drive`, which holds it to
-the robot's `SpeedLimits` (top speeds, and how fast it may speed up), whatever an order
-asks. Nav2's goals carry no speed: navigation drives at the speeds its own controller is
-configured with, on the robot.
+Every velocity the executor publishes goes through `RobotLink.drive`, which sends it as
+the robot's `SpeedLimits` let it go (speed.py: top speeds, how fast it may speed up, and
+never a speed that is not a finite number), whatever an order asks. A goal whose pose is
+not finite is never sent either. Nav2's goals carry no speed: before each goal, Nav2's
+controller is told the top linear speed on its `speed_limit` topic.
 """
 
 from __future__ import annotations
@@ -23,9 +24,7 @@ import math
 import time
 from collections.abc import Callable
 
-import msgspec
-
-from voicectl.shared.errors import BusError, OrderFailed
+from voicectl.shared.errors import BusError, OrderFailed, UnsafeCommand
 from voicectl.shared.geometry import compose, map_cell
 from voicectl.shared.messages import TargetPose
 from voicectl.shared.robot import Interface, RobotTransport, Role
@@ -33,8 +32,10 @@ from voicectl.shared.robot.action import ActionClient
 from voicectl.shared.robot.stop import RobotStop
 from voicectl.shared.robot_options import RobotOptions
 from voicectl.shared.ros2 import (
+    NAVIGATE_FEEDBACK,
     NAVIGATION_ERRORS,
     SAME_RESULT,
+    SPEED_LIMIT,
     CameraType,
     CdrError,
     CmdVelType,
@@ -52,6 +53,8 @@ from voicectl.shared.ros2 import (
     new_goal_id,
 )
 from voicectl.shared.throttle import Throttled
+
+from .speed import CONTROL_STEP, SAFE_LIMITS, Refuse, SpeedLimits, Take, command
 
 _LOGGER = logging.getLogger(__name__)
 
@@ -71,48 +74,9 @@ PROBE_TIMEOUT = 3.0
 ROBOT_FRAME = "base_link"
 ODOM_FRAME = "odom"
 ODOMETRY = "nav_msgs/msg/Odometry"
-CONTROL_STEP = 0.1
-"""Seconds of speeding up one velocity command may use at most: the first after a pause
-starts from rest, however long the pause."""
 STALE_COMMAND = 0.5
 """Seconds after which the last command no longer says how fast the robot goes (a base's
 cmd_vel watchdog has stopped it, or a stop from elsewhere has): it counts as at rest."""
-
-
-class SpeedLimits(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
-    """How fast the executor lets any order move the robot, whatever the order asks: every
-    velocity command is held to these (`--max-speed` ...). Slowing down is never held back."""
-
-    linear: float = 0.5
-    """m/s, forwards or backwards."""
-    angular: float = 1.5
-    """rad/s, either way."""
-    linear_accel: float = 1.0
-    """m/s², speeding up."""
-    angular_accel: float = 3.0
-    """rad/s², speeding up."""
-
-    def __post_init__(self) -> None:
-        for name in self.__struct_fields__:
-            value = getattr(self, name)
-            if not 0.0 < value < math.inf:
-                raise ValueError(f"speed limit {name} must be a number above 0, not {value}")
-
-
-SAFE_LIMITS = SpeedLimits()
-"""The limits of a robot configured with none: a walking pace, a gentle start."""
-
-
-def limited(wanted: float, last: float, top: float, accel: float, dt: float) -> float:
-    """`wanted` held to `top`, and to speeding up by at most `accel * dt` from `last`;
-    slower than `last` (or zero) at once, and through zero at once when it reverses."""
-    wanted = max(-top, min(top, wanted))
-    same_way = last != 0.0 and (wanted > 0.0) == (last > 0.0)
-    if wanted == 0.0 or (same_way and abs(wanted) <= abs(last)):
-        return wanted
-    base = last if same_way else 0.0
-    step = accel * dt
-    return base + max(-step, min(step, wanted - base))
 
 
 class RobotRevoked(OrderFailed):
@@ -155,8 +119,10 @@ class RobotLink:
         self._distro_checked = False
         self._probing: asyncio.Task[None] | None = None
         self._probe_again = False
-        self.navigation_seen = False
-        """Whether the robot's NavigateToPose server has shown itself (announced or answered)."""
+        self._navigation_seen = False
+        self.navigation_missing = transport.lacks(NAVIGATE_FEEDBACK)
+        """Why this process cannot speak Nav2's NavigateToPose at all (on DDS, nav2_msgs
+        is not installed here); None when it can."""
         self.announced_cmd_vel: CmdVelType | None = None
         """What the robot's graph says its cmd_vel subscribers take."""
         self._cmd_vel_hashes: dict[CmdVelType, str] = {}
@@ -208,19 +174,57 @@ class RobotLink:
         """Call `listener(pose)` on the loop for every odometry pose."""
         self._pose_listeners.append(listener)
 
+    @property
+    def navigation_seen(self) -> bool:
+        """Whether the robot's NavigateToPose server is there: announced (and not gone
+        since), or it answered."""
+        return self._navigation_seen
+
+    @navigation_seen.setter
+    def navigation_seen(self, seen: bool) -> None:
+        if seen != self._navigation_seen:
+            self._navigation_seen = seen
+            self._on_change()
+
+    @property
+    def navigation_problem(self) -> str | None:
+        """Why a navigation order would fail before anything is sent, in one line: Nav2's
+        interfaces missing here, no navigation announced by the robot, or a distribution
+        other than the configured one; None while nothing says so."""
+        if self.navigation_missing is not None:
+            return (
+                "navigation unavailable: Nav2's interfaces are missing where the executor "
+                f"runs (no nav2_msgs); {self.navigation_missing}"
+            )
+        if not self.navigation_seen:
+            return (
+                f"navigation unavailable: the robot announces no "
+                f"'{self.names.topic(self.names.navigate_name)}' action on the "
+                f"{self.transport.kind} transport (is Nav2 running, under that name? "
+                "--navigate names it)"
+            )
+        return self.distro_problem
+
     def start(self) -> None:
         codec = self.codec
         names = self.names
         self.transport.subscribe(names.odom, ODOMETRY, codec.read_odometry, self._on_odom)
-        self.navigation.follow()
+        if self.navigation_missing is None:
+            self.navigation.follow()
+        else:  # velocity orders run all the same; navigation orders fail at once
+            _LOGGER.warning("%s", self.navigation_problem)
         self.transport.discover(self._on_interface)
         self._probe_soon()
 
     def _on_interface(self, interface: Interface, present: bool) -> None:
+        names = self.names
         if not present:
+            if interface.role is Role.ACTION_SERVER and interface.name == names.topic(
+                names.navigate_name
+            ):
+                self.navigation_seen = False  # Nav2 has gone (or its bridge)
             return
         self._adopt_announced_distro()
-        names = self.names
         match interface.role:
             case Role.SUBSCRIBER if interface.name == names.cmd_vel:
                 self._learn_cmd_vel(interface.ros_type, interface.type_hash)
@@ -280,7 +284,7 @@ class RobotLink:
     def _probe_soon(self) -> None:
         """Probe the distribution now, or again once the probe under way has failed (a
         server announced meanwhile may answer where the first probe found none)."""
-        if self._distro_checked:
+        if self._distro_checked or self.navigation_missing is not None:
             return
         if self._probing is not None and not self._probing.done():
             self._probe_again = True
@@ -307,6 +311,7 @@ class RobotLink:
         except CdrError as exc:
             self.distro_problem = f"navigation's get_result reply is in no known layout: {exc}"
             _LOGGER.error("%s", self.distro_problem)
+            self._on_change()
             return
         self._distro_checked = True
         configured = self.options.distro
@@ -321,6 +326,7 @@ class RobotLink:
                 f"as --distro says; restart the executor with --distro {found} (or auto)"
             )
             _LOGGER.error("%s", self.distro_problem)
+            self._on_change()
             return
         if self.distro is not found:
             self.distro = found
@@ -394,8 +400,10 @@ class RobotLink:
             unsubscribe()
 
     def drive(self, linear_x: float, angular_z: float) -> None:
-        """Publish one velocity command on cmd_vel, in the type the robot takes, held to
-        the speed limits. Each waits for room rather than being dropped, and goes first."""
+        """Publish one velocity command on cmd_vel, in the type the robot takes, as the
+        speed limits let it go (`speed.command`). Each waits for room rather than being
+        dropped, and goes first. One the limits refuse (a speed that is not a finite
+        number) is not sent: the robot is stopped, and UnsafeCommand says why."""
         linear_x, angular_z = self._limit(linear_x, angular_z)
         kind = self.cmd_vel_type
         if kind is CmdVelType.TWIST and self.announced_cmd_vel is None and not self._warned_cmd_vel:
@@ -412,25 +420,30 @@ class RobotLink:
         self.transport.publish(self.names.cmd_vel, kind.ros_type, payload, urgent=True)
 
     def _limit(self, linear_x: float, angular_z: float) -> tuple[float, float]:
-        """The command held to `limits`, from the last one sent; remembered as sent."""
+        """The command as the limits let it go, from the last one sent; remembered as
+        sent. A refused one stops the robot and raises UnsafeCommand."""
         now = time.monotonic()
         last_linear, last_angular, at = self._commanded
         if now - at > STALE_COMMAND:
             last_linear = last_angular = 0.0
         dt = min(now - at, CONTROL_STEP)
         top = self.limits
-        linear = limited(linear_x, last_linear, top.linear, top.linear_accel, dt)
-        angular = limited(angular_z, last_angular, top.angular, top.angular_accel, dt)
-        if abs(linear_x) > top.linear or abs(angular_z) > top.angular:
-            self._noise.warning(
-                "speed",
-                "an order asked %g m/s, %g rad/s: held to %g m/s, %g rad/s (--max-speed, "
-                "--max-angular-speed)",
-                linear_x,
-                angular_z,
-                top.linear,
-                top.angular,
-            )
+        match command(linear_x, angular_z, (last_linear, last_angular), top, dt):
+            case Refuse(reason=reason):
+                sent = self.stop_moving()
+                _LOGGER.error("%s: nothing of it sent; %s", reason, sent)
+                raise UnsafeCommand(f"{reason}; the robot was stopped")
+            case Take(linear=linear, angular=angular):
+                if abs(linear_x) > top.linear or abs(angular_z) > top.angular:
+                    self._noise.warning(
+                        "speed",
+                        "an order asked %g m/s, %g rad/s: held to %g m/s, %g rad/s "
+                        "(--max-speed, --max-angular-speed)",
+                        linear_x,
+                        angular_z,
+                        top.linear,
+                        top.angular,
+                    )
         self._commanded = (linear, angular, now)
         return linear, angular
 
@@ -480,13 +493,19 @@ class RobotLink:
         again at every replan, so that it moves with the robot: there it is turned into an
         'odom' goal from the current odometry first.
         """
+        frame, pose = target.frame, Pose2D(x=target.x, y=target.y, yaw=target.yaw)
+        self._refuse_unless_finite(frame, pose)
+        unavailable = self.navigation_problem
+        if unavailable is not None:
+            raise OrderFailed(unavailable)
         distro = await self._known_distro()
         navigation = self.navigation
         if navigation.codec.distro is not distro:  # set with the distribution; kept honest here
             navigation.codec = Ros2Codec(distro)
-        frame, pose = target.frame, Pose2D(x=target.x, y=target.y, yaw=target.yaw)
         if distro is RosDistro.HUMBLE and frame == ROBOT_FRAME:
             pose, frame = compose(await self.next_pose(), pose), ODOM_FRAME
+            self._refuse_unless_finite(frame, pose)  # odometry's own numbers may not be
+        await self._limit_navigation()
         goal_id = new_goal_id()
 
         def feedback(message: NavigateFeedback) -> None:
@@ -515,6 +534,31 @@ class RobotLink:
                     on_problem(problem)
                 raise
         _raise_unless_succeeded(result, distro)
+
+    async def _limit_navigation(self) -> None:
+        """Hold Nav2's controller to the top linear speed of `limits` for the goal about
+        to be sent: its speed_limit topic (m/s), which Nav2 keeps until told otherwise. Nav2
+        takes no angular limit there. Where it cannot be sent, the goal goes all the same,
+        at the speeds Nav2 is configured with, and the log says so. Off the loop: a DDS
+        publisher's first message waits for DDS to match it."""
+        name = self.names.speed_limit
+        missing = self.transport.lacks(SPEED_LIMIT)
+        try:
+            if missing is not None:
+                raise BusError(missing)
+            payload = self.codec.speed_limit(self.limits.linear, time.time())
+            await asyncio.to_thread(self.transport.publish, name, SPEED_LIMIT, payload)
+        except BusError as exc:
+            self._noise.warning("speed_limit", "Nav2's speed limit not sent on '%s': %s", name, exc)
+
+    def _refuse_unless_finite(self, frame: str, pose: Pose2D) -> None:
+        """UnsafeCommand, the robot stopped, for a goal pose that is not finite numbers."""
+        if all(math.isfinite(value) for value in (pose.x, pose.y, pose.yaw)):
+            return
+        sent = self.stop_moving()
+        goal = f"x {pose.x}, y {pose.y}, yaw {pose.yaw} in '{frame}'"
+        _LOGGER.error("refused a goal at %s: not a finite pose; %s", goal, sent)
+        raise UnsafeCommand(f"a goal at {goal}: not a finite pose; not sent, the robot stopped")
 
     async def _why_refused(self, target: TargetPose) -> str:
         """What the robot's own map says of a goal navigation refused (Nav2 says nothing):

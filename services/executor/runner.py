@@ -41,9 +41,11 @@ from voicectl.shared.messages import (
     Running,
 )
 from voicectl.shared.process import Service, forever
+from voicectl.shared.throttle import Throttled
 
 from .fence import OrderRobot
 from .framework import Bindings, ExecutionContext, Executor, ParamsMismatch, order_params
+from .owner import OwnerCheck, Refuse
 from .robot import RobotLink
 from .watchdog import LoopWatchdog
 
@@ -55,6 +57,16 @@ STALL_LIMIT = 0.5
 """Seconds the event loop may stall before an order commanding the robot is halted."""
 SUPERVISOR_LOST = "supervisor lost: robot stopped (no one could STOP it)"
 """How an order that commanded the robot ends when the supervisor goes."""
+
+
+class _Offered:
+    """An order offered and being checked against who supervises the robot (`OwnerCheck`,
+    a moment on the bus): not started yet. A cancel or a halt that comes meanwhile, which
+    would have found it running had it started at once, withdraws it: it never starts."""
+
+    def __init__(self) -> None:
+        self.withdrawn = ""
+        """Why it will not start, once something has withdrawn it."""
 
 
 class _Execution:
@@ -115,6 +127,13 @@ class ExecutorService(Service):
         self._loop: asyncio.AbstractEventLoop | None = None
         self._stalled: _Execution | None = None
         """The order halted because the loop stalled under it, until the loop runs again."""
+        self._navigation: Callable[[], None] | None = None
+        """Withdraws the navigation token, while it is held."""
+        self._offered: dict[str, _Offered] = {}
+        """Orders offered and being checked, by id."""
+        self._owner = OwnerCheck(bus, keys.robot)
+        """Orders are taken from the robot's own supervisor only."""
+        self._noise = Throttled(_LOGGER)
 
     async def start(self) -> None:
         self._robot.start()
@@ -155,9 +174,25 @@ class ExecutorService(Service):
             cmd_vel_type=robot.cmd_vel_type,
             cmd_vel_hash=robot.cmd_vel_hash,
             navigate=robot.names.navigate_name,
+            navigation=robot.navigation_problem or "",
         )
-        if self._info is not None:
+        if self._info is not None:  # started
             self._info.publish(info)
+            self._say_navigation(robot.navigation_problem is None)
+
+    def _say_navigation(self, available: bool) -> None:
+        """Hold the robot's navigation token (`alive/navigation`, a part the panel shows)
+        while navigation is there, and say when that changes."""
+        if available == (self._navigation is not None):
+            return
+        if available:
+            self._navigation = self._bus.announce(self._keys.alive("navigation"))
+            _LOGGER.info("the robot's navigation is available")
+        else:
+            assert self._navigation is not None
+            self._navigation()
+            self._navigation = None
+            _LOGGER.warning("%s", self._robot.navigation_problem)
 
     async def end_stray_motion(self) -> None:
         """At start nothing of this executor runs: whatever moves the robot (a goal an
@@ -180,10 +215,26 @@ class ExecutorService(Service):
     async def handle(self, request: ExecutorRequest) -> Message:
         match request:
             case Execute(order_id=order_id, order=order):
+                offered = self._offered[order_id] = _Offered()
+                try:
+                    verdict = await self._owner.check(request)
+                finally:
+                    if self._offered.get(order_id) is offered:
+                        del self._offered[order_id]
+                if offered.withdrawn:
+                    return Rejected(order_id=order_id, reason=offered.withdrawn)
+                match verdict:
+                    case Refuse(reason=reason):
+                        self._noise.warning("sender", "refused order %s: %s", order_id, reason)
+                        return Rejected(order_id=order_id, reason=reason)
                 return self._start(order_id, order)
             case CancelOrder(order_id=order_id):
                 running = self._running
                 if running is None or running.order_id != order_id:
+                    checked = self._offered.get(order_id)
+                    if checked is not None:  # offered, still being checked: it never starts
+                        checked.withdrawn = "cancelled before it started"
+                        return self._finished(order_id, OrderStatus.CANCELLED, "cancelled")
                     # Finished as the cancel arrived? Then say how, so it is recorded right.
                     finished = self._recent.get(order_id)
                     if finished is not None:
@@ -211,6 +262,8 @@ class ExecutorService(Service):
         run again; the coroutine returned cancels the robot's goals, waits for the order to
         end, and says what the robot did not confirm (None if it did)."""
         self._robot.stop_moving()
+        for offered in self._offered.values():
+            offered.withdrawn = f"{why} before it started"
         running = self._running
         if running is not None:
             # Revoked at once, without the cancel deadline: whatever the executor does
@@ -373,7 +426,12 @@ class ExecutorService(Service):
             params = order_params(executor, order)
         except ParamsMismatch as exc:
             return Rejected(order_id=order_id, reason=str(exc))
-        robot = OrderRobot(self._robot, order_id, lambda: self.supervisor_lost)
+        robot = OrderRobot(
+            self._robot,
+            order_id,
+            lambda: self.supervisor_lost,
+            on_unsafe=lambda reason: self._fail_unsafe(order_id, reason),
+        )
         task = asyncio.create_task(self._run(order_id, executor, order, robot, params))
         self._running = _Execution(order_id, task, robot)
         return Accepted(order_id=order_id)
@@ -411,6 +469,23 @@ class ExecutorService(Service):
             status, message = OrderStatus.FAILED, f"{type(exc).__name__}: {exc}"
         self._report(order_id, status, message)
 
+    def _fail_unsafe(self, order_id: str, reason: str) -> None:
+        """Order `order_id` asked to move the robot by a value that is not a finite number:
+        the robot is stopped already and the handle revoked; the order fails with `reason`,
+        whatever its executor does with the error (it is cancelled if it goes on)."""
+        running = self._running
+        if running is None or running.order_id != order_id or running.reported:
+            return
+        running.cancel_status, running.cancel_reason = OrderStatus.FAILED, reason
+        running.ended_by = running.ended_by or (OrderStatus.FAILED, reason)
+        if self._loop is not None:  # an executor may drive from a thread of its own
+            self._loop.call_soon_threadsafe(self._end_if_running, running)
+
+    @staticmethod
+    def _end_if_running(running: _Execution) -> None:
+        if not running.task.done() and not running.task.cancelling():
+            running.task.cancel()
+
     def _report(self, order_id: str, status: OrderStatus, message: str) -> None:
         running = self._running
         if running is None or running.order_id != order_id or running.reported:
@@ -424,12 +499,21 @@ class ExecutorService(Service):
             message = why if message == why else f"{why}; it then said: {message}"
         if running.robot.problems:
             message = "; ".join([message, *running.robot.problems])
+        if status is OrderStatus.FAILED and running.robot.commanded:
+            # Whatever failed (a goal it could not even make, an exception), the robot is
+            # not left moving on the order's last command.
+            self._robot.stop_moving()
+        self._finished(order_id, status, message)
+
+    def _finished(self, order_id: str, status: OrderStatus, message: str) -> OrderFinished:
+        """Say how order `order_id` ended (kept for a cancel that crosses its end)."""
         _LOGGER.info("order %s %s: %s", order_id, status, message)
         finished = OrderFinished(order_id=order_id, status=status, message=message)
         self._recent[order_id] = finished
         while len(self._recent) > RECENT_RESULTS:
             self._recent.popitem(last=False)
         self._bus.publish(self._keys.executor_events, finished)
+        return finished
 
     def _forget_abandoned(self, task: asyncio.Task[None]) -> None:
         order_id = self.abandoned.pop(task, None)

@@ -9,7 +9,9 @@ ros2dds exposes a robot, or as a robot whose nodes run on rmw_zenoh, with the sa
   CompressedImage) out at 2 Hz; ``map`` (nav_msgs/OccupancyGrid, its world's walls,
   `world.py`) every 2 s; every name can be remapped;
 - ``navigate_to_pose/_action/{send_goal,get_result,cancel_goal}`` queryables and
-  ``.../{feedback,status}`` publications, behaving like Nav2's bt_navigator;
+  ``.../{feedback,status}`` publications, behaving like Nav2's bt_navigator, and
+  ``speed_limit`` (nav2_msgs/SpeedLimit) in, which holds its controller to a top linear
+  speed (m/s or percent; 0 lifts it), as Nav2's controller server does;
 - a liveliness token per interface, as the bridge or rmw_zenoh announces it, naming its
   ROS type.
 
@@ -40,6 +42,7 @@ from __future__ import annotations
 import asyncio
 import collections
 import contextlib
+import dataclasses
 import enum
 import io
 import logging
@@ -62,6 +65,7 @@ from voicectl.shared.ros2 import (
     NAVIGATE_GET_RESULT,
     NAVIGATE_SEND_GOAL,
     NAVIGATE_TO_POSE,
+    SPEED_LIMIT,
     CameraType,
     CancelCode,
     CmdVelType,
@@ -116,6 +120,9 @@ class SimFault(enum.StrEnum):
     """No get_result is ever answered."""
     GOAL_ABORTS = "goal-aborts"
     """Every goal aborts after a second, with an error code on Jazzy."""
+    NO_NAVIGATION = "no-navigation"
+    """No Nav2 at all: no navigate_to_pose action is served or announced (a robot driven
+    by cmd_vel alone)."""
 
 
 @dataclass(frozen=True)
@@ -184,6 +191,8 @@ class SimNode(Service):
         self._clock = clock
         self._epoch = clock()
         self._robot = Robot(config.limits)
+        self._navigation_limits = config.limits
+        """What navigation drives at, at most: the robot's limits, or a speed limit."""
         self._map = codec.occupancy_grid(floor_plan(config.bounds))
         self._active: _Goal | None = None
         self._finished: collections.deque[_Goal] = collections.deque(maxlen=HISTORY)
@@ -204,17 +213,25 @@ class SimNode(Service):
             lambda raw: self._codec.read_velocity(kind, raw),
             self._on_cmd_vel,
         )
-        transport.serve(names.navigate("send_goal"), NAVIGATE_SEND_GOAL, self._on_send_goal)
-        transport.serve(names.navigate("get_result"), NAVIGATE_GET_RESULT, self._on_get_result)
-        transport.serve(names.navigate("cancel_goal"), CANCEL_GOAL, self._on_cancel_goal)
-        for interface in (
+        offered = [
             Interface(Role.SUBSCRIBER, names.cmd_vel, kind.ros_type),
             Interface(Role.PUBLISHER, names.odom, ODOMETRY),
             Interface(Role.PUBLISHER, names.tf, TF),
             Interface(Role.PUBLISHER, names.camera_image, self._config.camera_type.ros_type),
             Interface(Role.PUBLISHER, names.map, OCCUPANCY_GRID),
-            Interface(Role.ACTION_SERVER, names.topic(names.navigate_name), NAVIGATE_TO_POSE),
-        ):
+        ]
+        if SimFault.NO_NAVIGATION not in self._config.faults:
+            transport.subscribe(
+                names.speed_limit, SPEED_LIMIT, self._codec.read_speed_limit, self._on_speed_limit
+            )
+            offered.append(Interface(Role.SUBSCRIBER, names.speed_limit, SPEED_LIMIT))
+            transport.serve(names.navigate("send_goal"), NAVIGATE_SEND_GOAL, self._on_send_goal)
+            transport.serve(names.navigate("get_result"), NAVIGATE_GET_RESULT, self._on_get_result)
+            transport.serve(names.navigate("cancel_goal"), CANCEL_GOAL, self._on_cancel_goal)
+            offered.append(
+                Interface(Role.ACTION_SERVER, names.topic(names.navigate_name), NAVIGATE_TO_POSE)
+            )
+        for interface in offered:
             transport.offer(interface)
         faults = ", ".join(sorted(self._config.faults)) or "none"
         _LOGGER.info(
@@ -276,7 +293,7 @@ class SimNode(Service):
             return
         if goal.relative is not None and now - goal.planned_at >= REPLAN_S:
             # Humble: the planner transforms the base_link goal again, from where the robot is.
-            goal.controller = GoToPose(compose(robot.pose, goal.relative), self._config.limits)
+            goal.controller = GoToPose(compose(robot.pose, goal.relative), self._navigation_limits)
             goal.planned_at = now
         linear, angular = goal.controller.command(robot.pose, dt)
         robot.step(linear, angular, dt)
@@ -366,6 +383,17 @@ class SimNode(Service):
 
     # --- topic and action handlers --------------------------------------------------------
 
+    def _on_speed_limit(self, limit: tuple[float, bool]) -> None:
+        """Nav2's controller held to a top linear speed, from this goal on (0: its own)."""
+        speed, percentage = limit
+        top = self._config.limits.max_linear
+        if math.isfinite(speed) and speed > 0.0:
+            top = min(top, top * min(speed, 100.0) / 100.0 if percentage else speed)
+        self._navigation_limits = dataclasses.replace(self._config.limits, max_linear=top)
+        if self._active is not None:  # the goal under way too, as Nav2's controller does
+            self._active.controller.limits = self._navigation_limits
+        _LOGGER.info("navigation held to %g m/s (speed_limit)", top)
+
     def _on_cmd_vel(self, velocity: tuple[float, float]) -> None:
         if self._active is not None:
             _LOGGER.debug("cmd_vel ignored while a goal is active")
@@ -403,7 +431,7 @@ class SimNode(Service):
         self._robot.clear_cmd_vel()
         self._active = _Goal(
             goal_id=request.goal_id,
-            controller=GoToPose(target, self._config.limits),
+            controller=GoToPose(target, self._navigation_limits),
             started_at=self.sim_time(),
             accepted_stamp=stamp,
             relative=relative,

@@ -15,9 +15,6 @@ from collections.abc import Callable, Coroutine
 from dataclasses import dataclass
 from typing import Any
 
-import msgspec
-import zenoh
-
 from voicectl.shared.bus import Bus, Pending, json_decoder
 from voicectl.shared.errors import ServiceError
 from voicectl.shared.keys import ANY, RobotKeys, last_chunk, robot_of
@@ -27,15 +24,13 @@ from voicectl.shared.messages import (
     ExecutorEvent,
     ExecutorInfo,
     Failed,
-    GetState,
     Message,
     Release,
-    StateReply,
     Submit,
     Submitted,
-    SupervisorReply,
     SupervisorRequest,
 )
+from voicectl.shared.ownership import OWNER_CHECK, answering, owner_tokens, owners
 from voicectl.shared.process import Service
 from voicectl.shared.robot.stop import prepare
 from voicectl.shared.throttle import Throttled
@@ -50,8 +45,6 @@ CLAIM_WINDOW = 2.0
 """Seconds after this supervisor claimed a robot during which another's claim counts as
 made at the same time, and is settled by Zenoh id; any later one is a newcomer's, which
 never displaces it."""
-OWNER_CHECK = 2.0
-"""Seconds to find who holds a robot's owner token, and whether it answers for it."""
 KNOWN_LISTED = 10
 """Robots named in the refusal of a request for an unknown one."""
 
@@ -125,7 +118,6 @@ class SupervisorService(Service):
         self._admitting: dict[str, bool] = {}
         """Robots whose executor announced itself, being checked for another supervisor;
         with whether its token is still up."""
-        self._decode_reply = json_decoder(SupervisorReply)
         self._decode_event = json_decoder(ExecutorEvent)
         self._decode_info = json_decoder(ExecutorInfo)
         self._noise = Throttled(_LOGGER)
@@ -291,42 +283,22 @@ class SupervisorService(Service):
     # --- who serves a robot ---------------------------------------------------------------
 
     async def _rival(self, robot: str) -> str | None:
-        """The Zenoh id of another supervisor serving `robot`: one whose owner token is up
-        and that answers for the robot; None if there is none."""
-        for tag in await asyncio.to_thread(self._holders, robot):
-            if tag == self._zid:
-                continue
-            if await asyncio.to_thread(self._answers, robot, tag):
-                return tag
-            self._forged(robot, tag)
-        return None
+        """The Zenoh id of another supervisor serving `robot` (shared/ownership.py: its
+        owner token up, and it answers for the robot); None if there is none."""
+        tokens = await asyncio.to_thread(owner_tokens, self._bus.session, robot, OWNER_CHECK)
+        if all(tag == self._zid for tag in tokens):
+            return None  # no one else claims it: nobody to ask (a made-up name, mostly)
+        answers = await asyncio.to_thread(answering, self._bus, robot, OWNER_CHECK)
+        supervising = owners(tokens, answers)
+        for tag in tokens:
+            if tag != self._zid and tag not in supervising:
+                self._forged(robot, tag)
+        return next((tag for tag in supervising if tag != self._zid), None)
 
-    def _holders(self, robot: str) -> list[str]:
-        """The tags of the owner tokens up for `robot` (on a thread: it waits)."""
-        replies = self._bus.session.liveliness().get(
-            RobotKeys(robot).supervisor_owner("*"), timeout=OWNER_CHECK
-        )
-        return [last_chunk(str(reply.ok.key_expr)) for reply in replies if reply.ok is not None]
-
-    def _answers(self, robot: str, zid: str) -> bool:
-        """Whether the process with Zenoh id `zid` answers as `robot`'s supervisor (on a
-        thread: it waits): a token alone proves nothing."""
-        replies = self._bus.session.get(
-            RobotKeys(robot).supervisor,
-            payload=self._bus.encode(GetState()),
-            target=zenoh.QueryTarget.ALL,
-            allowed_destination=zenoh.Locality.REMOTE,
-            timeout=OWNER_CHECK,
-        )
-        for reply in replies:
-            replier = reply.replier_id
-            if reply.ok is None or replier is None or str(replier.zid) != zid:
-                continue
-            with contextlib.suppress(msgspec.DecodeError, msgspec.ValidationError):
-                answer = self._decode_reply(reply.ok.payload.to_bytes())
-                if isinstance(answer, StateReply) and answer.state.robot == robot:
-                    return True
-        return False
+    async def _answers(self, robot: str, zid: str) -> bool:
+        """Whether the process with Zenoh id `zid` answers as `robot`'s supervisor: a
+        token alone proves nothing."""
+        return zid in await asyncio.to_thread(answering, self._bus, robot, OWNER_CHECK)
 
     def _forged(self, robot: str, tag: str) -> None:
         self._noise.warning(
@@ -358,7 +330,7 @@ class SupervisorService(Service):
     async def _settle(self, robot: str, tag: str, claim: Claim) -> None:
         """Two claims at the same time: the lower Zenoh id keeps the robot, if the other
         answers for it at all."""
-        if not await asyncio.to_thread(self._answers, robot, tag):
+        if not await self._answers(robot, tag):
             self._forged(robot, tag)
             return
         if not tag < self._zid or self._claims.get(robot) is not claim:

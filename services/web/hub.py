@@ -49,7 +49,9 @@ from voicectl.shared.throttle import Throttled
 
 _LOGGER = logging.getLogger(__name__)
 
-PARTS = ("converter", "stt", "supervisor", "executor", "robot")
+PARTS = ("converter", "stt", "supervisor", "executor", "robot", "navigation")
+"""What a panel shows as up or down; navigation from the token its executor holds while
+the robot's navigation is there (services/executor/runner.py)."""
 POSE_FRESH = 3.0
 """Seconds after its last pose that a robot still counts as online."""
 QUEUE_LIMIT = 200

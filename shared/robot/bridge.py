@@ -59,7 +59,7 @@ class BridgeTransport(RobotTransport):
 
         return Announcements(BRIDGE_TOKENS, name_of)
 
-    def publish(self, name: str, ros_type: str, payload: bytes, urgent: bool = False) -> None:
+    def send(self, name: str, ros_type: str, payload: bytes, urgent: bool = False) -> None:
         self._bus.publish_bytes(name, payload, urgent=urgent)
 
     def subscribe(
@@ -93,6 +93,23 @@ class BridgeTransport(RobotTransport):
                 handler(Interface(_ROLES[token.kind], token.key, token.ros_type), present)
 
         self._bus.watch(BRIDGE_TOKENS, on_token)
+
+    # --- without the event loop: the STOP relay's side (services/relay) ------------------
+
+    def subscribe_now(self, name: str, decode: Decode[T], handler: Handle[T]) -> Unsubscribe:
+        """Like `subscribe`, but `handler(message)` runs on Zenoh's own thread, at once,
+        whatever the loop is doing: it must be quick and thread-safe."""
+        return self._bus.subscribe(
+            name, decode, lambda _key, message: handler(message), on_loop=False
+        )
+
+    def serve_now(
+        self, name: str, handler: Callable[[bytes, Callable[[bytes | None], None]], None]
+    ) -> None:
+        """Answer a service's CDR requests on Zenoh's own thread: `handler(request,
+        reply)` hands it on at once and `reply` is called once, from any thread, with the
+        answer (None: none)."""
+        self._bus.serve_bytes_now(name, handler)
 
     # A key is a ROS name here, whatever the robot announces: nothing to learn or build for
     # it, and a topic's types share its key, so a stop sends in one type only.

@@ -6,7 +6,9 @@ PyPI's wheels (`pip install 'voicectl[ros2]'`); rclpy is imported only when this
 transport is opened. What crosses the seam stays CDR bytes: publications go out raw
 (`publish` of serialized bytes), subscriptions come in raw, and a service call's request is
 read into rclpy's type only to be sent. Types are found by their ROS names in the
-installed interface packages (Nav2's `nav2_msgs` must be installed for navigation).
+installed interface packages: a robot whose environment has no `nav2_msgs` (no Nav2, or
+PyPI's wheels alone) is driven all the same, and its navigation is said to be unavailable
+(`lacks`, services/executor/robot.py).
 
 QoS as rcl and rcl_action set it, and as voicectl's other transports announce it:
 publications and service calls reliable and volatile, 10 deep; an action's status
@@ -63,13 +65,25 @@ MATCH_WAIT = 0.5
 subscribers the graph shows: sent before, it reaches none of them."""
 
 
-def install_hint() -> str:
+def rclpy_hint() -> str:
     return (
         "the ros2 transport needs rclpy and the robot's interface packages: source the "
         f"robot's ROS 2 (. /opt/ros/$ROS_DISTRO/setup.bash) or {pip_install('ros2')}"
     )
 
 
+FROM_THE_EXTRA = frozenset(
+    {
+        "builtin_interfaces",
+        "std_msgs",
+        "geometry_msgs",
+        "nav_msgs",
+        "sensor_msgs",
+        "action_msgs",
+        "unique_identifier_msgs",
+    }
+)
+"""The interface packages `pip install 'voicectl[ros2]'` brings (PyPI's Kilted wheels)."""
 _MEMBERS = (
     ("_SendGoal", ("Impl", "SendGoalService")),
     ("_GetResult", ("Impl", "GetResultService")),
@@ -92,7 +106,23 @@ def interface_class(ros_type: str) -> Any:
                 return found
         return getattr(module, name)
     except (ImportError, AttributeError) as exc:
-        raise BusError(f"no ROS 2 type {ros_type} here ({exc}); {install_hint()}") from exc
+        raise BusError(f"no ROS 2 type {ros_type} here ({exc}): {install_hint(package)}") from exc
+
+
+def install_hint(package: str) -> str:
+    """How the interface package `package` gets where this process runs, in words."""
+    apt = f"apt install ros-$ROS_DISTRO-{package.replace('_', '-')}"
+    if package == "nav2_msgs":
+        return (
+            "Nav2's interfaces come with Nav2, from no Python package index: start the "
+            "executor where the robot's ROS 2 with Nav2 is sourced (. /opt/ros/$ROS_DISTRO/"
+            f"setup.bash; {apt} installs them), or build nav2_msgs into its environment"
+        )
+    pip = f", or {pip_install('ros2')}" if package in FROM_THE_EXTRA else ""
+    return (
+        f"the ROS package {package} is not installed here: source the robot's ROS 2 "
+        f"(. /opt/ros/$ROS_DISTRO/setup.bash; {apt} installs it){pip}"
+    )
 
 
 class Ros2Transport(RobotTransport):
@@ -109,7 +139,7 @@ class Ros2Transport(RobotTransport):
             from rclpy.serialization import deserialize_message, serialize_message
             from rclpy.signals import SignalHandlerOptions
         except ImportError as exc:
-            raise ServiceError(f"{install_hint()} ({exc})") from exc
+            raise ServiceError(f"{rclpy_hint()} ({exc})") from exc
         self._bus = bus
         self._serialize = serialize_message
         self._deserialize = deserialize_message
@@ -157,12 +187,19 @@ class Ros2Transport(RobotTransport):
     @classmethod
     def unavailable(cls) -> str | None:
         if importlib.util.find_spec("rclpy") is None:
-            return f"rclpy cannot be imported: {install_hint()}"
+            return f"rclpy cannot be imported: {rclpy_hint()}"
         return None
 
     @classmethod
     def prepare(cls, distro: RosDistro, ros_types: Iterable[str]) -> None:
         pass  # nothing is built per type: rclpy's type support is the robot's
+
+    def lacks(self, ros_type: str) -> str | None:
+        try:
+            interface_class(ros_type)
+        except BusError as exc:
+            return str(exc)
+        return None
 
     def _spin(self) -> None:
         try:
@@ -208,7 +245,7 @@ class Ros2Transport(RobotTransport):
         wanted = sum(s.topic_type == ros_type for s in subscribers)
         return publisher is not None and 0 < wanted <= publisher.get_subscription_count()
 
-    def publish(self, name: str, ros_type: str, payload: bytes, urgent: bool = False) -> None:
+    def send(self, name: str, ros_type: str, payload: bytes, urgent: bool = False) -> None:
         self.publisher(name, ros_type).publish(payload)
 
     def subscribe(
@@ -300,6 +337,48 @@ class Ros2Transport(RobotTransport):
         future = client.call_async(self._request(client, request))
         timer = threading.Timer(timeout, client.remove_pending_request, (future,))
         timer.daemon = True
+        timer.start()
+
+    def call_now(
+        self,
+        name: str,
+        service_type: str,
+        request: bytes,
+        timeout: float,
+        on_reply: Callable[[bytes | None], None],
+    ) -> None:
+        """Call a service from any thread, waiting for nothing, the loop least of all (a
+        STOP relayed from Zenoh's thread): `on_reply(reply)` on rclpy's thread once the
+        server answers, or `on_reply(None)` once `timeout` seconds have passed without an
+        answer, and at once where the graph shows no server (a robot without Nav2): a
+        request DDS has not matched with a server reaches none. The client is made ahead
+        (`client`), so that it is matched by then."""
+        client = self.client(name, service_type)
+        if not client.service_is_ready():
+            on_reply(None)
+            return
+        lock = threading.Lock()
+
+        def settle(reply: bytes | None) -> None:
+            if lock.acquire(blocking=False):  # once: the answer or the timeout, first
+                on_reply(reply)
+
+        def answered(done: Any) -> None:  # on rclpy's thread
+            timer.cancel()
+            try:
+                settle(bytes(self._serialize(done.result())))
+            except Exception as exc:
+                _LOGGER.warning("'%s' failed: %s", name, exc)
+                settle(None)
+
+        def expired() -> None:
+            client.remove_pending_request(future)
+            settle(None)
+
+        timer = threading.Timer(timeout, expired)
+        timer.daemon = True
+        future = client.call_async(self._request(client, request))
+        future.add_done_callback(answered)
         timer.start()
 
     def serve(

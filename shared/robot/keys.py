@@ -61,10 +61,13 @@ class RobotNames:
     """Nav2's NavigateToPose action."""
     map_name: str = "map"
     """The occupancy grid a Nav2 robot's map server publishes."""
+    speed_limit_name: str = "speed_limit"
+    """Where Nav2's controller server takes a speed limit (its `speed_limit_topic`)."""
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "namespace", check_ros_name(self.namespace, "ROS namespace"))
-        for field in ("cmd_vel_name", "odom_name", "camera_name", "navigate_name", "map_name"):
+        names = ("cmd_vel_name", "odom_name", "camera_name", "navigate_name", "map_name")
+        for field in (*names, "speed_limit_name"):
             name = check_ros_name(getattr(self, field), field.removesuffix("_name") + " name")
             if not name:
                 raise ValueError(f"{field.removesuffix('_name')} name must not be empty")
@@ -94,6 +97,15 @@ class RobotNames:
     @property
     def map(self) -> str:
         return self.topic(self.map_name)
+
+    @property
+    def speed_limit(self) -> str:
+        return self.topic(self.speed_limit_name)
+
+    @property
+    def any_speed_limit(self) -> str:
+        """Any speed limit topic under the namespace, remapped or not."""
+        return self.topic("**/speed_limit")
 
     @property
     def simulator(self) -> str:

@@ -237,7 +237,7 @@ class RmwZenohTransport(RobotTransport):
 
     # --- the seam -----------------------------------------------------------------------
 
-    def publish(self, name: str, ros_type: str, payload: bytes, urgent: bool = False) -> None:
+    def send(self, name: str, ros_type: str, payload: bytes, urgent: bool = False) -> None:
         entity = self.entity(RmwKind.PUBLISHER, name, ros_type)
         key = self._exact(name, ros_type)
         if _latched(name):

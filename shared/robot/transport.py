@@ -26,8 +26,10 @@ from collections.abc import Awaitable, Callable, Iterable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, ClassVar, Self, TypeVar
 
+from ..errors import UnsafeCommand
 from ..kinds import RosDistro, TransportKind
 from .keys import ACTION_MEMBERS, action_member
+from .velocity import stilled, unsafe_velocity
 
 if TYPE_CHECKING:  # the bus imports the messages, which import this package's kinds
     from ..bus import Bus
@@ -115,10 +117,21 @@ class RobotTransport(abc.ABC):
         carry); blocks, so runs off the event loop. Nothing where a key needs nothing
         built (the bridge)."""
 
-    @abc.abstractmethod
     def publish(self, name: str, ros_type: str, payload: bytes, urgent: bool = False) -> None:
         """Publish one CDR message on a topic. An `urgent` one (zero velocity) waits for
-        room instead of being dropped, and goes first."""
+        room instead of being dropped, and goes first. A velocity command with an axis
+        that is not a finite number is never sent, whoever asks: the same command with
+        every axis zero goes instead, at once, and UnsafeCommand says why."""
+        unsafe = unsafe_velocity(ros_type, payload)
+        if unsafe is None:
+            self.send(name, ros_type, payload, urgent)
+            return
+        self.send(name, ros_type, stilled(ros_type, payload), urgent=True)
+        raise UnsafeCommand(f"refused {unsafe} on '{name}'; sent zero velocity instead")
+
+    @abc.abstractmethod
+    def send(self, name: str, ros_type: str, payload: bytes, urgent: bool = False) -> None:
+        """Put one CDR message on a topic as it is (`publish` checks it first)."""
 
     @abc.abstractmethod
     def subscribe(
@@ -174,6 +187,12 @@ class RobotTransport(abc.ABC):
         """The robot's distribution as its announcements tell it (rmw_zenoh's type hashes:
         Nav2's feedback tells Rolling from Jazzy, where a get_result reply cannot), whatever
         was configured; None where they tell nothing (the bridge, DDS)."""
+        return None
+
+    def lacks(self, ros_type: str) -> str | None:
+        """Why this process cannot send or read messages of `ros_type` on this transport
+        at all, in one line (DDS: its interface package is not installed here); None when
+        it can (the layouts on Zenoh carry CDR that voicectl writes itself)."""
         return None
 
     @abc.abstractmethod

@@ -33,11 +33,24 @@ class Straight(msgspec.Struct):
     """Metres, negative backwards; None: the x of a base_link target pose."""
     speed: Annotated[float, msgspec.Meta(gt=0)] = 0.3
 
+    def __post_init__(self) -> None:
+        _finite(distance=self.distance, speed=self.speed)
+
 
 class Turn(msgspec.Struct):
     angle: float | None = None
     """Radians, positive counter-clockwise; None: the yaw of a base_link target pose."""
     angular_speed: Annotated[float, msgspec.Meta(gt=0)] = 1.0
+
+    def __post_init__(self) -> None:
+        _finite(angle=self.angle, angular_speed=self.angular_speed)
+
+
+def _finite(**values: float | None) -> None:
+    """ValueError (a refused order, at once) for a parameter that is not a finite number."""
+    for name, value in values.items():
+        if value is not None and not math.isfinite(value):
+            raise ValueError(f"'{name}' must be a finite number, not {value}")
 
 
 class Drive(Executor):
@@ -90,6 +103,11 @@ async def _close_loop(
     try:
         while True:
             remaining = goal - measure(await ctx.robot.next_pose())
+            if not math.isfinite(remaining):
+                raise OrderFailed(
+                    f"odometry gave a pose that is not finite numbers ({remaining} to go): "
+                    "the robot cannot be steered by it"
+                )
             if abs(remaining) <= TOLERANCE:
                 return
             now = asyncio.get_running_loop().time()
