@@ -11,6 +11,7 @@ from pathlib import Path
 
 import pytest
 
+from voicectl.services.web.hub import PARTS
 from voicectl.shared import words
 from voicectl.shared.answers import outcome_words, proposal_words, stopped_words
 from voicectl.shared.messages import Doubt, Order, OrderRecord, OrderStatus, Proposal, Stopped
@@ -134,8 +135,7 @@ def test_every_word_the_panel_writes_is_in_the_english_catalogue() -> None:
     used |= set(re.findall(r'voicectlWords\.t\("([\w.]+)"', scripts))
     used |= set(re.findall(r'"(answer\.[\w.]+)"', scripts))
     # Keys made from a name: a part, an ended status, a broken order, a goal's trouble.
-    used |= {f"part.{p}" for p in ("converter", "stt", "supervisor", "executor", "robot")}
-    used |= {f"partDown.{p}" for p in ("converter", "stt", "supervisor", "executor", "robot")}
+    used |= {f"{kind}.{part}" for kind in ("part", "partDown") for part in PARTS}
     used |= {f"status.{s.value}" for s in OrderStatus}
     used |= {f"broke.{s}" for s in ("failed", "rejected", "interrupted")}
     used |= {f"trouble.{t}{m}" for t in ("outside", "unseen", "obstacle") for m in ("", ".many")}

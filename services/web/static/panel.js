@@ -44,7 +44,7 @@ const voice = { context: null, asked: null, playing: null }; // the spoken answe
 const answers = window.voicectlAnswers;
 const TRAIL = 300;
 const JUMP = 4; // metres: more than a drive covers between two poses (0.5 s apart; the simulator runs up to 10x)
-const PARTS = ["converter", "stt", "supervisor", "executor", "robot"];
+const PARTS = ["converter", "stt", "supervisor", "executor", "robot", "navigation"];
 // A part that is down, in the words of what the person notices (its name one hover away):
 // catalogue entries part.NAME and partDown.NAME.
 // How an order that broke its command ended, after its description (broke.STATUS).
