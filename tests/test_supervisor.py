@@ -13,7 +13,8 @@ from pathlib import Path
 from harness.client import Client, client_wait_ready
 from harness.wait import async_wait_until
 from voicectl.services.executor.runner import SUPERVISOR_LOST
-from voicectl.services.supervisor.robot import SETTLE
+from voicectl.services.supervisor.latch import LatchFile
+from voicectl.services.supervisor.robot import RESTORED_STOP, SETTLE
 from voicectl.shared.bus import json_decoder
 from voicectl.shared.errors import BusError
 from voicectl.shared.keys import RobotKeys
@@ -422,6 +423,43 @@ async def test_the_state_never_says_stopped_beside_a_running_order(site: Site) -
         await async_wait_until(kept, 10.0, "the executor's words in the history")
         assert published
         assert [s for s in published if s.stopped and s.current is not None] == []
+
+
+async def test_a_stop_latched_across_a_restart_ends_the_restored_order_and_latches_the_executor(
+    site: Site,
+) -> None:
+    """Issue 43: a supervisor that died with its stop latched (on disk) but not yet said to
+    the executor came back with the order still current beside the stop, and the executor
+    unlatched. Now the restored order ends as the stop ends one, and the executor is
+    latched as soon as it is heard."""
+    stubborn = ("--executor", "harness.executors:Stubborn")
+    site.start_supervisor()
+    executor = site.processes.executor(site.router, "r1", *stubborn, *ROBOT_GIVEN)
+    with site.joined() as bus:
+        client = Client(bus, "r1")
+        await client_wait_ready(client)
+        (running,) = await client.submit(order("stubborn", seconds=30))
+        await async_wait_until(
+            lambda: f"executing {running}" in site.processes.log(executor),
+            30.0,
+            "the executor to run the order",
+        )
+        site.kill_supervisor()
+        # The latch as the dead supervisor had written it, before any word to the executor.
+        LatchFile(site.db.with_name(site.db.name + ".stop")).write(frozenset({"r1"}))
+        assert "emergency stop" not in site.processes.log(executor)
+        site.start_supervisor()
+        await client_wait_ready(client)
+        state = await client.state()
+        assert (state.stopped, state.current) == (True, None)
+        record = (await client.history()).records[0]
+        assert (record.id, record.status) == (running, OrderStatus.CANCELLED)
+        assert record.message.startswith(RESTORED_STOP), record.message
+        await async_wait_until(
+            lambda: "emergency stop: sent zero velocity" in site.processes.log(executor),
+            30.0,
+            "the executor to be latched",
+        )
 
 
 async def test_a_second_supervisor_on_the_bus_stands_down(site: Site, tmp_path: Path) -> None:

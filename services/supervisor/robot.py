@@ -67,6 +67,8 @@ EXECUTOR_TIMEOUT = 5.0
 RESUME_GRACE = 3.0
 """After a restart, how long to wait for the executor before calling a restored running
 order interrupted."""
+RESTORED_STOP = "emergency stop (latched when the supervisor restarted)"
+"""How an order restored as running ends when the stop was latched at the restart."""
 LOST_GRACE = 0.5
 """After the executor's token goes, how long its running order may still report a result."""
 SETTLE = 0.5
@@ -140,10 +142,17 @@ class RobotSupervisor:
             self._served[key] = False
             self._ends.append(self._bus.watch_served(key, functools.partial(self.on_served, key)))
         self._tasks.append(loop.create_task(self._dispatch_loop()))
+        if self._queue.stopped:  # latched before a restart: held still again
+            # An order restored as running ends as the stop ended it: a stop latched
+            # before the restart may not have reached the executor (the supervisor died
+            # first), and the state never says stopped beside a running order. The
+            # executor is latched once it is heard (`_online`).
+            ended = self._queue.stop_current(RESTORED_STOP)
+            if ended is not None:
+                loop.call_later(EXECUTOR_TIMEOUT, self._stop_waiting, ended.id)
+            self._hold()
         if not self._queue.current_verified:
             self._tasks.append(loop.create_task(self._expire_unverified()))
-        if self._queue.stopped:  # latched before a restart: held still again
-            self._hold()
         self._changed()
 
     async def stop(self) -> None:
@@ -492,6 +501,10 @@ class RobotSupervisor:
         loop = asyncio.get_running_loop()
         if alive:
             self._settled_at = 0.0 if self._settled_at is None else loop.time() + SETTLE
+        if alive and self._queue.stopped:
+            # An executor heard while the stop is latched is latched too, whatever it
+            # missed while it or this supervisor was away.
+            self._tasks.append(loop.create_task(self._relatch()))
         if alive and current is not None and self._lost_pending:
             # Back (or a new one) before the grace ran out: ask it whether it still runs it.
             self._lost_pending = False
@@ -504,6 +517,10 @@ class RobotSupervisor:
             self._lost_pending = True
             loop.call_later(LOST_GRACE, self._lost, current.id)
         self._changed()
+
+    async def _relatch(self) -> None:
+        answer = await self._executor_latch.latch()
+        _LOGGER.info("%s: the emergency stop is latched: %s", self.robot, answer.detail)
 
     def _lost(self, order_id: str) -> None:
         self._lost_pending = False
