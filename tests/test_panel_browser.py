@@ -250,7 +250,9 @@ def test_speak_a_command_and_a_non_command(stack: Stack, speech: Speak, tmp_path
         expect(ears.nth(0)).to_contain_text(SAID_IN)
         expect(ears.nth(1)).to_contain_text("moonshine")
         expect(ears.nth(1)).to_contain_text("turn left; reach kitchen")
-        expect(ears.nth(2)).to_contain_text("both heard")
+        expect(ears.nth(2)).to_contain_text(
+            "grammar and moonshine heard 'turn left; reach kitchen'"
+        )
         page.click("#mic")  # stop listening
         page.click("#send")
         history = page.locator("#history tr")
