@@ -482,6 +482,17 @@ def baseline(jsgf: str, parser: Parser, utterances: list[Utterance], directory: 
 # --- through the service -------------------------------------------------------------------------
 
 
+def ears_heard(transcript: Transcript) -> str:
+    """Each ear's words in a final, with the free ears' support for the grammar's: what a
+    wrong order's line shows."""
+    said = [f"grammar {transcript.text!r}"]
+    for ear in (transcript.transcription, transcript.third):
+        if ear is not None:
+            support = "" if ear.support is None else f" ({ear.support:.2f})"
+            said.append(f"{ear.engine} {ear.text!r}{support}")
+    return ", ".join(said)
+
+
 def print_threads(pid: int) -> None:
     """CPU of each live thread of `pid` (threads that ended are not listed)."""
     for task in sorted(Path(f"/proc/{pid}/task").iterdir()):
@@ -561,13 +572,16 @@ async def through_service(
                     at, transcript = finals[session]
                     outcome.text = transcript.text
                     outcome.to_final = at - spoken_end
-                    outcome.heard, outcome.doubts = transcript.heard, transcript.doubts
+                    outcome.heard = ears_heard(transcript)
                 # The converter's proposal is the verdict: it rejects speech that does
                 # not make whole orders.
                 if session in proposals:
                     at, proposal = proposals[session]
                     outcome.to_proposal = at - spoken_end
                     outcome.rejected, outcome.orders = proposal.rejected, proposal.orders
+                    # The decision's words and questions, not the grammar's doubts alone:
+                    # a question between ears is offered on the proposal.
+                    outcome.text, outcome.doubts = proposal.transcript, proposal.doubts
                 outcomes.append(outcome)
                 # One person speaking: the next utterance starts once this session has
                 # closed, as a panel's next press of Listen would (else two decoders are
