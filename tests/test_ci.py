@@ -151,7 +151,7 @@ def test_a_step_without_a_report_ran_nothing_and_fails_the_run(tmp_path: Path) -
     )
 
 
-STEPS = ("test", "test-ros2", "test-containers")
+STEPS = ("test", "test-install", "test-ros2", "test-containers")
 """The scripts .ci/run runs, in order."""
 
 
@@ -189,15 +189,15 @@ def ci_run(tmp_path: Path, failing: str = "") -> subprocess.CompletedProcess[str
 def test_ci_ends_with_the_skips_and_fails_on_one_no_step_ran(tmp_path: Path) -> None:
     done = ci_run(tmp_path)
     assert done.returncode == 1, done.stdout
-    tail = done.stdout.splitlines()[-5:]
-    assert tail[0] == "== skipped in this run: 4 (3 that CI is meant to run)", done.stdout
+    tail = done.stdout.splitlines()[-6:]
+    assert tail[0] == "== skipped in this run: 5 (4 that CI is meant to run)", done.stdout
     assert tail[1] == (
-        "test: test_tiny::test_runs_in_the_second_step: the second step runs it [ran in ros2]"
+        "test: test_tiny::test_runs_in_the_second_step: the second step runs it [ran in install]"
     )
     assert tail[2:] == [
         f"{step}: test_tiny::test_never_runs: nothing to run it with "
         "[NOT ALLOWED: CI is meant to run it]"
-        for step in ("test", "ros2", "containers")
+        for step in ("test", "install", "ros2", "containers")
     ]
 
 
@@ -205,7 +205,7 @@ def test_ci_that_stops_at_a_failing_step_still_lists_the_skips(tmp_path: Path) -
     done = ci_run(tmp_path, failing="test-ros2")
     assert done.returncode == 1, done.stdout
     lines = done.stdout.splitlines()
-    assert "== skipped in this run: 2 (2 that CI is meant to run)" in lines, done.stdout
+    assert "== skipped in this run: 3 (2 that CI is meant to run)" in lines, done.stdout
     assert [line.rsplit("/", 1)[-1] for line in lines if line.startswith("NO REPORT: ")] == [
         "ros2.xml: its step ran none of its tests",
         "containers.xml: its step ran none of its tests",

@@ -27,7 +27,7 @@ from websockets.typing import Origin
 
 from .conftest import REPO, Stack, started_stack
 
-pytestmark = pytest.mark.e2e
+pytestmark = [pytest.mark.e2e, pytest.mark.install]
 
 STATIC = REPO / "services" / "web" / "static"
 PACKAGES = ("voicectl", "services", "shared")

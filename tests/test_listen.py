@@ -239,6 +239,7 @@ def copy_checkout(to: Path) -> None:
         shutil.copy2(source, to / name, follow_symlinks=False)
 
 
+@pytest.mark.install
 @pytest.mark.timeout(900)
 def test_the_docs_examples_run_as_written_right_after_scripts_up(tmp_path: Path) -> None:
     """docs/listen.md's examples in a clone that `scripts/up` itself installed (its .venv,
