@@ -21,12 +21,15 @@ for the converter (docs/speech.md, "One ear is not two").
 from __future__ import annotations
 
 import contextlib
+import functools
 import logging
 import math
 import re
 import threading
+from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
+from typing import Generic, TypeVar
 
 from voicectl.shared.config import cache_dir
 from voicectl.shared.errors import Cancelled
@@ -41,6 +44,8 @@ from .whisper import Whisper
 from .whisper import weights_dir as whisper_weights
 
 _LOGGER = logging.getLogger(__name__)
+
+T = TypeVar("T")
 
 RUNS_AT_ONCE = 2
 """Transcriptions a process runs at once, one onnxruntime thread each (two cores)."""
@@ -182,6 +187,41 @@ def why_ask(grammar: GrammarHeard, second: Transcription) -> str:
     return ""
 
 
+class _AtPause(Generic[T]):
+    """The one transcription of a stream started when its speech pauses: a newer pause, or
+    speech going on, drops the one in flight (its cancel is set)."""
+
+    def __init__(self, pool: ThreadPoolExecutor, runs: Runs) -> None:
+        self._pool = pool
+        self._runs = runs
+        self._run: Future[T] | None = None
+        self._cancel = threading.Event()
+
+    def start(self, transcribe: Callable[[threading.Event], T]) -> None:
+        self.drop()
+        self._cancel = threading.Event()
+        self._run = self._pool.submit(transcribe, self._cancel)
+        self._runs.at_pause += 1
+
+    def done(self) -> T | None:
+        """Its result, once it finished well; None while it runs, or when it failed."""
+        run = self._run
+        if run is None or not run.done() or run.cancelled() or run.exception() is not None:
+            return None
+        return run.result()
+
+    def take(self) -> Future[T] | None:
+        """The run in flight, no longer this stream's to drop."""
+        run, self._run = self._run, None
+        return run
+
+    def drop(self) -> None:
+        if self._run is not None:
+            self._cancel.set()
+            self._run = None
+            self._runs.dropped += 1
+
+
 class _Ear:
     """One stream's free ears (sphinx.py's `Listener`): at most one Moonshine run in
     flight, and Whisper at the end when asked."""
@@ -195,30 +235,20 @@ class _Ear:
         always: bool,
     ) -> None:
         self._model = model
-        self._pool = pool
         self._runs = runs
         self._third = third
         self._always = always
-        self._run: Future[Transcript] | None = None
-        self._cancel = threading.Event()
+        self._paused: _AtPause[Transcript] = _AtPause(pool, runs)
 
     def pause(self, audio: bytes) -> None:
-        self.drop()
-        self._cancel = threading.Event()
-        self._run = self._pool.submit(self._model.transcribe, audio, self._cancel)
-        self._runs.at_pause += 1
+        self._paused.start(functools.partial(self._model.transcribe, audio))
 
     def paused_text(self) -> str:
-        run = self._run
-        if run is None or not run.done() or run.cancelled() or run.exception() is not None:
-            return ""
-        return run.result().text
+        heard = self._paused.done()
+        return "" if heard is None else heard.text
 
     def drop(self) -> None:
-        if self._run is not None:
-            self._cancel.set()
-            self._run = None
-            self._runs.dropped += 1
+        self._paused.drop()
 
     def result(
         self, audio: bytes, grammar: GrammarHeard
@@ -234,7 +264,7 @@ class _Ear:
 
     def _second(self, audio: bytes, grammar: str) -> Transcription:
         heard = None
-        run, self._run = self._run, None
+        run = self._paused.take()
         if run is not None:
             with contextlib.suppress(Cancelled):  # never set for a run still wanted
                 heard = run.result()
@@ -290,31 +320,20 @@ class _Alone:
 
     def __init__(self, model: Whisper, pool: ThreadPoolExecutor, runs: Runs, language: str) -> None:
         self._model = model
-        self._pool = pool
         self._runs = runs
         self._language = language
-        self._run: Future[WhisperHeard] | None = None
-        self._cancel = threading.Event()
+        self._paused: _AtPause[WhisperHeard] = _AtPause(pool, runs)
 
     def pause(self, audio: bytes) -> None:
-        self.drop()
-        self._cancel = threading.Event()
-        self._run = self._pool.submit(
-            self._model.transcribe, audio, self._language, "", self._cancel
-        )
-        self._runs.at_pause += 1
+        transcribe = functools.partial(self._model.transcribe, audio, self._language, "")
+        self._paused.start(transcribe)
 
     def paused_text(self) -> str:
-        run = self._run
-        if run is None or not run.done() or run.cancelled() or run.exception() is not None:
-            return ""
-        return run.result().text
+        heard = self._paused.done()
+        return "" if heard is None else heard.text
 
     def drop(self) -> None:
-        if self._run is not None:
-            self._cancel.set()
-            self._run = None
-            self._runs.dropped += 1
+        self._paused.drop()
 
     def result(
         self, audio: bytes, grammar: GrammarHeard
