@@ -36,12 +36,13 @@ from harness.measure import MOTION_WAIT, Robot, cpu_seconds, line, percentile, r
 from harness.ports import free_port
 from harness.processes import REPO, rss_mb
 from voicectl.shared.bus import Bus, BusOptions
-from voicectl.shared.client import VoicectlClient
+from voicectl.shared.client import Unreachable, VoicectlClient
 from voicectl.shared.errors import BusError
 from voicectl.shared.messages import (
     CancelAll,
     GetState,
     Order,
+    ParseResult,
     Release,
     StateReply,
     Submit,
@@ -132,7 +133,7 @@ async def measure(
         for name, robot in watched.items():
             robot.listen(watching, RobotNames(name))
         await ready(client, fleet.names)
-        (turn,) = (await client.parse("turn left")).orders
+        (turn,) = (await parsed(client, "turn left")).orders
         raw = await raw_latency(bus)
         results = Results()
         pids = {n: fleet.processes[n].pid for n in ("supervisor", "router")}
@@ -176,6 +177,18 @@ async def ready(client: VoicectlClient, names: list[str], timeout: float = 600.0
         if time.monotonic() > deadline:
             sys.exit(f"executors not online after {timeout:g} s: {sorted(waiting)[:10]}")
         await asyncio.sleep(0.5)
+
+
+async def parsed(client: VoicectlClient, text: str, timeout: float = 120.0) -> ParseResult:
+    """`text` parsed, once the converter answers (it loads every language's orders first)."""
+    deadline = time.monotonic() + timeout
+    while True:
+        try:
+            return await client.parse(text)
+        except Unreachable:
+            if time.monotonic() > deadline:
+                raise
+            await asyncio.sleep(0.5)
 
 
 async def cycle(

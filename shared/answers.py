@@ -1,6 +1,7 @@
 """What voicectl says aloud: the project's messages as one short sentence for a person,
-in the words the panel shows (services/web/static/answers.js says the same in the browser;
-tests/test_panel_voice.py holds the two to one table)."""
+in the words the panel shows and in its language (services/web/static/answers.js says the
+same in the browser; tests/test_panel_voice.py holds the two to one table). The words come
+from the catalogue of the language (shared/words.py); a proposal says its own language."""
 
 from __future__ import annotations
 
@@ -20,76 +21,90 @@ from .messages import (
     State,
     Stopped,
 )
+from .words import ENGLISH, table, word
 
 NOT_CAUGHT = "I did not catch that"
+"""English `answer.notCaught`."""
 SHORT_REASON = 60
 """Characters of an executor's reason that are read out: its first clause, cut at a word."""
 
 _UNITS = [
-    (re.compile(r"(?<![\d.])1 m\b"), "1 metre"),
-    (re.compile(r"(\d) m\b"), r"\1 metres"),
-    (re.compile(r"(?<![\d.])1 s\b"), "1 second"),
-    (re.compile(r"(\d) s\b"), r"\1 seconds"),
-    (re.compile(r"(\d) ?°"), r"\1 degrees"),
+    (re.compile(r"(?<![\d.])1 m\b"), "answer.metre", False),
+    (re.compile(r"(\d+(?:\.\d+)?) m\b"), "answer.metres", True),
+    (re.compile(r"(?<![\d.])1 s\b"), "answer.second", False),
+    (re.compile(r"(\d+(?:\.\d+)?) s\b"), "answer.seconds", True),
+    (re.compile(r"(\d+(?:\.\d+)?) ?°"), "answer.degrees", True),
 ]
 """The panel's abbreviations ('move forward 2 m') as people say them ('2 metres')."""
 
-_DONE = {"reach": "reached", "turn": "turned", "move": "moved", "go": "went", "wait": "waited"}
-"""Orders whose first word has a past tense to say they are done ('reached kitchen');
-any other is 'done: take picture'."""
 
-
-def spoken(description: str) -> str:
+def spoken(description: str, language: str = ENGLISH) -> str:
     """An order's description as it is said rather than written."""
-    for pattern, said in _UNITS:
+    for pattern, key, counted in _UNITS:
+        said = word(language, key, n=r"\1") if counted else word(language, key)
         description = pattern.sub(said, description)
     return description
 
 
-def proposal_words(proposal: Proposal) -> str:
+def proposal_words(proposal: Proposal, language: str = "") -> str:
     """What the recogniser made of an utterance: its orders, the question it asks, or that
-    it did not catch it (never the engineer's reason the panel shows beside it)."""
+    it did not catch it (never the engineer's reason the panel shows beside it), in the
+    proposal's language unless `language` says otherwise."""
+    language = language or proposal.language
+    not_caught = word(language, "answer.notCaught")
     if proposal.rejected:
-        return NOT_CAUGHT
+        return not_caught
     if proposal.doubts:
-        asked = [doubt_words(proposal.transcript, doubt) for doubt in proposal.doubts]
-        return ", and ".join(question.removesuffix("?") for question in asked) + "?"
-    orders = orders_words(proposal.orders)
-    missed = " and ".join(f"'{problem.text}'" for problem in proposal.errors if problem.text)
+        asked = [doubt_words(proposal.transcript, d, language) for d in proposal.doubts]
+        joined = word(language, "answer.andAsk").join(q.removesuffix("?") for q in asked)
+        return f"{joined}?"
+    orders = orders_words(proposal.orders, language)
+    missed = word(language, "answer.and").join(
+        f"'{problem.text}'" for problem in proposal.errors if problem.text
+    )
     if not orders:
-        return NOT_CAUGHT
-    return f"{orders}; I did not catch {missed}" if missed else orders
+        return not_caught
+    if missed:
+        return word(language, "answer.notCaughtSome", orders=orders, missed=missed)
+    return orders
 
 
-def orders_words(orders: Sequence[Order]) -> str:
+def orders_words(orders: Sequence[Order], language: str = ENGLISH) -> str:
     """Orders read back: 'turn left, then reach kitchen'."""
-    return ", then ".join(spoken(order.description) for order in orders)
+    return word(language, "answer.then").join(
+        spoken(order.description, language) for order in orders
+    )
 
 
-def doubt_words(transcript: str, doubt: Doubt) -> str:
+def doubt_words(transcript: str, doubt: Doubt, language: str = ENGLISH) -> str:
     """The question the panel asks with buttons, aloud: 'ten or two meters?' (the doubtful
     words, what they may have been, and the word after them, usually the unit)."""
     choices = [doubt.words, *doubt.alternatives]
-    asked = choices[0] if len(choices) == 1 else f"{', '.join(choices[:-1])} or {choices[-1]}"
+    either = word(language, "answer.or")
+    asked = choices[0] if len(choices) == 1 else f"{', '.join(choices[:-1])}{either}{choices[-1]}"
     after = transcript.split()[doubt.position + len(doubt.words.split()) :][:1]
     return f"{' '.join([asked, *after])}?"
 
 
-def outcome_words(record: OrderRecord) -> str | None:
+def outcome_words(record: OrderRecord, language: str = ENGLISH) -> str | None:
     """How an order ended, or None while it has not (queued, running)."""
-    what = spoken(record.order.description)
+    what = spoken(record.order.description, language)
+    why = short(record.message) if record.message else ""
     match record.status:
         case OrderStatus.SUCCEEDED:
             verb, _, rest = what.partition(" ")
-            return f"{_DONE[verb]} {rest}".strip() if verb in _DONE else f"done: {what}"
+            past = table(language, "answer.past").get(verb)
+            return f"{past} {rest}".strip() if past else word(language, "answer.done", what=what)
         case OrderStatus.FAILED:
-            return f"{what} failed" + (f": {short(record.message)}" if record.message else "")
+            key = "answer.failedWhy" if why else "answer.failed"
+            return word(language, key, what=what, why=why)
         case OrderStatus.CANCELLED:
-            return f"{what} cancelled"
+            return word(language, "answer.cancelled", what=what)
         case OrderStatus.REJECTED:
-            return f"{what} refused" + (f": {short(record.message)}" if record.message else "")
+            key = "answer.refusedWhy" if why else "answer.refused"
+            return word(language, key, what=what, why=why)
         case OrderStatus.INTERRUPTED:
-            return f"{what} interrupted"
+            return word(language, "answer.interrupted", what=what)
         case _:
             return None
 
@@ -103,9 +118,9 @@ def short(reason: str) -> str:
     return clause[:SHORT_REASON].rsplit(" ", 1)[0]
 
 
-def stopped_words(stopped: Stopped) -> str:
+def stopped_words(stopped: Stopped, language: str = ENGLISH) -> str:
     """The emergency stop's answer: 'stopped', or that the robot did not confirm it."""
-    return "stopped" if stopped.confirmed else "stop sent, not confirmed"
+    return word(language, "answer.stopped" if stopped.confirmed else "answer.stopUnconfirmed")
 
 
 # --- questions about the queue ---------------------------------------------------------

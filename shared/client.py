@@ -201,11 +201,14 @@ class VoicectlClient:
         future.add_done_callback(self._pending.discard)
         return future
 
-    async def parse(self, text: str) -> ParseResult:
-        """What the converter makes of `text`."""
+    async def parse(self, text: str, language: str = "") -> ParseResult:
+        """What the converter makes of `text`, written in `language` (empty: its default)."""
         try:
             reply: ParseReply | Failed = await self.bus.request(
-                ConverterKeys().parse, ParseRequest(text=text), self._parse_decode, self.timeout
+                ConverterKeys().parse,
+                ParseRequest(text=text, language=language),
+                self._parse_decode,
+                self.timeout,
             )
         except BusError as exc:
             raise Unreachable("converter", exc) from exc
@@ -309,13 +312,18 @@ class VoicectlClient:
         return reply
 
     async def say(
-        self, robot: str, text: str, partial: bool = False, asked: Asked | None = None
+        self,
+        robot: str,
+        text: str,
+        partial: bool = False,
+        asked: Asked | None = None,
+        language: str = "",
     ) -> Said:
-        """Parse `text` and send its orders, edits and questions (`send`): only when every
-        part of it made one, unless `partial`, which sends what was understood. A refusal
-        is `SayRefused`, with what the text made."""
+        """Parse `text` (in `language`) and send its orders, edits and questions (`send`):
+        only when every part of it made one, unless `partial`, which sends what was
+        understood. A refusal is `SayRefused`, with what the text made."""
         try:
-            result = await self.parse(text)
+            result = await self.parse(text, language)
         except Refused as exc:
             raise SayRefused(exc, None) from exc
         sending = result.orders if partial or not result.errors else []

@@ -201,10 +201,15 @@ class ConverterKeys:
         """Liveliness token of the converter (a method, as `RobotKeys.alive(service)`)."""
         return f"{ROOT}/converter/alive"
 
+    def grammar(self, language: str) -> str:
+        """The recogniser grammar of one language's orders: published on change, kept for
+        late subscribers."""
+        return f"{ROOT}/converter/grammar/{check_chunk(language, 'language')}"
+
     @property
-    def grammar(self) -> str:
-        """The recogniser grammar: published on change, and a queryable for late starters."""
-        return f"{ROOT}/converter/grammar"
+    def grammars(self) -> str:
+        """Every language's grammar."""
+        return f"{ROOT}/converter/grammar/*"
 
     @property
     def status(self) -> str:

@@ -115,6 +115,8 @@ class AudioStart(Message):
 
     sample_rate: Literal[16000] = SAMPLE_RATE
     channels: Literal[1] = 1
+    language: Annotated[str, msgspec.Meta(pattern="^([a-z]{2,3})?$")] = ""
+    """The language the person speaks (ISO 639-1, "es"); empty: the recogniser's own."""
 
 
 class AudioChunk(Message):
@@ -177,6 +179,11 @@ class Transcription(Data):
     token in e times less likely). None when the grammar heard no words."""
     asked: str = ""
     """Why this ear was asked, for an ear asked only when the others leave a doubt."""
+    no_speech: float | None = None
+    """The model's own probability that the audio held no speech (Whisper's)."""
+    second: str | None = None
+    """What a second decode of the same ear heard (Whisper, prompted with the orders'
+    words), where it alone hears the language: its own evidence, never a second ear."""
 
 
 class Transcript(Message):
@@ -212,6 +219,12 @@ class Transcript(Message):
     """What the second ear (Moonshine) heard."""
     third: Transcription | None = None
     """What the third ear (Whisper) heard, when the first two left a doubt."""
+    language: str = "en"
+    """The language it was heard in: the converter reads it with that language's orders."""
+    alone: bool = False
+    """Heard by one ear only, the one that hears the language (Whisper, for a language
+    that the grammar's ear and Moonshine do not hear): `text` is empty and `transcription`
+    is that ear's. Its orders need evidence of their own (docs/speech.md)."""
 
 
 class SttStatus(Message):
@@ -317,14 +330,26 @@ class Proposal(Message):
     """What each ear of the recogniser heard, for speech heard by more than one."""
     decision: str = ""
     """Why the speech became these orders, a doubt or nothing, in one line for a person."""
+    confirm: bool = False
+    """Heard by one ear without the evidence to send it alone: read back and sent only on
+    a yes (a click on the panel, "sí" or "ja" hands-free). It then carries one doubt
+    covering its whole transcript, with no alternatives, which is that question."""
+    language: str = "en"
+    """The language it was heard and read in."""
 
 
 class ParseRequest(Message):
     text: str
+    language: str = ""
+    """The language of `text` (ISO 639-1); empty: the converter's default (English when
+    it has English orders)."""
 
 
 class GetGrammar(Message):
     """Ask for the current recogniser grammar (a recogniser that starts late does this)."""
+
+    language: str = ""
+    """Its language; empty: the converter's default."""
 
 
 class Amend(Message):
@@ -333,6 +358,8 @@ class Amend(Message):
 
     order: Order
     change: Order
+    language: str = ""
+    """The language the correction was said in; empty: the converter's default."""
 
 
 ConverterRequest = ParseRequest | GetGrammar | Amend
@@ -367,6 +394,8 @@ class Grammar(Message):
     """Orders whose alias cannot be expanded to a finite set, one line each saying why."""
     version: str = ""
     """Changes whenever the orders change (a digest of the phrases)."""
+    language: str = "en"
+    """The language of its orders (ISO 639-1): the recogniser hears it in that language."""
 
 
 class OrdersStatus(Message):
@@ -377,6 +406,8 @@ class OrdersStatus(Message):
     errors: list[str] = msgspec.field(default_factory=list)
     orders: int = 0
     """How many orders are loaded (the previous set when the reload failed)."""
+    languages: list[str] = msgspec.field(default_factory=list)
+    """The languages the loaded orders are in."""
 
 
 class Place(Data):
@@ -390,6 +421,10 @@ class Place(Data):
     """The order's description ('reach kitchen')."""
     pose: TargetPose
     """Where it is, in the 'map' frame."""
+    language: str = "en"
+    """The language of `phrase` and `description`: each language's orders give their own."""
+    title: str = ""
+    """The place as the map labels it in that language ("la cocina"); empty: `name`."""
 
 
 class Places(Message):

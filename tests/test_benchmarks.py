@@ -37,6 +37,7 @@ QUICK = {
         "supervisor RSS MB",
         "(0 problems;",
     ),
+    "languages": ("de dev: 4 of", "non-commands refused", "p95", "espeak clean"),
     "supervisor": (
         "raw Zenoh request/reply (baseline)",
         "submit to dispatch (order at the executor)",
@@ -54,6 +55,7 @@ RUNS = {
     ],
     "fleet": ["--robots", "3", "--seconds", "4"],
     "supervisor": ["--quick"],
+    "languages": [*("--language", "de", "--split", "dev", "--limit", "4", "--paced", "0.3")],
 }
 """How each runs here. --quick is a person's one-minute look at the figures: e2e's streams
 10 utterances in real time and fleet's keeps its robots busy for 8 s, more than the report
@@ -67,7 +69,8 @@ robot an order (one every 3 s, the first within 3 s), the STOP included. The res
 def test_a_benchmark_runs_quickly(bench: str, tmp_path: Path) -> None:
     # The speech e2e makes goes to a directory of the test's own; so do the temporary
     # directories of the benchmark and its services, to see that none is left behind.
-    extra = ["--speech", str(tmp_path)] if bench == "e2e" else []
+    where = {"e2e": ["--speech", str(tmp_path)], "languages": ["--set", str(tmp_path)]}
+    extra = where.get(bench, [])
     temporary = tmp_path / "tmp"
     temporary.mkdir()
     done = subprocess.run(

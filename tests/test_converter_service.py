@@ -19,6 +19,7 @@ from voicectl.shared.errors import BusError
 from voicectl.shared.keys import ConverterKeys, RobotKeys
 from voicectl.shared.messages import (
     ConverterReply,
+    Failed,
     GetGrammar,
     Grammar,
     OrdersStatus,
@@ -53,7 +54,7 @@ class Converter:
         self.grammars: list[Grammar] = []
         self.alive: list[bool] = []
         bus.subscribe(KEYS.status, json_decoder(OrdersStatus), lambda _k, m: self._got(m))
-        bus.subscribe(KEYS.grammar, json_decoder(Grammar), lambda _k, m: self.grammars.append(m))
+        bus.subscribe(KEYS.grammars, json_decoder(Grammar), lambda _k, m: self.grammars.append(m))
         bus.watch(KEYS.alive(), lambda _k, alive: self.alive.append(alive))
         self.process = processes.start(
             "voicectl.services.converter", "--connect", router, "--orders", str(orders), "--debug"
@@ -135,16 +136,33 @@ async def test_queries_answer_a_recogniser_that_starts_late(
         assert status.ok
         assert status.errors == []
         assert status.orders == 8 + 18  # and orders/queue.yaml's edits and questions
-        assert len(status.sources) == 4
-        await async_wait_until(lambda: converter.grammars, WAIT, "the grammar at start")
+        assert len(status.sources) == 10  # the orders in English, Spanish and German
+        assert status.languages == ["de", "en", "es"]
+        await async_wait_until(
+            lambda: {g.language for g in converter.grammars} == {"de", "en", "es"},
+            WAIT,
+            "a grammar per language at start",
+        )
         with joined(router) as late:
             grammar = await late.request(
                 KEYS.parse, GetGrammar(), json_decoder(ConverterReply), timeout=10.0
             )
             assert isinstance(grammar, Grammar)
-            assert grammar == converter.grammars[0]
+            assert grammar == next(g for g in converter.grammars if g.language == "en")
             assert "go forward two point five meters" in grammar.phrases
             assert "#JSGF" in grammar.jsgf
+            spanish = await late.request(
+                KEYS.parse, GetGrammar(language="es"), json_decoder(ConverterReply), timeout=10.0
+            )
+            assert isinstance(spanish, Grammar)
+            assert spanish.language == "es"
+            assert "espera diez segundos" in spanish.phrases
+            assert "treinta" in spanish.words
+            unknown = await late.request(
+                KEYS.parse, GetGrammar(language="fr"), json_decoder(ConverterReply), timeout=10.0
+            )
+            assert isinstance(unknown, Failed)
+            assert unknown.reason == "no orders in language 'fr'; languages: de, en, es"
         result = await converter.ask("go forward two point five meters then dance")
         assert [(o.order, o.case) for o in result.orders] == [("drive", "forward")]
         assert result.orders[0].target_pose is not None

@@ -3,11 +3,15 @@ transcripts as the recogniser sends them."""
 
 from __future__ import annotations
 
+from dataclasses import replace
+
+import msgspec
 from hypothesis import given
 from hypothesis import strategies as st
 
 from voicectl.services.converter.decide import (
     GRAMMAR,
+    Evidence,
     Reading,
     Rule,
     decide,
@@ -408,3 +412,94 @@ def test_an_ear_that_heard_nothing_changes_nothing(
         decide(grammar, [moonshine], rule),
     )
     assert (with_it.rejected, with_it.orders) == (without.rejected, without.orders)
+
+
+# --- one ear is not two (docs/speech.md, "One ear is not two"): in a language one ear hears
+# alone, its orders are sent by themselves only on its own evidence, under a rule that allows
+# it; otherwise they are a confirmation, with a question that is never sent by itself.
+
+
+@st.composite
+def an_alone_reading(draw: st.DrawFn) -> Reading:
+    reading = draw(a_reading("whisper"))
+    evidence = Evidence(
+        confidence=draw(st.sampled_from([0.3, 0.85, 0.99])),
+        no_speech=draw(st.sampled_from([None, 0.01, 0.5])),
+        second=draw(st.sampled_from([None, False, True])),
+        prompted=draw(st.booleans()),
+    )
+    return replace(reading, evidence=evidence)
+
+
+@given(an_alone_reading(), st.sampled_from([SHIPPED_RULE, Rule(alone="evidence")]))
+def test_one_ear_alone_is_sent_only_on_its_own_evidence(reading: Reading, rule: Rule) -> None:
+    nobody = Reading(GRAMMAR, "", reason="no grammar's ear in this language")
+    decision = decide(nobody, [reading], rule)
+    if decision.rejected:
+        assert decision.orders == []
+        assert not decision.confirm
+        return
+    assert reading.claims
+    assert decision.orders == reading.orders
+    assert reading.evidence is not None
+    if not decision.confirm and not decision.doubts:  # sent by itself
+        assert rule.alone == "evidence"
+        assert reading.evidence.passes(rule)
+        assert not reading.evidence.prompted  # a prompted decode's orders need a yes
+    if decision.confirm:  # read back: a question, never sent by itself
+        assert decision.doubts
+    if rule.alone == "confirm":
+        assert decision.confirm
+
+
+def test_a_lone_transcript_is_confirmed_with_the_whole_sentence() -> None:
+    parser = Parser(OrderSet.load(REPO / "orders", "es"))
+    heard = "Gira a la izquierda y luego ve a la cocina."
+    transcript = Transcript(
+        text="",
+        language="es",
+        alone=True,
+        transcription=Transcription(
+            engine="whisper", text=heard, confidence=0.95, no_speech=0.01, second=heard
+        ),
+    )
+    decision = decide(*readings(transcript, parser))
+    assert [(o.order, o.case) for o in decision.orders] == [
+        ("rotation", "left"),
+        ("goal", "kitchen"),
+    ]
+    assert decision.confirm
+    assert decision.doubts == [
+        Doubt(position=0, words="gira a la izquierda y luego ve a la cocina", confidence=0.95)
+    ]
+    assert decision.reason == (
+        "whisper alone heard 'gira a la izquierda; ve a la cocina': confirm it"
+    )
+    # Under the evidence rule its second decode's agreement sends it; a second decode that
+    # made other orders does not.
+    sent = decide(*readings(transcript, parser), rule=Rule(alone="evidence"))
+    assert not sent.confirm
+    assert sent.doubts == []
+    other = msgspec.structs.replace(
+        transcript,
+        transcription=msgspec.structs.replace(
+            transcript.transcription, second="Gira a la derecha y luego ve a la cocina."
+        ),
+    )
+    assert decide(*readings(other, parser), rule=Rule(alone="evidence")).confirm
+    # Orders only the prompted decode heard ("kira la izquierda" unprompted) are asked.
+    rescued = msgspec.structs.replace(
+        transcript,
+        transcription=msgspec.structs.replace(
+            transcript.transcription,
+            text="Kira la izquierda y luego vea la cocina.",
+            second="gira la izquierda y luego vea la cocina",
+        ),
+    )
+    decision = decide(*readings(rescued, parser), rule=Rule(alone="evidence"))
+    assert decision.confirm
+    assert [(o.order, o.case) for o in decision.orders] == [
+        ("rotation", "left"),
+        ("goal", "kitchen"),
+    ]
+    assert decision.reason.endswith("(prompted with the orders' words): confirm it")

@@ -467,3 +467,36 @@ def spoke(lines: list[str]) -> int:
 def loudest(pcm: bytes) -> float:
     samples = np.frombuffer(pcm[: len(pcm) // 2 * 2], dtype="<i2").astype(np.float32)
     return float(np.abs(samples).max()) if len(samples) else 0.0
+
+
+SPANISH = REPO / "tests" / "data" / "gira-a-la-izquierda-kokoro-em_santa.wav"
+"""Kokoro's Spanish em_santa: "gira a la izquierda y luego ve a la cocina"
+(tests/test_panel_languages.py says how it was made)."""
+
+
+def test_spanish_heard_by_one_ear_is_read_back_and_sent_on_si(stack: Stack, speech: Speak) -> None:
+    """--language es: Whisper alone hears it, so its orders are read back in Spanish; "no"
+    sends nothing, "sí" (the check that the test can fail) sends them."""
+    mouth = Mouth(stack, "--language", "es", "--awake", "2")
+    try:
+        wait_until(lambda: mouth.heard("listening"), 30.0, "the listener")
+        for answer, logged in (("no", "confirmation: no"), ("sí", "confirmation: si")):
+            asked = mouth.heard("¿Sí o no?")
+            mouth.say(SPANISH)
+            wait_until(lambda n=asked: mouth.heard("¿Sí o no?") > n, 60.0, "the read-back")
+            mouth.say(speech(answer, "espeak:es", 150))
+            wait_until(lambda text=logged: mouth.heard(text), 30.0, f"the answer {answer!r}")
+            if answer == "no":
+                assert not descriptions(state(stack))
+        assert mouth.heard("answer: gira a la izquierda, luego ve a la cocina. ¿Sí o no?") == 2
+        wait_until(
+            lambda: ("ve a la cocina", OrderStatus.SUCCEEDED) in descriptions(state(stack)),
+            60.0,
+            "the orders said sí to",
+        )
+        assert [d for d, _ in descriptions(state(stack))] == [
+            "ve a la cocina",
+            "gira a la izquierda",
+        ]
+    finally:
+        assert mouth.close() == 0

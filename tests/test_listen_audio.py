@@ -135,10 +135,24 @@ def test_a_file_is_paced_at_real_time(speech: Path) -> None:
 
 
 def test_closing_wakes_a_paced_read(speech: Path) -> None:
+    """A read waiting for its frame's time returns None once the source is closed, long
+    before the file's end; at most the read under way when it closed still gives a frame."""
     source = open_source(str(speech))
     assert source.read() is not None
-    threading.Timer(0.05, source.close).start()
-    assert source.read() is None
+    closed = threading.Event()
+
+    def close() -> None:
+        closed.set()
+        source.close()
+
+    threading.Timer(0.05, close).start()
+    frames, after_close = 1, 0
+    while source.read() is not None:
+        frames += 1
+        after_close += closed.is_set()
+    assert closed.is_set()
+    assert after_close <= 1
+    assert frames < seconds_of(speech) * 50 / 2, frames  # ended by the close, not the file
     source.close()  # again: idempotent
 
 

@@ -11,10 +11,12 @@ from pathlib import Path
 from typing import Any
 
 import msgspec
+import pytest
 
 from voicectl.shared.answers import outcome_words, proposal_words, question_words, stopped_words
 from voicectl.shared.edits import ended_by_edit
 from voicectl.shared.messages import Order, OrderRecord, OrderStatus
+from voicectl.shared.words import catalogue
 
 from .conftest import REPO, Stack
 from .test_answers import OUTCOMES, PLACES, PROPOSALS, QUESTIONS, STOPS
@@ -22,6 +24,7 @@ from .test_panel_browser import CHROMIUM, CHROMIUM_FLAGS, login, panel
 from .test_panel_browser import pytestmark as pytestmark  # Chromium installed, or skipped
 
 ANSWERS_JS = REPO / "services" / "web" / "static" / "answers.js"
+WORDS_JS = REPO / "services" / "web" / "static" / "words.js"
 
 LISTEN = """
 // Every sound the page plays through WebAudio: its length, loudness, and whether it ended
@@ -123,13 +126,22 @@ def test_answers_are_spoken_only_once_asked(stack: Stack, tmp_path: Path) -> Non
         expect(page.locator("#speak-answers")).to_be_checked()
 
 
-def test_the_panel_says_what_the_service_would(tmp_path: Path) -> None:
-    """answers.js and shared/answers.py on one table of messages."""
+@pytest.mark.parametrize("language", ["en", "es", "de"])
+def test_the_panel_says_what_the_service_would(tmp_path: Path, language: str) -> None:
+    """answers.js and shared/answers.py on one table of messages, in each language's words
+    (words.js given the catalogue the panel's web service serves). The answers about the
+    queue are English in every language, as the queue's phrases are (orders/queue.yaml)."""
     places = msgspec.to_builtins(PLACES)
     cases = (
-        [("proposalWords", [msgspec.to_builtins(p)], proposal_words(p)) for p, _ in PROPOSALS]
-        + [("outcomeWords", [msgspec.to_builtins(r)], outcome_words(r)) for r, _ in OUTCOMES]
-        + [("stoppedWords", [msgspec.to_builtins(s)], stopped_words(s)) for s, _ in STOPS]
+        [
+            ("proposalWords", [msgspec.to_builtins(p)], proposal_words(p, language))
+            for p, _ in PROPOSALS
+        ]
+        + [
+            ("outcomeWords", [msgspec.to_builtins(r)], outcome_words(r, language))
+            for r, _ in OUTCOMES
+        ]
+        + [("stoppedWords", [msgspec.to_builtins(s)], stopped_words(s, language)) for s, _ in STOPS]
         + [
             (
                 "questionWords",
@@ -141,6 +153,11 @@ def test_the_panel_says_what_the_service_would(tmp_path: Path) -> None:
         + [("endedByEdit", [msgspec.to_builtins(r)], ended_by_edit(r)) for r in ENDINGS]
     )
     with blank_page(tmp_path / "profile") as page:
+        page.add_script_tag(path=str(WORDS_JS))
+        page.evaluate(
+            "([language, words]) => window.voicectlWords.use({ language, words })",
+            [language, catalogue(language)],
+        )
         page.add_script_tag(path=str(ANSWERS_JS))
         said = page.evaluate(
             "cases => cases.map(([name, args]) => window.voicectlAnswers[name](...args))",

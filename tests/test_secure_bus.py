@@ -12,6 +12,7 @@ import os
 import shlex
 import socket
 import stat
+import subprocess
 import sys
 from functools import partial
 from pathlib import Path
@@ -67,8 +68,8 @@ class SecureSite:
     def config(self, user: str) -> Path:
         return self.secrets / f"{user}.json5"
 
-    def start(self, module: str, user: str, *args: str) -> None:
-        self.processes.start(module, "--config", str(self.config(user)), *args)
+    def start(self, module: str, user: str, *args: str) -> subprocess.Popen[bytes]:
+        return self.processes.start(module, "--config", str(self.config(user)), *args)
 
     def options(self, config: Path) -> BusOptions:
         return BusOptions(connect=[], mode=None, config_file=config, wait=False)
@@ -194,9 +195,13 @@ def test_the_bus_secrets_command_names_robots_and_their_namespaces(tmp_path: Pat
 
 
 async def test_the_stack_runs_end_to_end_on_the_secured_bus(site: SecureSite) -> None:
-    site.start("voicectl.services.converter", "converter")
+    converter = site.start("voicectl.services.converter", "converter")
     start_robot(site)
     operator = str(site.config("operator"))
+    # Its three languages' grammars take a while on a loaded machine: `say` asks it.
+    await async_wait_until(
+        lambda: "converter ready" in site.processes.log(converter), 60.0, "the converter"
+    )
 
     with site.joined("operator") as bus:
         client = Client(bus, "r1")

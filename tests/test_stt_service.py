@@ -328,7 +328,7 @@ async def test_bad_input_is_logged_and_dropped_and_sessions_go_on(
         bus.publish(KEYS.stt_audio("nostart"), AudioChunk(seq=0, pcm=b"\x00" * 640))
         bus.publish(KEYS.stt_audio("nostart"), AudioStop())
         # An empty grammar, as a broken converter might publish it: the old one stays.
-        bus.publish(ConverterKeys().grammar, Grammar(jsgf="", version="empty"))
+        bus.publish(ConverterKeys().grammar("en"), Grammar(jsgf="", version="empty"))
         await stream(bus, "good", wav)
         [final] = await listener.final("good")
         assert final.text == "turn right"

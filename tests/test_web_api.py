@@ -3,6 +3,7 @@ real Zenoh router: every refusal, and the audio bridge's messages on the bus."""
 
 from __future__ import annotations
 
+import functools
 import json
 import socket
 import threading
@@ -650,8 +651,16 @@ async def test_a_flood_of_made_up_robots_is_forgotten_past_the_cap(router: str) 
         hub = Hub(bus, "robot", max_robots=cap)
         async with running(hub):
             with hub.listen("shown"):  # a page shows this robot: it stays, flood or not
-                for robot in ("robot", "shown"):
+
+                def said(robot: str) -> bool:
+                    """Said again until the hub knows it: a sample put before its
+                    subscription reached the router is lost."""
                     other.put(RobotKeys(robot).stt_status, encode(SttStatus(engine="real")))
+                    return hub.knows(robot, "SttStatus")
+
+                for robot in ("robot", "shown"):
+                    status = functools.partial(said, robot)
+                    await async_wait_until(status, 30.0, f"{robot}'s status")
                 # The hub's watch on the labels reached the router: tokens are heard now.
                 tokens = [other.liveliness().declare_token(RobotKeys("shown").label("wave"))]
                 await async_wait_until(

@@ -95,6 +95,13 @@ def build_parser() -> argparse.ArgumentParser:
     up.add_argument("--port", type=int, default=8000, help="panel port")
     up.add_argument("--robot", type=robot_name, default="robot")
     up.add_argument(
+        "--language",
+        default="en",
+        metavar="CODE",
+        help="what people speak to the robot's microphone by default (the panel says its "
+        "own); the orders in that language are heard (default %(default)s)",
+    )
+    up.add_argument(
         "--orders",
         type=Path,
         default=SHIPPED_ORDERS,
@@ -143,6 +150,12 @@ def build_parser() -> argparse.ArgumentParser:
         action="store_true",
         help="print the recogniser grammar (JSGF, phrases, words) as JSON instead",
     )
+    parse.add_argument(
+        "--language",
+        default="en",
+        metavar="CODE",
+        help="the language of the text: the orders files in it are read (default %(default)s)",
+    )
     parse.add_argument("text", nargs="?", help="what was said or typed")
 
     transcribe = sub.add_parser(
@@ -157,6 +170,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="orders file or directory (default: orders/)",
     )
     add_engine_arguments(transcribe)
+    transcribe.add_argument(
+        "--language",
+        default="en",
+        metavar="CODE",
+        help="the language spoken: the orders in it are read, and heard in it "
+        "(default %(default)s)",
+    )
     transcribe.add_argument("audio", type=Path, nargs="+", metavar="AUDIO.wav")
 
     say = sub.add_parser(
@@ -167,6 +187,12 @@ def build_parser() -> argparse.ArgumentParser:
         "--partial",
         action="store_true",
         help="submit the orders that were understood even if some words were not",
+    )
+    say.add_argument(
+        "--language",
+        default="",
+        metavar="CODE",
+        help="the language of the text (default: the converter's)",
     )
     add_bus_arguments(say)
     say.add_argument("text")
@@ -385,7 +411,10 @@ def _up(args: argparse.Namespace) -> int:
     ]
     if not args.no_stt:
         engine = engine_options(args).argv()
-        children.insert(3, Child("stt", ["voicectl.services.stt", *robot, *engine, *connect]))
+        spoken = ["--language", args.language]
+        children.insert(
+            3, Child("stt", ["voicectl.services.stt", *robot, *spoken, *engine, *connect])
+        )
     web = None
     if not args.no_web:
         problem = tls_problem(args)
@@ -527,7 +556,7 @@ def _parse(args: argparse.Namespace) -> int:
         print("voicectl parse: give a TEXT to parse, or --grammar", file=sys.stderr)
         return 2
     try:
-        orders = OrderSet.load(args.orders)
+        orders = OrderSet.load(args.orders, args.language)
     except OrdersFileError as exc:
         print(f"voicectl parse: {exc}", file=sys.stderr)
         return 2
@@ -566,7 +595,7 @@ def _transcribe(args: argparse.Namespace) -> int:
         print(f"voicectl transcribe: no such file: {', '.join(missing)}", file=sys.stderr)
         return 2
     try:
-        orders = OrderSet.load(args.orders)
+        orders = OrderSet.load(args.orders, args.language)
         engine = load_engine(engine_options(args))
     except (OrdersFileError, EngineError) as exc:
         print(f"voicectl transcribe: {exc}", file=sys.stderr)
@@ -590,7 +619,11 @@ async def _say(args: argparse.Namespace) -> int:
     try:
         with Bus.open(bus_options(args, wait=False), asyncio.get_running_loop()) as bus:
             said = await VoicectlClient(bus).say(
-                args.robot, args.text, partial=args.partial, asked=asked
+                args.robot,
+                args.text,
+                partial=args.partial,
+                asked=asked,
+                language=args.language,
             )
     except SayRefused as exc:
         # Refused is an answer too: the same JSON as any other, with what was understood

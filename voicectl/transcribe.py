@@ -99,20 +99,21 @@ class Unreadable(msgspec.Struct):
 def transcribe(
     engine: Engine, parser: Parser, files: list[Path]
 ) -> Iterator[FileTranscript | Unreadable]:
-    """Each file's transcription, in order, decided as the converter decides (decide.py)."""
+    """Each file's transcription, in order, decided as the converter decides (decide.py),
+    heard in the language of `parser`'s orders."""
     for path in files:
         try:
-            heard = list(stream_finals(engine, path))
+            heard = list(stream_finals(engine, path, parser.orders.language))
         except AudioError as exc:
             yield Unreadable(file=str(path), error=str(exc))
             continue
         yield _file_line(path, heard, parser)
 
 
-def stream_finals(engine: Engine, path: Path) -> Iterator[Final]:
+def stream_finals(engine: Engine, path: Path, language: str = "en") -> Iterator[Final]:
     """The final results of a file streamed through a recogniser as a microphone's audio,
     a second at a time, times counted from the file's start."""
-    recogniser = engine.recogniser(MAX_UTTERANCE)
+    recogniser = engine.recogniser(MAX_UTTERANCE, language=language)
     try:
         lead = recogniser.accept(bytes(int(LEAD_SILENCE * 32000)))
         events = [e for e in lead if isinstance(e, Final)]
@@ -135,7 +136,10 @@ def _shifted(finals: list[Final]) -> Iterator[Final]:
 
 
 def _file_line(path: Path, heard: list[Final], parser: Parser) -> FileTranscript:
-    decisions = [decide(*readings(transcript_of(final), parser)) for final in heard]
+    language = parser.orders.language
+    decisions = [
+        decide(*readings(transcript_of(final, language=language), parser)) for final in heard
+    ]
     utterances = [_utterance(f, d) for f, d in zip(heard, decisions, strict=True)]
     taken = [u for u in utterances if not u.rejected]
     refused = [d for d in decisions if d.rejected]

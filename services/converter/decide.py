@@ -23,6 +23,10 @@ written down in docs/speech.md ("How the ears decide") and walked by a property 
 - Absence of evidence never clears a doubt: a value an ear doubted stays asked unless
   another ear that claims the same orders heard it without doubt. Every number of the
   -teen/-ty pairs ("fifteen", "fifty") that the grammar did not hear too is asked.
+- One ear is not two. In a language only one ear hears (`Transcript.alone`: Whisper, for
+  Spanish or German), nothing can agree with it: its orders are sent by themselves only
+  when its own evidence passes (`Rule.alone`); else they are a confirmation, read back
+  and sent only on a yes (`Decision.confirm`), never sent by themselves.
 """
 
 from __future__ import annotations
@@ -30,6 +34,8 @@ from __future__ import annotations
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
+
+import msgspec
 
 from voicectl.shared.messages import Doubt, Hearing, Order, ParseProblem, Transcript, Transcription
 
@@ -74,9 +80,44 @@ class Rule:
     lone: str = "unclaimed"
     """When one free ear's orders are taken alone: 'unclaimed' (no other ear claims orders),
     'unheard' (and no other free ear heard words at all) or 'never'."""
+    alone: str = "confirm"
+    """In a language one ear alone hears, when its orders are sent without a confirmation:
+    'confirm' (never: every one is read back and waits for a yes) or 'evidence' (when its
+    own evidence passes `alone_confidence`, `alone_no_speech` and its second decode made
+    the same orders). Chosen on the dev split of harness/speech_languages.py
+    (docs/benchmarks.md, "Other languages")."""
+    alone_confidence: float = 0.8
+    """The lowest geometric mean of its tokens' probabilities that may send alone."""
+    alone_no_speech: float = 0.1
+    """The highest probability it gave to the audio holding no speech."""
 
 
 SHIPPED = Rule()
+
+
+@dataclass(frozen=True)
+class Evidence:
+    """What an ear that hears alone says of its own words (services/stt/ears.py, `_Alone`)."""
+
+    confidence: float
+    """The geometric mean of its tokens' probabilities."""
+    no_speech: float | None
+    """Its probability that the audio held no speech."""
+    second: bool | None
+    """Whether its second decode (prompted with the orders' words) made the same orders;
+    None when it made none (its first words held no word of the orders)."""
+    prompted: bool = False
+    """The orders are the prompted decode's, the first having made none: the prompt may
+    have put them there, so they are never sent without a yes."""
+
+    def passes(self, rule: Rule) -> bool:
+        return (
+            not self.prompted
+            and self.second is True
+            and self.confidence >= rule.alone_confidence
+            and self.no_speech is not None
+            and self.no_speech <= rule.alone_no_speech
+        )
 
 
 @dataclass(frozen=True)
@@ -97,6 +138,8 @@ class Reading:
     doubts: list[Doubt] = field(default_factory=list)
     support: float | None = None
     """This ear's likelihood of the grammar's words (`Transcription.support`)."""
+    evidence: Evidence | None = None
+    """For an ear that hears its language alone: what it says of its own words."""
 
     @property
     def heard(self) -> bool:
@@ -131,11 +174,20 @@ class Decision:
     """One line for a person: why these orders, or why none."""
     candidates: list[str]
     hearings: list[Hearing]
+    confirm: bool = False
+    """Sent only on a yes: heard by one ear without the evidence to send it alone."""
 
 
 def readings(transcript: Transcript, parser: Parser) -> tuple[Reading, list[Reading]]:
     """What each ear of a final transcript heard, read by `parser`: the grammar's, and the
-    free ears' that heard the utterance."""
+    free ears' that heard the utterance; in a language one ear hears alone, that ear's,
+    with its evidence, beside a grammar that heard nothing."""
+    if transcript.alone:
+        nobody = Reading(GRAMMAR, "", reason="no grammar's ear in this language")
+        heard = transcript.transcription
+        if heard is None:
+            return nobody, []
+        return nobody, [alone_reading(heard, parser)]
     free = [
         free_reading(heard, parser)
         for heard in (transcript.transcription, transcript.third)
@@ -186,6 +238,21 @@ def free_reading(heard: Transcription, parser: Parser) -> Reading:
     return not_a_command(ear, text, result.errors, support)
 
 
+def alone_reading(heard: Transcription, parser: Parser) -> Reading:
+    """The words of an ear that hears its language alone, with its own evidence: the
+    model's confidence and no-speech probability, and whether a second decode of it made
+    the same orders."""
+    reading = free_reading(heard, parser)
+    if heard.second is None:
+        return replace(reading, evidence=Evidence(heard.confidence, heard.no_speech, None))
+    again = free_reading(msgspec.structs.replace(heard, text=heard.second), parser)
+    if not reading.claims and again.claims:  # heard as orders only with the prompt
+        evidence = Evidence(heard.confidence, heard.no_speech, None, prompted=True)
+        return replace(again, evidence=evidence)
+    second = reading.claims and again.claims and again.orders == reading.orders
+    return replace(reading, evidence=Evidence(heard.confidence, heard.no_speech, second))
+
+
 def not_a_command(
     ear: str, text: str, errors: list[ParseProblem], support: float | None = None
 ) -> Reading:
@@ -233,6 +300,8 @@ def decide(grammar: Reading, free: Sequence[Reading] = (), rule: Rule = SHIPPED)
             if grammar.accepted
             else _refuse(grammar, hearings, grammar.reason)
         )
+    if len(free) == 1 and free[0].evidence is not None and not grammar.text:
+        return _lone(free[0], hearings, rule)
     claims = [reading for reading in ears if reading.claims]
     if not claims:
         said = [reading for reading in free if reading.text]
@@ -359,6 +428,26 @@ def _alone(
         return _refuse(claim, hearings, why)
     doubts = _merged(claim.doubts, _teens_or_tens(claim.text))
     return _take(replace(claim, doubts=doubts), hearings, f"{claim.ear} heard {_said(claim)}")
+
+
+def _lone(reading: Reading, hearings: list[Hearing], rule: Rule) -> Decision:
+    """The one ear of a language claims orders: sent alone only if its own evidence
+    passes the rule; else read back, and sent only on a yes. Its number doubts are asked
+    either way."""
+    if not reading.claims:
+        return _refuse(reading, hearings, reading.reason or "nothing heard")
+    doubts = _merged(reading.doubts, _teens_or_tens(reading.text))
+    evidence = reading.evidence
+    said = f"{reading.ear} alone heard {_said(reading)}"
+    if evidence is not None and evidence.prompted:
+        said += " (prompted with the orders' words)"
+    if rule.alone == "evidence" and evidence is not None and evidence.passes(rule):
+        return _take(replace(reading, doubts=doubts), hearings, f"{said}, and again")
+    if not doubts:
+        confidence = evidence.confidence if evidence is not None else 0.0
+        doubts = [Doubt(position=0, words=reading.text, confidence=confidence)]
+    decision = _take(replace(reading, doubts=doubts), hearings, f"{said}: confirm it")
+    return replace(decision, confirm=True)
 
 
 def _heard_surely(reading: Reading, doubt: Doubt) -> bool:

@@ -24,7 +24,7 @@ from __future__ import annotations
 import hashlib
 import itertools
 import math
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 
 from voicectl.shared.edits import QUEUE_LABEL
 from voicectl.shared.messages import Grammar
@@ -32,7 +32,6 @@ from voicectl.shared.messages import Grammar
 from .expand import SlotRef, Template
 from .model import Command
 from .orders import OrderSet
-from .slots import say_number
 from .text import normalise
 
 EDGE_WORDS = ("please", "now")
@@ -44,7 +43,7 @@ GRAMMAR_NAME = "voicectl"
 
 def build_grammar(orders: OrderSet) -> Grammar:
     """The grammar of `orders`; a pure function of them (its version is a digest)."""
-    builder = _Builder(orders.skip_words)
+    builder = _Builder(orders.skip_words, orders.numbers.say)
     for command in orders.commands:
         builder.add(command)
     separator = orders.separator_expansion
@@ -65,6 +64,7 @@ def build_grammar(orders: OrderSet) -> Grammar:
         words=sorted(builder.words),
         separator_phrases=separator_phrases,
         skip_words=list(orders.skip_words),
+        language=orders.language,
         number_words=sorted(builder.number_words),
         unexpandable=builder.unexpandable,
         version=digest[:16],
@@ -72,8 +72,10 @@ def build_grammar(orders: OrderSet) -> Grammar:
 
 
 class _Builder:
-    def __init__(self, skip_words: tuple[str, ...]) -> None:
+    def __init__(self, skip_words: tuple[str, ...], say: Callable[[float], str]) -> None:
         self.skip_words = skip_words
+        self.say = say
+        """The orders' language's words for a number."""
         self.gap = " <skip> " if skip_words else " "
         """What stands between two words of a command in the JSGF."""
         self.rules: list[tuple[str, str, str]] = []
@@ -98,7 +100,7 @@ class _Builder:
             if loop:
                 self.rules.append((rule, loop, command.name))
             return
-        values = {name: [say_number(v) for v in s.heard()] for name, s in command.slots.items()}
+        values = {name: [self.say(v) for v in s.heard()] for name, s in command.slots.items()}
         alternatives = [self._jsgf_template(t, values) for t in expansion.templates]
         self.rules.append((rule, " | ".join(alternatives), command.name))
         for template in expansion.templates:

@@ -8,8 +8,9 @@ from dataclasses import dataclass, field
 from voicectl.shared.messages import Order, ParamValue, TargetPose
 
 from .expand import Expansion
+from .language import numbers_of
 from .patterns import PLACEHOLDER, combined
-from .slots import NUMBER_PATTERN, OrderSlot, SlotSpec, format_value
+from .slots import OrderSlot, SlotSpec, format_value
 
 POSE_KEYS = ("x", "y", "yaw")
 
@@ -48,6 +49,8 @@ class OrderSpec:
     """Read back and wait for a spoken yes before it runs (hands-free listening)."""
     refs: dict[str, OrderSlot] = field(default_factory=dict)
     """Its slots that name a queued order (orders of label `queue` only)."""
+    language: str = "en"
+    """The language of its file: how its numbers are said and read."""
 
     def confirms(self, case: CaseSpec | None) -> bool:
         return case.confirm if case is not None and case.confirm is not None else self.confirm
@@ -120,7 +123,7 @@ class Command:
     def pattern(self, skip_words: tuple[str, ...] = ()) -> str:
         """The aliases as one regex with slots as named groups, not yet restricted to whole
         words; `skip_words` may stand wherever the aliases have a space."""
-        return combined(self.aliases, NUMBER_PATTERN, skip_words)
+        return combined(self.aliases, numbers_of(self.order.language).pattern, skip_words)
 
     def to_order(self, spoken: dict[str, str | None]) -> Order:
         """The order this command makes with the slot texts `spoken` (by slot name; None
@@ -130,11 +133,12 @@ class Command:
         """
         filled: dict[str, ParamValue] = {}
         said: dict[str, str] = {}
+        read = numbers_of(self.order.language).read
         for name, slot in self.slots.items():
             text = spoken.get(name)
             if text is None:
                 continue
-            value = slot.value(text)
+            value = slot.value(text, read)
             filled[slot.to] = slot.stored(value)
             said[name] = format_value(value)
         description = PLACEHOLDER.sub(

@@ -32,6 +32,7 @@ from typing import Any
 from voicectl.shared.errors import OrdersFileError
 
 from .expand import Expansion, expand
+from .language import DEFAULT, Language, Numbers, language_of, numbers_of
 from .model import Command, OrderSpec
 from .orders_file import (
     DEFAULT_SEPARATOR,
@@ -43,7 +44,7 @@ from .orders_file import (
 )
 from .refer import names_of, spelled
 
-__all__ = ["DEFAULT_SKIP_WORDS", "OrderSet", "OrdersInvalid", "orders_files"]
+__all__ = ["DEFAULT_SKIP_WORDS", "OrderSet", "OrdersInvalid", "load_languages", "orders_files"]
 
 
 def orders_files(path: Path) -> list[Path]:
@@ -67,6 +68,8 @@ class OrderSet:
     prefixes: tuple[Command, ...] = ()
     """The aliases of orders with cases, alone."""
     separator_expansion: Expansion = field(default_factory=Expansion)
+    language: str = DEFAULT
+    """The language every file of the set is written in."""
     templates: tuple[Command, ...] = ()
     """Commands that name a queued order (`{order}`), as written: `commands` holds what
     they make with each name of these orders (refer.py)..."""
@@ -82,28 +85,30 @@ class OrderSet:
     def skip_words(self) -> tuple[str, ...]:
         """The small words the parser ignores between and around a command's words."""
         if self.declared_skip_words is None:
-            return DEFAULT_SKIP_WORDS
+            return language_of(self.language).skip_words or DEFAULT_SKIP_WORDS
         return self.declared_skip_words
 
+    @property
+    def spoken(self) -> Language:
+        """What is known of the set's language: its "and", unit words, numbers."""
+        return language_of(self.language)
+
+    @property
+    def numbers(self) -> Numbers:
+        return numbers_of(self.language)
+
     @staticmethod
-    def load(path: Path) -> OrderSet:
-        """Load one YAML file, or every ``*.yaml``/``*.yml`` in a directory."""
+    def load(path: Path, language: str = DEFAULT) -> OrderSet:
+        """Load one YAML file, or the ``*.yaml``/``*.yml`` of a directory written in
+        `language` (every file is read and checked; `load_languages` keeps them all)."""
         if path.is_dir():
-            files = orders_files(path)
-            if not files:
-                raise OrdersFileError(f"{path}: no *.yaml orders files in this directory")
-            sets: list[OrderSet] = []
-            problems: list[Problem] = []
-            for file in files:
-                try:
-                    sets.append(OrderSet.load(file))
-                except OrdersInvalid as exc:
-                    problems.extend(exc.problems)
-                except OrdersFileError as exc:
-                    problems.append((str(exc), None))
-            if problems:
-                raise OrdersInvalid(problems)
-            return OrderSet.merge(sets)
+            sets = load_languages(path)
+            if language not in sets:
+                raise OrdersFileError(
+                    f"{path}: no orders in language {language!r}; "
+                    f"its files are in {', '.join(sorted(sets))}"
+                )
+            return sets[language]
         try:
             text = path.read_text(encoding="utf-8")
         except (OSError, UnicodeDecodeError) as exc:
@@ -118,7 +123,12 @@ class OrderSet:
     def from_dict(data: Any, source: str = "<dict>") -> OrderSet:
         checked = check_file(data, source)
         return OrderSet.build(
-            checked.orders, checked.commands, checked.separator, checked.skip_words, (source,)
+            checked.orders,
+            checked.commands,
+            checked.separator,
+            checked.skip_words,
+            (source,),
+            checked.language,
         )
 
     @staticmethod
@@ -128,6 +138,7 @@ class OrderSet:
         separator: str,
         skip_words: tuple[str, ...] | None,
         sources: tuple[str, ...],
+        language: str = DEFAULT,
     ) -> OrderSet:
         templates = tuple(c for c in commands if c.refs)
         plain = [c for c in commands if not c.refs]
@@ -137,6 +148,7 @@ class OrderSet:
         except ValueError as exc:
             raise OrdersInvalid([(f"{', '.join(sources)}: {exc}", None)]) from exc
         return OrderSet(
+            language=language,
             orders=orders,
             separator=separator,
             declared_skip_words=skip_words,
@@ -188,4 +200,51 @@ class OrderSet:
             separators.pop(),
             declared.pop() if declared else None,
             tuple(src for s in sets for src in s.sources),
+            sets[0].language,
         )
+
+
+def load_languages(path: Path) -> dict[str, OrderSet]:
+    """Every orders file at `path` (a file, or a directory's ``*.yaml``), read, checked
+    and joined per language: the same orders may come in several languages, each file
+    saying its own (`language: es`). OrdersInvalid lists every problem of every file."""
+    if not path.is_dir():
+        single = OrderSet.load(path)
+        return {single.language: single}
+    files = orders_files(path)
+    if not files:
+        raise OrdersFileError(f"{path}: no *.yaml orders files in this directory")
+    by_language: dict[str, list[OrderSet]] = {}
+    problems: list[Problem] = []
+    for file in files:
+        try:
+            one = OrderSet.load(file)
+        except OrdersInvalid as exc:
+            problems.extend(exc.problems)
+        except OrdersFileError as exc:
+            problems.append((str(exc), None))
+        else:
+            by_language.setdefault(one.language, []).append(one)
+    merged: dict[str, OrderSet] = {}
+    for language, sets in by_language.items():
+        try:
+            merged[language] = OrderSet.merge(sets)
+        except OrdersInvalid as exc:
+            problems.extend(exc.problems)
+        except OrdersFileError as exc:
+            problems.append((f"language {language}: {exc}", None))
+    if problems:
+        raise OrdersInvalid(problems)
+    return merged
+
+
+def check_heard(sets: dict[str, OrderSet], heard: frozenset[str]) -> None:
+    """Orders in a language no installed ear hears are refused: nobody could say them.
+    One line naming the first file and the language."""
+    for language, orders in sets.items():
+        if language not in heard:
+            raise OrdersFileError(
+                f"{orders.sources[0]}: language {language}: no installed speech engine "
+                f"hears it (installed: {', '.join(sorted(heard)) or 'none'}); "
+                "pip install 'voicectl[stt]' brings Whisper, which hears 99 languages"
+            )

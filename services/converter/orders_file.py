@@ -24,6 +24,7 @@ from voicectl.shared.errors import OrdersFileError, VoicectlError
 from voicectl.shared.messages import Order, ParamValue
 
 from .expand import SlotRef, expand
+from .language import DEFAULT, LANGUAGES, language_of, markers_in, reads_numbers, unreadable
 from .model import POSE_KEYS, CaseSpec, Command, OrderSpec
 from .patterns import PLACEHOLDER, SLOT_GROUP, SLOT_STUB, check_regex, combined, with_slots
 from .slots import OrderSlot, SlotSpec, slot_from_dict
@@ -68,6 +69,8 @@ class OrdersFile:
     separator: str
     skip_words: tuple[str, ...] | None
     """None when the file does not say."""
+    language: str = DEFAULT
+    """What its aliases are written in (`language: es`); English when it does not say."""
 
 
 def read_yaml(text: str, source: str) -> Any:
@@ -87,13 +90,20 @@ def check_file(data: Any, source: str) -> OrdersFile:
         data = data["orders_list"]
     if not isinstance(data, dict) or not isinstance(data.get("orders"), dict):
         raise OrdersFileError(f"{source}: expected a mapping with an 'orders' mapping")
-    unknown = set(data) - {"orders", "separator", "skip_words"}
+    unknown = set(data) - {"orders", "separator", "skip_words", "language"}
     if unknown:
         raise OrdersFileError(
             f"{source}: unknown top-level key(s) {', '.join(sorted(map(str, unknown)))}; "
-            "allowed: orders, separator, skip_words"
+            "allowed: orders, separator, skip_words, language"
         )
-    separator = data.get("separator", DEFAULT_SEPARATOR)
+    language = _language(data, source)
+    if "separator" not in data and not language_of(language).separator:
+        where = (
+            f"{source}: language {language}: say how its commands are joined "
+            "('separator', a regex: \"then\" in English)"
+        )
+        raise OrdersInvalid([(where, _line(data, "language"))])
+    separator = data.get("separator", language_of(language).separator or DEFAULT_SEPARATOR)
     if not isinstance(separator, str) or not separator.strip():
         raise OrdersFileError(f"{source}: 'separator' must be a non-empty string (regex)")
     try:
@@ -107,7 +117,7 @@ def check_file(data: Any, source: str) -> OrdersFile:
     problems: list[Problem] = []
     for name, spec in data["orders"].items():
         try:
-            order = _order_from_dict(str(name), spec, source)
+            order = _order_from_dict(str(name), spec, source, language)
             commands.extend(_commands(order))
             orders.append(order)
         except _Problem as exc:
@@ -117,7 +127,89 @@ def check_file(data: Any, source: str) -> OrdersFile:
         raise OrdersInvalid(problems)
     if not orders:
         raise OrdersFileError(f"{source}: 'orders' is empty")
-    return OrdersFile(tuple(orders), commands, separator, skip_words)
+    line = _line(data, "language")
+    _check_language(commands, language, source, line)
+    _check_numbers(orders, language, source, line)
+    return OrdersFile(tuple(orders), commands, separator, skip_words, language)
+
+
+def _language(data: dict[str, Any], source: str) -> str:
+    """The file's `language`: an ISO 639-1 code (two letters), English when absent."""
+    language = data.get("language", DEFAULT)
+    if not isinstance(language, str) or not re.fullmatch(r"[a-z]{2}", language):
+        where = f"{source}: 'language' must be a two-letter code (en, es, de...), got {language!r}"
+        raise OrdersInvalid([(where, _line(data, "language"))])
+    return language
+
+
+def _check_language(commands: list[Command], language: str, source: str, line: int | None) -> None:
+    """A file whose aliases are plainly in another language than it says is refused: its
+    commands would be listened for in the wrong language, and never heard. Told apart by
+    the words of the aliases that only one language here uses (`Language.markers`)."""
+    words = {
+        word for command in commands for alias in command.aliases for word in expand_words(alias)
+    }
+    found = markers_in(words)
+    own = found.get(language, [])
+    for other, marks in found.items():
+        if other != language and len(marks) >= 2 and len(marks) > len(own):
+            said = ", ".join(f"'{w}'" for w in marks[:5])
+            ours = LANGUAGES[language].name if language in LANGUAGES else f"'{language}'"
+            raise OrdersInvalid(
+                [
+                    (
+                        f"{source}: says language: {language}, but its aliases are "
+                        f"{LANGUAGES[other].name} ({said}"
+                        + (f"; {ours}: only {', '.join(repr(w) for w in own)}" if own else "")
+                        + f"): write language: {other}, or the aliases in {ours}",
+                        line,
+                    )
+                ]
+            )
+
+
+def expand_words(alias: str) -> set[str]:
+    """Every word an alias can say (slots aside)."""
+    try:
+        expansion = expand(with_slots(alias, SLOT_STUB))
+    except re.error:
+        return set()
+    return {word for word in expansion.words if normalise(word) == word}
+
+
+def _check_numbers(orders: list[OrderSpec], language: str, source: str, line: int | None) -> None:
+    """Orders with number slots need their numbers read in the file's language."""
+    slots = [
+        (order, slot)
+        for order in orders
+        for slot in [*order.slots.values(), *(s for c in order.cases for s in c.slots.values())]
+    ]
+    if not slots:
+        return
+    if not reads_numbers(language):
+        order, slot = slots[0]
+        raise OrdersInvalid(
+            [
+                (
+                    f"{source}: language {language}: text2num cannot read numbers in it, "
+                    f"and order '{order.name}' has the number slot '{slot.name}'",
+                    line,
+                )
+            ]
+        )
+    for order, slot in slots:
+        wrong = unreadable(language, slot.heard())
+        if wrong:
+            value, said = wrong[0]
+            raise OrdersInvalid(
+                [
+                    (
+                        f"{source}: language {language}: text2num does not read '{said}' as "
+                        f"{value:g} (order '{order.name}', slot '{slot.name}')",
+                        line,
+                    )
+                ]
+            )
 
 
 class _Problem(VoicectlError):
@@ -134,7 +226,7 @@ def _at(line: int | None) -> str:
     return f" (line {line})" if line else ""
 
 
-def _order_from_dict(name: str, spec: Any, source: str) -> OrderSpec:
+def _order_from_dict(name: str, spec: Any, source: str, language: str = DEFAULT) -> OrderSpec:
     if not isinstance(spec, dict):
         raise _Problem(f"expected a mapping, got {type(spec).__name__}")
     alias = _required_str(spec, "voice_alias")
@@ -169,6 +261,7 @@ def _order_from_dict(name: str, spec: Any, source: str) -> OrderSpec:
         line=_line(spec),
         confirm=bool(confirm),
         refs=refs,
+        language=language,
     )
     for case in order.cases or (None,):
         at = f" case '{case.name}'" if case else ""

@@ -34,10 +34,11 @@ from voicectl.shared.messages import Order, ParseProblem, ParseResult
 
 from .amend import Amender, AmendRefused
 from .expand import SlotRef
+from .language import DEFAULT, language_of
 from .model import Command
 from .orders import OrderSet
 from .patterns import SLOT_GROUP
-from .slots import NUMBER_WORDS, SIGN_WORDS, SlotValueError
+from .slots import SlotValueError
 from .suggest import Suggester
 from .text import normalise, whole_words
 
@@ -67,31 +68,21 @@ def _finditer(matcher: _Matcher, segment: str, deadline: float) -> Iterator[rege
         ) from None
 
 
-CONJUNCTION = "and"
 MAX_CONJUNCTIONS = 4
 """A segment with more "and"s is not tried split: 2**4 ways are enough for speech."""
-UNIT_SYMBOLS = {
-    "m": "meters",
-    "cm": "centimeters",
-    "mm": "millimeters",
-    "deg": "degrees",
-    "°": "degrees",
-    "rad": "radians",
-    "s": "seconds",
-    "sec": "seconds",
-    "secs": "seconds",
-    "min": "minutes",
-    "mins": "minutes",
-}
-_SYMBOL_AFTER_NUMBER = re.compile(
-    r"(?<=\d)\s*(?:°|(?:" + "|".join(k for k in UNIT_SYMBOLS if k != "°") + r")(?!\w))",
-    re.IGNORECASE,
-)
+UNIT_SYMBOLS = language_of(DEFAULT).unit_words
+"""English unit symbols after a number ("4.5 m"); each language has its own."""
+
+
+def _symbol_after_number(symbols: dict[str, str]) -> re.Pattern[str]:
+    others = "|".join(re.escape(k) for k in symbols if k != "°")
+    return re.compile(r"(?<=\d)\s*(?:°|(?:" + others + r")(?!\w))", re.IGNORECASE)
+
 
 _NUMBER = "\x00number"
 """Index key of commands that start with a slot."""
 _NUMERIC = re.compile(r"-?\d")
-_NUMBER_STARTS = NUMBER_WORDS | SIGN_WORDS | {"a"}
+_DECIMAL_COMMA = re.compile(r"(?<=\d),(?=\d)")
 
 
 @dataclass(frozen=True)
@@ -111,8 +102,14 @@ class _Index:
     """
 
     def __init__(
-        self, commands: Sequence[Command], skip_words: tuple[str, ...], enabled: bool
+        self,
+        commands: Sequence[Command],
+        skip_words: tuple[str, ...],
+        enabled: bool,
+        number_starts: frozenset[str],
     ) -> None:
+        self._number_starts = number_starts
+        """Words a spoken number may begin with, in the orders' language."""
         self.matchers = [
             _Matcher(c, regex.compile(whole_words(c.pattern(skip_words)), regex.IGNORECASE))
             for c in commands
@@ -142,7 +139,7 @@ class _Index:
         present = {word.casefold() for word in words}
         for word in words:
             positions.update(self._by_word.get(word.casefold(), ()))
-            if word in _NUMBER_STARTS or _NUMERIC.match(word):
+            if word in self._number_starts or _NUMERIC.match(word):
                 positions.update(self._by_word.get(_NUMBER, ()))
                 present.add(_NUMBER)
         return [self.matchers[p] for p in sorted(positions) if self._needs[p] <= present]
@@ -192,13 +189,19 @@ class Parser:
 
     def __init__(self, orders: OrderSet, use_index: bool = True) -> None:
         self.orders = orders
+        spoken = orders.spoken
+        self._conjunctions = frozenset(spoken.conjunctions)
+        """The language's "and" ("y", "und")."""
+        conjunction = "|".join(map(re.escape, spoken.conjunctions)) or "(?!)"
         self._separator = re.compile(
-            whole_words(f"(?:{CONJUNCTION} )?(?:{orders.separator})"), re.IGNORECASE
+            whole_words(f"(?:(?:{conjunction}) )?(?:{orders.separator})"), re.IGNORECASE
         )
         """The orders' separator, "and then" as well."""
+        self._decimal_comma = spoken.decimal_comma
         self._skip_words = frozenset(orders.skip_words)
-        self._commands = _Index(orders.commands, orders.skip_words, use_index)
-        self._prefixes = _Index(orders.prefixes, orders.skip_words, use_index)
+        starts = orders.numbers.starts
+        self._commands = _Index(orders.commands, orders.skip_words, use_index, starts)
+        self._prefixes = _Index(orders.prefixes, orders.skip_words, use_index, starts)
         # Edits are short phrases that name the other orders' words ("no kitchen", "cancel
         # left"): offered for a near-miss, they crowd out the orders people meant.
         self._suggester = Suggester(
@@ -213,9 +216,11 @@ class Parser:
             for before, word in itertools.pairwise(template)
             if isinstance(word, str) and (isinstance(before, SlotRef) or _NUMERIC.search(before))
         }
-        self._symbols = {k: v for k, v in UNIT_SYMBOLS.items() if k not in after_numbers}
+        symbols = spoken.unit_words or UNIT_SYMBOLS
+        self._symbols = {k: v for k, v in symbols.items() if k not in after_numbers}
         """Unit symbols read as words: those no alias uses itself after a number (the
         queue's "what s next" leaves "10 s" ten seconds)."""
+        self._symbol_after_number = _symbol_after_number(symbols)
         self.amender = Amender(orders.commands)
         self.unit_words = frozenset(
             word.casefold()
@@ -294,22 +299,25 @@ class Parser:
         return found[0] if len(found) == 1 else None
 
     def spell_units(self, text: str) -> str:
-        """Unit symbols right after a number as the unit's word: "4.5 m" -> "4.5 meters"."""
+        """Unit symbols right after a number as the unit's word: "4.5 m" -> "4.5 meters";
+        a decimal comma as a point, in a language that writes one ("2,5 m")."""
+        if self._decimal_comma:
+            text = _DECIMAL_COMMA.sub(".", text)
 
         def word(found: re.Match[str]) -> str:
             symbol = found.group(0).strip()
             spelled = self._symbols.get(symbol.casefold())
             return f" {spelled}" if spelled else found.group(0)
 
-        return _SYMBOL_AFTER_NUMBER.sub(word, text)
+        return self._symbol_after_number.sub(word, text)
 
     def _joined(self, segment: str, deadline: float) -> list[Order] | None:
         """The orders of a segment that is commands joined by "and", if splitting at some
         of its "and"s makes every piece one order (the fewest pieces first)."""
         words = segment.split(" ")
-        while words[:1] == [CONJUNCTION]:  # "... then and turn left"; a last "and" says
-            words = words[1:]  # that more was to come, and stays an error
-        joints = [i for i, word in enumerate(words) if word == CONJUNCTION]
+        while words[:1] and words[0] in self._conjunctions:  # "... then and turn left"; a
+            words = words[1:]  # last "and" says that more was to come, and stays an error
+        joints = [i for i, word in enumerate(words) if word in self._conjunctions]
         stripped = len(words) < len(segment.split(" "))
         if len(joints) > MAX_CONJUNCTIONS or not (joints or stripped):
             return None

@@ -26,5 +26,15 @@ def places_of(orders: OrderSet) -> list[Place]:
             continue
         phrase = " ".join(str(word) for word in command.expansion.templates[0])
         name = command.case.name if command.case is not None else command.order.name
-        found.append(Place(name=name, phrase=phrase, description=order.description, pose=pose))
+        title = command.case.description if command.case is not None else order.description
+        found.append(
+            Place(
+                name=name,
+                phrase=phrase,
+                description=order.description,
+                pose=pose,
+                language=orders.language,
+                title=title,
+            )
+        )
     return found

@@ -12,6 +12,7 @@ from voicectl.shared.bus import Bus, Latest, json_decoder
 from voicectl.shared.edits import ReplaceEdit, read_edit
 from voicectl.shared.errors import OrdersFileError
 from voicectl.shared.keys import ConverterKeys, RobotKeys, robot_of
+from voicectl.shared.languages import heard_here
 from voicectl.shared.messages import (
     Amend,
     Amended,
@@ -22,6 +23,7 @@ from voicectl.shared.messages import (
     Message,
     Order,
     OrdersStatus,
+    ParseProblem,
     ParseReply,
     ParseRequest,
     Places,
@@ -34,7 +36,8 @@ from voicectl.shared.process import Service
 from .amend import AmendRefused
 from .decide import decide, problem, readings
 from .grammar import build_grammar
-from .orders import OrderSet, OrdersInvalid
+from .language import DEFAULT
+from .orders import OrderSet, OrdersInvalid, check_heard, load_languages
 from .parser import Parser
 from .places import places_of
 from .watch import Signature, signature
@@ -46,24 +49,70 @@ POLL_SECONDS = 0.25
 
 
 @dataclass(frozen=True)
-class Loaded:
-    """One consistent configuration: the orders, their parser and their grammar."""
+class Book:
+    """One language's orders, their parser and their grammar."""
 
     orders: OrderSet
     parser: Parser
     grammar: Grammar
+
+
+@dataclass(frozen=True)
+class Loaded:
+    """One consistent configuration: the orders of every language, with their parsers and
+    grammars."""
+
+    books: dict[str, Book]
     signature: Signature
     """The files' metadata as it was just before they were read."""
 
+    @property
+    def default(self) -> str:
+        """The language of requests that name none: English when there are English
+        orders, else the first language."""
+        return DEFAULT if DEFAULT in self.books else sorted(self.books)[0]
 
-def load(path: Path, before: Signature) -> Loaded:
+    def book(self, language: str = "") -> Book | None:
+        return self.books.get(language or self.default)
+
+    @property
+    def orders(self) -> OrderSet:
+        return self.books[self.default].orders
+
+    @property
+    def parser(self) -> Parser:
+        return self.books[self.default].parser
+
+    @property
+    def grammar(self) -> Grammar:
+        return self.books[self.default].grammar
+
+    @property
+    def count(self) -> int:
+        """Orders of the default language (the others are the same orders, said otherwise)."""
+        return len(self.orders.orders)
+
+    @property
+    def sources(self) -> list[str]:
+        return [source for book in self.books.values() for source in book.orders.sources]
+
+
+def load(path: Path, before: Signature, heard: frozenset[str] | None = None) -> Loaded:
     """Read, validate and compile the orders at `path` (blocking: run it in a thread).
 
-    `before` is the files' signature taken just before. Raises OrdersFileError; nothing is
-    half-loaded.
+    `before` is the files' signature taken just before; `heard`, the languages the
+    installed speech engines hear (`heard_here()` when not given; None: no engine is
+    installed, nothing to check). Raises OrdersFileError; nothing is half-loaded.
     """
-    orders = OrderSet.load(path)
-    return Loaded(orders, Parser(orders), build_grammar(orders), before)
+    sets = load_languages(path)
+    known = heard_here() if heard is None else heard
+    if known is not None:
+        check_heard(sets, known)
+    books = {
+        language: Book(orders, Parser(orders), build_grammar(orders))
+        for language, orders in sets.items()
+    }
+    return Loaded(books, before)
 
 
 def errors_of(exc: OrdersFileError) -> list[str]:
@@ -89,7 +138,8 @@ class ConverterService(Service):
         self._failed: Signature | None = None
         """The signature of files that did not load, so that they are not re-read each poll."""
         self._closers = contextlib.ExitStack()
-        self._grammar: Latest | None = None
+        self._grammars: dict[str, Latest] = {}
+        """One publisher per language's grammar, kept for late subscribers."""
         self._status: Latest | None = None
         self._places: Latest | None = None
 
@@ -98,9 +148,6 @@ class ConverterService(Service):
         return self._loaded
 
     async def start(self) -> None:
-        self._grammar = self._closers.enter_context(
-            contextlib.closing(self._bus.latest(self._keys.grammar))
-        )
         self._status = self._closers.enter_context(
             contextlib.closing(self._bus.latest(self._keys.status))
         )
@@ -115,9 +162,10 @@ class ConverterService(Service):
         self._bus.announce(self._keys.alive())
         loaded = self._loaded
         _LOGGER.info(
-            "converter ready with %d orders from %s; grammar %s (%d phrases)",
-            len(loaded.orders.orders),
+            "converter ready with %d orders from %s in %s; grammar %s (%d phrases)",
+            loaded.count,
             self._path,
+            ", ".join(sorted(loaded.books)),
             loaded.grammar.version,
             len(loaded.grammar.phrases),
         )
@@ -144,25 +192,36 @@ class ConverterService(Service):
             self._publish_status(
                 OrdersStatus(
                     ok=False,
-                    sources=list(self._loaded.orders.sources),
+                    sources=self._loaded.sources,
                     errors=errors,
-                    orders=len(self._loaded.orders.orders),
+                    orders=self._loaded.count,
+                    languages=sorted(self._loaded.books),
                 )
             )
             return
         self._loaded = loaded
         self._failed = None
-        _LOGGER.info("orders reloaded: %d orders from %s", len(loaded.orders.orders), self._path)
+        _LOGGER.info("orders reloaded: %d orders from %s", loaded.count, self._path)
         self._publish_loaded()
 
     def _publish_loaded(self) -> None:
-        orders = self._loaded.orders
-        assert self._grammar is not None, "publishing before the service started"
-        assert self._places is not None
-        self._grammar.publish(self._loaded.grammar)
-        self._places.publish(Places(places=places_of(orders)))
+        loaded = self._loaded
+        assert self._places is not None, "publishing before the service started"
+        for language, book in loaded.books.items():
+            if language not in self._grammars:
+                self._grammars[language] = self._closers.enter_context(
+                    contextlib.closing(self._bus.latest(self._keys.grammar(language)))
+                )
+            self._grammars[language].publish(book.grammar)
+        places = [place for book in loaded.books.values() for place in places_of(book.orders)]
+        self._places.publish(Places(places=places))
         self._publish_status(
-            OrdersStatus(ok=True, sources=list(orders.sources), orders=len(orders.orders))
+            OrdersStatus(
+                ok=True,
+                sources=loaded.sources,
+                orders=loaded.count,
+                languages=sorted(loaded.books),
+            )
         )
 
     def _publish_status(self, status: OrdersStatus) -> None:
@@ -170,15 +229,22 @@ class ConverterService(Service):
         self._status.publish(status)
 
     async def _on_request(self, request: ConverterRequest) -> Message:
+        loaded = self._loaded
+        book = loaded.book(request.language)
+        if book is None:
+            return Failed(
+                reason=f"no orders in language {request.language!r}; "
+                f"languages: {', '.join(sorted(loaded.books))}"
+            )
         match request:
             case ParseRequest(text=text):
-                return ParseReply(result=self._loaded.parser.parse(text))
+                return ParseReply(result=book.parser.parse(text))
             case GetGrammar():
-                return self._loaded.grammar
+                return book.grammar
             case Amend(order=order, change=change):
-                return self._amend(order, change)
+                return self._amend(book.parser, order, change)
 
-    def _amend(self, order: Order, change: Order) -> Message:
+    def _amend(self, parser: Parser, order: Order, change: Order) -> Message:
         """`order` made again as the correction `change` says, or why not."""
         try:
             edit = read_edit(change)
@@ -187,7 +253,7 @@ class ConverterService(Service):
         if not isinstance(edit, ReplaceEdit):
             return Failed(reason=f"not a correction: '{change.description}' is another edit")
         try:
-            return Amended(order=self._loaded.parser.amender.amend(order, edit))
+            return Amended(order=parser.amender.amend(order, edit))
         except AmendRefused as exc:
             return Failed(reason=str(exc))
 
@@ -197,7 +263,32 @@ class ConverterService(Service):
         whole orders: unlike typed text, a part that did not parse is a sign the rest was
         misheard too. Speech that is not a command never becomes orders."""
         robot = robot_of(key)
-        decision = decide(*readings(transcript, self._loaded.parser))
+        book = self._loaded.book(transcript.language)
+        if book is None:
+            _LOGGER.warning(
+                "%s: a transcript in %r, which no orders are in: not read",
+                robot,
+                transcript.language,
+            )
+            self._bus.publish(
+                RobotKeys(robot).proposal,
+                Proposal(
+                    transcript="",
+                    session=transcript.session,
+                    utterance=transcript.utterance,
+                    rejected=True,
+                    errors=[
+                        ParseProblem(
+                            text="",
+                            reason=f"no orders in language {transcript.language!r}: "
+                            f"the languages are {', '.join(sorted(self._loaded.books))}",
+                        )
+                    ],
+                    language=transcript.language,
+                ),
+            )
+            return
+        decision = decide(*readings(transcript, book.parser))
         proposal = Proposal(
             transcript=decision.text,
             orders=decision.orders,
@@ -208,6 +299,8 @@ class ConverterService(Service):
             doubts=decision.doubts,
             hearings=decision.hearings if len(decision.hearings) > 1 else [],
             decision=decision.reason,
+            confirm=decision.confirm,
+            language=book.orders.language,
         )
         _LOGGER.info(
             "%s: %s -> %s",

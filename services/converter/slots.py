@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import math
 import re
+from collections.abc import Callable
 from dataclasses import dataclass
 from decimal import Decimal
 from enum import StrEnum
@@ -272,9 +273,10 @@ class SlotSpec:
         values = sorted(multiples | whole, key=lambda v: (abs(v - self.min) + abs(v - self.max), v))
         return sorted(values[:limit])
 
-    def value(self, spoken: str) -> float:
-        """The number `spoken` says, in `unit`; raises SlotValueError naming what is allowed."""
-        value = read_number(spoken)
+    def value(self, spoken: str, read: Callable[[str], float | None] = read_number) -> float:
+        """The number `spoken` says (read by `read`, the language's reader), in `unit`;
+        raises SlotValueError naming what is allowed."""
+        value = read(spoken)
         if value is None:
             raise SlotValueError(f"{self.name}: '{spoken}' is not one number")
         if not self.min <= value <= self.max:

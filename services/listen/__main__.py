@@ -44,7 +44,9 @@ def _voice(args: argparse.Namespace, stack: contextlib.ExitStack) -> Speak | Non
     from voicectl.shared.tts import load_voice
 
     try:
-        voice = load_voice(args.speak)
+        # espeak-ng speaks the listener's language in its own voice for it; flite, English.
+        spoken = args.language if args.speak == "espeak-ng" and args.language != "en" else None
+        voice = load_voice(args.speak, voice=spoken)
     except TtsError as exc:
         raise AudioError(str(exc)) from exc
     sink = open_sink(args.speaker)

@@ -35,6 +35,13 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     )
     parser.add_argument("--wake-threshold", type=float, default=WAKE_THRESHOLD)
     parser.add_argument(
+        "--language",
+        default="en",
+        metavar="CODE",
+        help="what people say to it (en, es, de...): heard, answered and confirmed in that "
+        "language (default %(default)s)",
+    )
+    parser.add_argument(
         "--no-stop-word",
         action="store_true",
         help="do not stop a moving robot on hearing 'stop' alone (it needs no wake phrase)",
@@ -84,4 +91,5 @@ def listen_config(args: argparse.Namespace) -> ListenConfig:
         stop_word=not args.no_stop_word,
         stop_threshold=args.stop_threshold,
         awake=args.awake,
+        language=args.language,
     )

@@ -25,6 +25,8 @@ from collections.abc import Callable, Coroutine
 from dataclasses import dataclass, field
 from typing import Any
 
+import msgspec
+
 from voicectl.shared import answers
 from voicectl.shared.bus import Bus, Stream, json_decoder
 from voicectl.shared.client import Refused, Unreachable, VoicectlClient
@@ -51,6 +53,7 @@ from voicectl.shared.messages import (
     Via,
 )
 from voicectl.shared.process import Service
+from voicectl.shared.words import word
 
 from .spotter import (
     STOP_LOOP_PENALTY,
@@ -79,7 +82,12 @@ PHRASE_SECONDS = 2.0
 """Longer than any wake phrase takes to say."""
 ECHO_TAIL = 0.3
 """Seconds the microphone stays muted after the robot's own voice ends (room echo)."""
-CONFIRM_WORDS = (Phrase("yes", 1e-10), Phrase("no", 1e-10))
+CONFIRM_SOUNDS = {"en": ("yes", "no"), "es": ("si", "no"), "de": ("ja", "nine")}
+"""The spoken "yes" and "no" of each language, as the spotter's English dictionary spells
+their sounds (Spanish "sí" is its "si", German "nein" its "nine"): a read-back waits for
+one of the two in the listener's language. A language without them sends nothing on a
+read-back: its orders are asked, never sent hands-free."""
+CONFIRM_THRESHOLD = 1e-10
 ANSWER_WAIT = 15.0
 """Seconds the end of a file or standard input waits, at most, for the answer to what was
 said last: on a busy host the recogniser finishes an utterance seconds after its audio
@@ -99,6 +107,9 @@ class ListenConfig:
     """Seconds the listener stays awake after the wake phrase or the last thing said."""
     confirm_seconds: float = 6.0
     """How long a read-back waits for "yes" or "no"; silence means no."""
+    language: str = "en"
+    """What the person speaks: the recogniser hears it in it, answers are said in it, and a
+    read-back waits for its "yes" ("sí", "ja")."""
 
 
 @dataclass
@@ -303,7 +314,7 @@ class Listener(Service):
     def _wake_now(self) -> _Awake:
         session = uuid.uuid4().hex[:16]
         stream = self._bus.stream(self._keys.stt_audio(session))
-        stream.send(AudioStart())
+        stream.send(AudioStart(language=self._config.language))
         awake = _Awake(session, stream)
         self._awake = awake
         self._sessions[session] = awake
@@ -395,27 +406,37 @@ class Listener(Service):
         if awake.checked is not None and not await awake.checked:
             _LOGGER.info("a false wake: %r not acted on", proposal.transcript)
             return
+        language = self._config.language
         certain = proposal.orders and not (proposal.errors or proposal.doubts or proposal.rejected)
-        words = answers.proposal_words(proposal)
-        if not certain:
+        # Heard by one ear without the evidence to send it alone (decide.py): its orders,
+        # read back, are sent on a yes.
+        confirm = (
+            proposal.confirm
+            and proposal.orders
+            and not (proposal.errors or proposal.rejected)
+            and all(not doubt.alternatives for doubt in proposal.doubts)
+        )
+        if confirm:
+            proposal = msgspec.structs.replace(proposal, doubts=[])
+        words = answers.proposal_words(proposal, language)
+        if not (certain or confirm):
             await self.say(words)
             return
         plain = [order for order in proposal.orders if not is_edit(order)]
-        if any(order.confirm for order in proposal.orders):
+        if confirm or any(order.confirm for order in proposal.orders):
             if not await self._confirmed(words):
-                await self.say("cancelled")
+                await self.say(word(language, "answer.dropped"))
                 return
         elif plain:  # an edit or a question is answered, not read back
-            await self.say(answers.orders_words(plain))
+            await self.say(answers.orders_words(plain, language))
         try:
             sent = await self._client.send(
                 self._config.robot, proposal.orders, proposal.transcript, self._asked
             )
         except (Refused, Unreachable) as exc:
             _LOGGER.warning("not submitted: %s", exc)
-            await self.say(
-                f"not sent: {answers.short(exc.reason if isinstance(exc, Refused) else str(exc))}"
-            )
+            why = answers.short(exc.reason if isinstance(exc, Refused) else str(exc))
+            await self.say(word(language, "answer.notSent", why=why))
             return
         self._mine.update(sent.order_ids)
         if sent.order_ids:
@@ -424,10 +445,17 @@ class Listener(Service):
             await self.say(answered.answer)
 
     async def _confirmed(self, words: str) -> bool:
-        """Read the orders back and wait for "yes"; "no", or nothing, is no."""
+        """Read the orders back and wait for "yes" in the listener's language; "no", or
+        nothing, is no."""
+        language = self._config.language
+        sounds = CONFIRM_SOUNDS.get(language)
+        if sounds is None:
+            await self.say(word(language, "answer.yesOrNo", words=words))
+            _LOGGER.info("no spoken yes in %s: a read-back is not sent hands-free", language)
+            return False
         self._answered = self._loop.create_future()
-        await self.say(f"{words}. Yes or no?")
-        self._answer = Spotter(list(CONFIRM_WORDS))
+        await self.say(word(language, "answer.yesOrNo", words=words))
+        self._answer = Spotter([Phrase(sound, CONFIRM_THRESHOLD) for sound in sounds])
         try:
             async with asyncio.timeout(self._config.confirm_seconds):
                 answer = await self._answered
@@ -439,7 +467,7 @@ class Listener(Service):
             if self._awake is not None:
                 self._awake.last_heard = time.monotonic()
         _LOGGER.info("confirmation: %s", answer or "no answer")
-        return answer == "yes"
+        return answer == sounds[0]
 
     def _on_answer(self, word: str) -> None:
         if self._answered is not None and not self._answered.done():
@@ -449,7 +477,8 @@ class Listener(Service):
         state = update.state
         self._moving = state.current is not None
         if state.stopped and not self._stopped:  # stopped from elsewhere (the panel, the CLI)
-            self._keep(self.say(answers.stopped_words(Stopped(confirmed=True, detail=""))))
+            stopped = Stopped(confirmed=True, detail="")
+            self._keep(self.say(answers.stopped_words(stopped, self._config.language)))
         self._stopped = state.stopped
         for record in state.history:
             if record.id in self._mine:
@@ -461,7 +490,7 @@ class Listener(Service):
             return  # "stopped" says it
         if ended_by_edit(record):
             return  # the edit's answer said it
-        words = answers.outcome_words(record)
+        words = answers.outcome_words(record, self._config.language)
         if words:
             self._keep(self.say(words))
 
@@ -476,7 +505,7 @@ class Listener(Service):
             _LOGGER.error("'stop' heard, but nothing could be stopped: %s", exc)
             return
         _LOGGER.info("stopped (%s)", "confirmed" if stopped.confirmed else stopped.detail)
-        await self.say(answers.stopped_words(stopped))
+        await self.say(answers.stopped_words(stopped, self._config.language))
 
     def _keep(self, work: Coroutine[Any, Any, None]) -> None:
         """Run `work` on its own, holding it until done (the loop keeps weak references)."""

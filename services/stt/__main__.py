@@ -21,9 +21,16 @@ async def main(args: argparse.Namespace) -> None:
         engine = await asyncio.to_thread(load_engine, config.engine)
     except EngineError as exc:
         raise ServiceError(str(exc)) from exc
+    if config.language not in engine.languages:
+        engine.close()
+        raise ServiceError(
+            f"--language {config.language}: the {engine.name} engine hears "
+            + ("it not" if len(engine.languages) > 3 else ", ".join(sorted(engine.languages)))
+            + (" (--engine whisper hears 99 languages)" if engine.name != "whisper" else "")
+        )
     try:
         with open_bus(args) as bus:
-            await serve(SttService(bus, config.robot, engine, config.limits))
+            await serve(SttService(bus, config.robot, engine, config.limits, config.language))
     finally:
         engine.close()
 

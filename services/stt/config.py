@@ -4,6 +4,7 @@ shared with `voicectl transcribe` and bench/stt.py."""
 from __future__ import annotations
 
 import argparse
+import re
 from dataclasses import dataclass, field
 
 from voicectl.shared.process import add_bus_arguments, robot_name
@@ -19,12 +20,15 @@ class SttConfig:
     robot: str = "robot"
     engine: EngineOptions = field(default_factory=EngineOptions)
     limits: SessionLimits = field(default_factory=SessionLimits)
+    language: str = "en"
+    """What its sessions are heard in, unless a session says otherwise."""
 
     @classmethod
     def of(cls, args: argparse.Namespace) -> SttConfig:
         """The config the command line (`parse_args`) gives."""
         return cls(
             robot=args.robot,
+            language=args.language,
             engine=engine_options(args),
             limits=SessionLimits(
                 max_utterance=args.max_utterance,
@@ -70,6 +74,12 @@ def add_engine_arguments(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _language(text: str) -> str:
+    if not re.fullmatch(r"[a-z]{2,3}", text):
+        raise argparse.ArgumentTypeError(f"{text!r} is not a language code (en, es, de...)")
+    return text
+
+
 def _count(text: str) -> int:
     try:
         value = int(text)
@@ -95,6 +105,14 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         description="Speech to text for one robot, listening only for the orders' commands.",
     )
     parser.add_argument("--robot", type=robot_name, default="robot")
+    parser.add_argument(
+        "--language",
+        default="en",
+        type=_language,
+        metavar="CODE",
+        help="what people speak to this robot (ISO 639-1: en, es, de...), unless a session "
+        "says otherwise; heard with the orders in that language (default %(default)s)",
+    )
     add_engine_arguments(parser)
     limits = SessionLimits()
     for flag, kind, default, metavar, text in (

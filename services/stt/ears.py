@@ -12,30 +12,40 @@ results travel together in one `Final`; the converter, which parses, decides fro
 them (services/converter/decide.py).
 
 Two engines of the registry are made here: `moonshine` (the first two ears) and `whisper`
-(all three).
+(all three). Whisper also hears the languages the other two do not: there it is the one
+ear (`_Alone`), told the language, and pocketsphinx only finds where utterances begin and
+end; a second decode of Whisper's, prompted with the orders' words, is its own evidence
+for the converter (docs/speech.md, "One ear is not two").
 """
 
 from __future__ import annotations
 
 import contextlib
+import functools
 import logging
 import math
 import re
 import threading
+from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
+from typing import Generic, TypeVar
 
 from voicectl.shared.config import cache_dir
 from voicectl.shared.errors import Cancelled
+from voicectl.shared.languages import WHISPER_LANGUAGES
 from voicectl.shared.messages import Grammar, PhraseCheck, Transcription
 
 from .engine import EngineError, EngineOptions, Recogniser
 from .moonshine import Moonshine, Transcript, prepare, weights_dir
 from .sphinx import GrammarHeard, PocketsphinxEngine
+from .whisper import Heard as WhisperHeard
 from .whisper import Whisper
 from .whisper import weights_dir as whisper_weights
 
 _LOGGER = logging.getLogger(__name__)
+
+T = TypeVar("T")
 
 RUNS_AT_ONCE = 2
 """Transcriptions a process runs at once, one onnxruntime thread each (two cores)."""
@@ -47,6 +57,11 @@ prompts and the chatter, -1.9 to -5.3 ("Hello, robot." -3.4)."""
 AGREED = -0.5
 """Moonshine finding the grammar's words at least this likely beside its own (nats a
 token) is the two ears agreeing; below it, the third ear is asked."""
+PROMPT_WORDS = 60
+"""At most this many of the orders' words (numbers aside) prompt the second decode of a
+lone ear. Prompted, Whisper base wrote "gira la izquierda" for Kokoro's Spanish voice that
+it heard unprompted as "kira la izquierda"; it also wrote a German "warte zehn Sekunden"
+from the prompt that nobody said: a prompted decode is never sent without a yes."""
 WHEN = ("doubt", "always")
 """When the third ear hears an utterance: when the first two leave a doubt (`why_ask`), or
 always (bench/stt.py records every ear's reading, to choose the rule on the dev split)."""
@@ -97,6 +112,8 @@ class Ears:
         always: bool = False,
     ) -> None:
         self.name = name
+        self.languages = frozenset({"en"}) | (WHISPER_LANGUAGES if third is not None else set())
+        """English with all ears; with Whisper, every language it knows, heard by it alone."""
         self._grammar = grammar
         self._model = model
         self._third = third
@@ -107,9 +124,20 @@ class Ears:
     def use_grammar(self, grammar: Grammar) -> list[str]:
         return self._grammar.use_grammar(grammar)
 
-    def recogniser(self, max_utterance: float, segment: bool = True) -> Recogniser:
-        ear = _Ear(self._model, self._pool, self.runs, self._third, self._always)
-        return self._grammar.recogniser(max_utterance, segment, ear)
+    def recogniser(
+        self, max_utterance: float, segment: bool = True, language: str = "en"
+    ) -> Recogniser:
+        if language not in self.languages:
+            raise EngineError(
+                f"the {self.name} engine does not hear {language!r}"
+                + (" (--engine whisper hears it)" if language in WHISPER_LANGUAGES else "")
+            )
+        if language in self._grammar.languages:
+            ear: _Ear | _Alone = _Ear(self._model, self._pool, self.runs, self._third, self._always)
+        else:
+            assert self._third is not None
+            ear = _Alone(self._third, self._pool, self.runs, language)
+        return self._grammar.recogniser(max_utterance, segment, ear, language)
 
     def check(self, pcm: bytes, phrase: str) -> PhraseCheck:
         """Moonshine's reading of a wake phrase's audio: heard when the phrase is about as
@@ -159,6 +187,41 @@ def why_ask(grammar: GrammarHeard, second: Transcription) -> str:
     return ""
 
 
+class _AtPause(Generic[T]):
+    """The one transcription of a stream started when its speech pauses: a newer pause, or
+    speech going on, drops the one in flight (its cancel is set)."""
+
+    def __init__(self, pool: ThreadPoolExecutor, runs: Runs) -> None:
+        self._pool = pool
+        self._runs = runs
+        self._run: Future[T] | None = None
+        self._cancel = threading.Event()
+
+    def start(self, transcribe: Callable[[threading.Event], T]) -> None:
+        self.drop()
+        self._cancel = threading.Event()
+        self._run = self._pool.submit(transcribe, self._cancel)
+        self._runs.at_pause += 1
+
+    def done(self) -> T | None:
+        """Its result, once it finished well; None while it runs, or when it failed."""
+        run = self._run
+        if run is None or not run.done() or run.cancelled() or run.exception() is not None:
+            return None
+        return run.result()
+
+    def take(self) -> Future[T] | None:
+        """The run in flight, no longer this stream's to drop."""
+        run, self._run = self._run, None
+        return run
+
+    def drop(self) -> None:
+        if self._run is not None:
+            self._cancel.set()
+            self._run = None
+            self._runs.dropped += 1
+
+
 class _Ear:
     """One stream's free ears (sphinx.py's `Listener`): at most one Moonshine run in
     flight, and Whisper at the end when asked."""
@@ -172,30 +235,20 @@ class _Ear:
         always: bool,
     ) -> None:
         self._model = model
-        self._pool = pool
         self._runs = runs
         self._third = third
         self._always = always
-        self._run: Future[Transcript] | None = None
-        self._cancel = threading.Event()
+        self._paused: _AtPause[Transcript] = _AtPause(pool, runs)
 
     def pause(self, audio: bytes) -> None:
-        self.drop()
-        self._cancel = threading.Event()
-        self._run = self._pool.submit(self._model.transcribe, audio, self._cancel)
-        self._runs.at_pause += 1
+        self._paused.start(functools.partial(self._model.transcribe, audio))
 
     def paused_text(self) -> str:
-        run = self._run
-        if run is None or not run.done() or run.cancelled() or run.exception() is not None:
-            return ""
-        return run.result().text
+        heard = self._paused.done()
+        return "" if heard is None else heard.text
 
     def drop(self) -> None:
-        if self._run is not None:
-            self._cancel.set()
-            self._run = None
-            self._runs.dropped += 1
+        self._paused.drop()
 
     def result(
         self, audio: bytes, grammar: GrammarHeard
@@ -211,7 +264,7 @@ class _Ear:
 
     def _second(self, audio: bytes, grammar: str) -> Transcription:
         heard = None
-        run, self._run = self._run, None
+        run = self._paused.take()
         if run is not None:
             with contextlib.suppress(Cancelled):  # never set for a run still wanted
                 heard = run.result()
@@ -255,6 +308,73 @@ class _Ear:
             support=None if support is None else round(support, 3),
             asked=f"always ({why})" if self._always and why else why or "always",
         )
+
+
+class _Alone:
+    """A stream's one ear in a language only Whisper hears (sphinx.py's `Listener`):
+    Whisper, told the language, started when the speech pauses as Moonshine is; at the
+    end, when its words hold a word of the orders, a second decode prompted with the
+    orders' words. Both, with the model's own no-speech probability and confidence, are
+    the evidence the converter weighs (decide.py's `Rule.alone`). The run at the pause only
+    tells the endpointer whether a number may follow (`paused_text`)."""
+
+    def __init__(self, model: Whisper, pool: ThreadPoolExecutor, runs: Runs, language: str) -> None:
+        self._model = model
+        self._runs = runs
+        self._language = language
+        self._paused: _AtPause[WhisperHeard] = _AtPause(pool, runs)
+
+    def pause(self, audio: bytes) -> None:
+        transcribe = functools.partial(self._model.transcribe, audio, self._language, "")
+        self._paused.start(transcribe)
+
+    def paused_text(self) -> str:
+        heard = self._paused.done()
+        return "" if heard is None else heard.text
+
+    def drop(self) -> None:
+        self._paused.drop()
+
+    def result(
+        self, audio: bytes, grammar: GrammarHeard
+    ) -> tuple[Transcription, Transcription | None]:
+        # The run started at the pause is not taken: its audio ends where the voice
+        # activity detector stopped flagging speech, 80 to 120 ms before the voice did,
+        # which cut the last syllable ("cocina" heard as "coc"); with no other ear to make
+        # up for it, the one ear hears the whole utterance again.
+        self.drop()
+        self._runs.at_end += 1
+        heard = self._model.transcribe(audio, self._language)
+        self._runs.third += 1
+        second = None
+        if heard.text and _holds_command_word(heard.text, grammar.vocabulary):
+            prompt = ", ".join(sorted(grammar.vocabulary - grammar.numbers)[:PROMPT_WORDS])
+            second = self._model.transcribe(audio, self._language, prompt).text
+        _LOGGER.debug(
+            "whisper alone (%s) heard %r in %.3f s, then %r",
+            self._language,
+            heard.text,
+            heard.seconds,
+            second,
+        )
+        return (
+            Transcription(
+                engine="whisper",
+                text=heard.text,
+                confidence=round(heard.confidence, 3),
+                asked=f"the one ear that hears {self._language}",
+                no_speech=round(heard.no_speech, 3),
+                second=second,
+            ),
+            None,
+        )
+
+
+def _holds_command_word(text: str, vocabulary: frozenset[str]) -> bool:
+    """Whether a transcript holds a word of the orders, or a number: else it is no
+    command, and a second decode would say nothing more."""
+    words = set(re.findall(r"[^\W\d_]+", text.lower()))
+    return bool(words & vocabulary) or bool(re.search(r"\d", text))
 
 
 def written(words: str) -> str:

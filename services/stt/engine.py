@@ -70,6 +70,8 @@ class Final(Struct, frozen=True, tag=True):
     """What the third ear heard, when it was asked (Whisper)."""
     noisy: bool = False
     """The room was noisy when the utterance ended."""
+    alone: bool = False
+    """Heard by the language's one ear (`transcription`), no grammar's ear beside it."""
 
 
 RecognitionEvent = SpeechStarted | Heard | Final
@@ -88,15 +90,20 @@ class Recogniser(Protocol):
 
 class Engine(Protocol):
     name: str
+    languages: frozenset[str]
+    """What its recognisers can hear (ISO 639-1)."""
 
     def use_grammar(self, grammar: Grammar) -> list[str]:
         """Compile `grammar` for recognisers made from now on; returns the words it
         cannot pronounce. Raises EngineError when the grammar cannot be used."""
 
-    def recogniser(self, max_utterance: float, segment: bool = True) -> Recogniser:
-        """A recogniser for one stream, with the grammar in use now. Utterances longer
-        than `max_utterance` seconds are cut; with `segment` False the whole stream is one
-        utterance (offline transcription). Raises EngineError before any grammar."""
+    def recogniser(
+        self, max_utterance: float, segment: bool = True, language: str = "en"
+    ) -> Recogniser:
+        """A recogniser for one stream in `language`, with that language's grammar in use
+        now. Utterances longer than `max_utterance` seconds are cut; with `segment` False
+        the whole stream is one utterance (offline transcription). Raises EngineError
+        before any grammar, or for a language it does not hear."""
 
     def check(self, pcm: bytes, phrase: str) -> PhraseCheck:
         """Whether `pcm` says `phrase`, by an ear bound to no grammar; `checked` False
@@ -227,11 +234,15 @@ def load_here(options: EngineOptions) -> Engine:
 
 
 def finals(
-    engine: Engine, pcm: bytes, max_utterance: float = 15.0, segment: bool = True
+    engine: Engine,
+    pcm: bytes,
+    max_utterance: float = 15.0,
+    segment: bool = True,
+    language: str = "en",
 ) -> list[Final]:
     """What one stream of `pcm` comes to, sent in 20 ms frames as a microphone sends it:
     its final results, in order (`voicectl transcribe`, the tests, the speech benchmark)."""
-    recogniser = engine.recogniser(max_utterance, segment)
+    recogniser = engine.recogniser(max_utterance, segment, language)
     try:
         events = [e for frame in frames(pcm) for e in recogniser.accept(frame)]
         events += recogniser.finish()

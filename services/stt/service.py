@@ -30,6 +30,7 @@ from voicectl.shared.messages import (
     CheckPhrase,
     Grammar,
     Message,
+    OrdersStatus,
     PartialTranscript,
     SessionEnded,
     SttStatus,
@@ -44,6 +45,9 @@ from .checks import PhraseChecks
 from .engine import Engine, EngineError, Final, Heard, Recogniser, RecognitionEvent, SpeechStarted
 
 _LOGGER = logging.getLogger(__name__)
+
+MAX_LANGUAGES = 32
+"""Languages whose grammar one recogniser follows at most: each is a subscription."""
 
 
 @dataclass(frozen=True)
@@ -78,8 +82,16 @@ class Session:
     decoding in bulk, most of it in waking threads: here a chunk wakes one thread.
     """
 
-    def __init__(self, name: str, service: SttService, loop: asyncio.AbstractEventLoop) -> None:
+    def __init__(
+        self,
+        name: str,
+        service: SttService,
+        loop: asyncio.AbstractEventLoop,
+        language: str = "",
+    ) -> None:
         self.name = name
+        self.language = language or service.language
+        """What the person speaks: the session's own choice, else the recogniser's."""
         self._service = service
         self._loop = loop
         self._inbox: queue.SimpleQueue[bytes | None] = queue.SimpleQueue()
@@ -186,7 +198,7 @@ class Session:
                 if not self._held:
                     return
                 self._recogniser = self._service.engine.recogniser(
-                    self._service.limits.max_utterance
+                    self._service.limits.max_utterance, language=self.language
                 )
                 if self._refused:
                     _LOGGER.info("session %s is recognised from now on", self.name)
@@ -245,8 +257,12 @@ class SttService(Service):
     sessions that went quiet, `stop()` aborts the sessions still open.
     """
 
-    def __init__(self, bus: Bus, robot: str, engine: Engine, limits: SessionLimits) -> None:
+    def __init__(
+        self, bus: Bus, robot: str, engine: Engine, limits: SessionLimits, language: str = "en"
+    ) -> None:
         self._robot = robot
+        self.language = language
+        """What its sessions are heard in unless a session says otherwise (`--language`)."""
         self.bus = bus
         self.engine = engine
         self.limits = limits
@@ -256,9 +272,11 @@ class SttService(Service):
         self._sessions_lock = threading.Lock()
         """Sessions are opened and fed on Zenoh's thread, and ended on the loop."""
         self._loop: asyncio.AbstractEventLoop | None = None
-        self._grammar = ""
-        """Version of the grammar in use; empty before the first."""
-        self._wanted: Grammar | None = None
+        self._grammars: dict[str, str] = {}
+        """Version of the grammar in use, per language; none before the first."""
+        self._wanted: dict[str, Grammar] = {}
+        self._following: set[str] = set()
+        """The languages whose grammar it subscribes to."""
         self._compiling: asyncio.Task[None] | None = None
         self._status: Latest | None = None
         self._unpronounceable: list[str] = []
@@ -274,8 +292,9 @@ class SttService(Service):
     async def start(self) -> None:
         self._status = self.bus.latest(self._keys.stt_status)
         self._publish_status("waiting for the converter's grammar")
+        self._follow(self.language)
         self.bus.subscribe(
-            self._converter.grammar, json_decoder(Grammar), self._on_grammar, history=True
+            self._converter.status, json_decoder(OrdersStatus), self._on_orders, history=True
         )
         self._loop = asyncio.get_running_loop()
         self.bus.subscribe(
@@ -332,25 +351,59 @@ class SttService(Service):
 
     # --- grammar ---------------------------------------------------------------------------
 
-    def _on_grammar(self, _key: str, grammar: Grammar) -> None:
-        if grammar.version in (self._grammar, self._wanted.version if self._wanted else ""):
+    @property
+    def _grammar(self) -> str:
+        """The version of the grammar its own language is heard with; '' before it."""
+        return self._grammars.get(self.language, "")
+
+    def _on_orders(self, _key: str, status: OrdersStatus) -> None:
+        """The converter's orders are in these languages: follow the grammar of each this
+        engine hears. One key per language, each asked for its history: a late subscriber
+        to all of them at once (`grammar/*`) was given only some (zenoh 1.10)."""
+        for language in status.languages[:MAX_LANGUAGES]:
+            if language in self.engine.languages:
+                self._follow(language)
+
+    def _follow(self, language: str) -> None:
+        if language in self._following or len(self._following) >= MAX_LANGUAGES:
             return
-        self._wanted = grammar
+        try:
+            key = self._converter.grammar(language)
+        except ValueError:
+            return  # no language code: a converter on this bus does not send it
+        self._following.add(language)
+        self.bus.subscribe(key, json_decoder(Grammar), self._on_grammar, history=True)
+
+    def _on_grammar(self, _key: str, grammar: Grammar) -> None:
+        language = grammar.language
+        if language not in self.engine.languages:
+            return  # orders in a language this engine does not hear: no session can ask
+        wanted = self._wanted.get(language)
+        if grammar.version in (self._grammars.get(language), wanted.version if wanted else ""):
+            return
+        self._wanted[language] = grammar
         if self._compiling is None or self._compiling.done():
             self._compiling = asyncio.create_task(self._compile())
 
     async def _compile(self) -> None:
-        """Compile the newest grammar off the loop; one compile at a time, latest wins."""
-        while self._wanted is not None and self._wanted.version != self._grammar:
-            grammar = self._wanted
+        """Compile the newest grammars off the loop; one compile at a time, latest wins."""
+        while self._wanted:
+            language, grammar = next(iter(self._wanted.items()))
+            if grammar.version == self._grammars.get(language):
+                del self._wanted[language]
+                continue
             try:
                 missing = await asyncio.to_thread(self.engine.use_grammar, grammar)
             except EngineError as exc:
                 _LOGGER.error("grammar %s not used: %s", grammar.version, exc)
                 self._publish_status(f"grammar {grammar.version} not used: {exc}")
-                self._wanted = None
-                return
-            self._grammar = grammar.version
+                if self._wanted.get(language) is grammar:
+                    del self._wanted[language]
+                continue
+            self._grammars[language] = grammar.version
+            if language != self.language:
+                _LOGGER.info("listening in %s too, with grammar %s", language, grammar.version)
+                continue
             self._unpronounceable = missing
             if missing:
                 _LOGGER.warning(
@@ -404,7 +457,19 @@ class SttService(Service):
                     )
                     return
                 assert self._loop is not None
-                session = self._sessions[name] = Session(name, self, self._loop)
+                language = message.language
+                if language and language not in self.engine.languages:
+                    self._refused.add(name)
+                    self._tell(
+                        name,
+                        SessionEnded(
+                            reason=f"this recogniser ({self.engine.name}) does not hear "
+                            f"{language!r}",
+                            refused=True,
+                        ),
+                    )
+                    return
+                session = self._sessions[name] = Session(name, self, self._loop, language)
                 self._refused.discard(name)
                 _LOGGER.info("session %s started", name)
                 self._loop.call_soon_threadsafe(self._publish_status, "")
@@ -479,11 +544,19 @@ class SttService(Service):
                 self.bus.publish(self._keys.transcript, transcript)
 
     def _judge(self, session: str, final: Final) -> Transcript:
-        reason = "" if self._grammar else "no grammar yet: is the converter running?"
-        return transcript_of(final, session, reason)
+        with self._sessions_lock:
+            found = self._sessions.get(session)
+        language = found.language if found is not None else self.language
+        heard = language in self._grammars
+        reason = "" if heard else "no grammar yet: is the converter running?"
+        if not heard and language != self.language:
+            reason = f"no grammar in {language} yet: are there orders in {language}?"
+        return transcript_of(final, session, reason, language)
 
 
-def transcript_of(final: Final, session: str = "", refused: str = "") -> Transcript:
+def transcript_of(
+    final: Final, session: str = "", refused: str = "", language: str = "en"
+) -> Transcript:
     """The bus message of a recogniser's final result; `refused` rejects it whatever the
     engine said (no grammar yet), the second ear's transcript included."""
     reason = final.rejection or refused
@@ -501,6 +574,8 @@ def transcript_of(final: Final, session: str = "", refused: str = "") -> Transcr
         doubts=[] if reason else final.doubts,
         transcription=None if refused else final.transcription,
         third=None if refused else final.third,
+        language=language,
+        alone=final.alone,
     )
 
 

@@ -97,6 +97,10 @@ HANG_FRAMES = 17
 ("turn left" before "forty five degrees", "go forward" before "eight meters"): ended at
 the pause, they made another order than the one said. On the dev split, Kokoro's
 speakers paused up to 0.33 s there."""
+ALONE_END_FRAMES = HANG_FRAMES
+"""In a language only a free ear hears, an utterance ends after this many (0.51 s): the
+detector stops flagging speech before a soft last syllable ends ("coci-na"), and with no
+grammar's ear to hear the rest, 0.24 s cut it ("vea la coc")."""
 EARLY_FRAMES = 3
 """After this many (0.09 s) the final pass runs already; the end confirms or drops it."""
 LISTENER_FRAMES = 1
@@ -134,6 +138,8 @@ class GrammarHeard:
     """The room is noisy (`NOISY_SPREAD`)."""
     vocabulary: frozenset[str] = frozenset()
     """The words of the orders' commands, skip words aside."""
+    numbers: frozenset[str] = frozenset()
+    """The words of the numbers among them."""
 
 
 class Listener(Protocol):
@@ -270,8 +276,9 @@ class _Decoder:
 
 
 def _plain_words(text: str) -> list[str]:
-    """A transcript's words as the grammar spells them: "Go forward." -> go, forward."""
-    return re.findall(r"[a-z']+", text.lower())
+    """A transcript's words as the grammar spells them: "Go forward." -> go, forward;
+    "Gira atrás." -> gira, atrás."""
+    return re.findall(r"[^\W\d_]+(?:'[^\W\d_]+)*", text.lower())
 
 
 def _numbered(word: str, variant: int) -> str:
@@ -287,11 +294,16 @@ class PocketsphinxEngine:
     """Compiles grammars once and lends decoders to recognisers."""
 
     name = "pocketsphinx"
+    languages = frozenset({"en"})
+    """Its acoustic model, dictionary and language model are US English."""
 
     def __init__(self, min_confidence: float = 0.5, thresholds: Thresholds | None = None) -> None:
         self.min_confidence = min_confidence
         self.thresholds = thresholds or Thresholds()
         self._compiled: _Compiled | None = None
+        self._others: dict[str, _Compiled] = {}
+        """Other languages' grammars, as word automata only: for the free ear that hears
+        them, the endpointer asks whether the words so far await a number."""
         self._pool: list[_Decoder] = []
         self._lock = threading.Lock()
         self._open_lm: Any = None
@@ -304,6 +316,16 @@ class PocketsphinxEngine:
             raise EngineError(f"grammar {grammar.version}: {exc}") from exc
         if not graph.finals:
             raise EngineError(f"grammar {grammar.version} accepts no phrase")
+        if grammar.language not in self.languages:
+            self._others[grammar.language] = _Compiled(
+                version=grammar.version,
+                graph=graph,
+                added={},
+                skip_words=frozenset(grammar.skip_words),
+                number_words=frozenset(grammar.number_words),
+                unpronounceable=frozenset(),
+            )
+            return []
         decoder = self.borrow()
         try:
             found = pronunciations(graph.words, decoder.known)
@@ -320,11 +342,22 @@ class PocketsphinxEngine:
         return found.unpronounceable
 
     def recogniser(
-        self, max_utterance: float, segment: bool = True, listener: Listener | None = None
+        self,
+        max_utterance: float,
+        segment: bool = True,
+        listener: Listener | None = None,
+        language: str = "en",
     ) -> SphinxRecogniser:
-        if self._compiled is None:
+        """A recogniser in `language`: bound to the grammar in English; in another
+        language only `listener`, the free ear that hears it, hears the words, and this
+        recogniser finds the utterances (its voice activity and endpointer)."""
+        if language not in self.languages and listener is None:
+            raise EngineError(
+                f"{self.name} hears {', '.join(sorted(self.languages))} only, not {language!r}"
+            )
+        if (self._compiled if language in self.languages else self._others.get(language)) is None:
             raise EngineError("no grammar yet")
-        return SphinxRecogniser(self, max_utterance, segment, listener)
+        return SphinxRecogniser(self, max_utterance, segment, listener, language)
 
     def borrow(self) -> _Decoder:
         with self._lock:
@@ -347,9 +380,10 @@ class PocketsphinxEngine:
     def close(self) -> None:
         """Nothing beyond this process's memory."""
 
-    def compiled(self) -> _Compiled:
-        assert self._compiled is not None
-        return self._compiled
+    def compiled(self, language: str = "en") -> _Compiled:
+        found = self._compiled if language in self.languages else self._others.get(language)
+        assert found is not None
+        return found
 
 
 class _Utterance:
@@ -408,9 +442,13 @@ class SphinxRecogniser:
         max_utterance: float,
         segment: bool,
         listener: Listener | None = None,
+        language: str = "en",
     ) -> None:
         self._engine = engine
         self._listener = listener
+        self._language = language
+        self._bound = language in engine.languages
+        """Whether the grammar's passes run: not for a language only the listener hears."""
         self._max_bytes = int(max_utterance * 32000)
         self._segment = segment
         self._decoder: _Decoder | None = None
@@ -500,7 +538,7 @@ class SphinxRecogniser:
             self._listener.drop()  # the pause was not the end
         if speech and utterance.held is not None:
             utterance.held = None  # a number or more words after all: one utterance
-        if speech and not utterance.live:
+        if speech and not utterance.live and self._bound:
             self._resume(utterance)
         self._feed(frame, suppressed, raw, events)
         if speech:
@@ -513,13 +551,13 @@ class SphinxRecogniser:
             if utterance.speech >= MIN_SPEECH_FRAMES:
                 if utterance.quiet == LISTENER_FRAMES and self._listener is not None:
                     self._listener.pause(bytes(utterance.raw))
-                if utterance.quiet == EARLY_FRAMES:
+                if utterance.quiet == EARLY_FRAMES and self._bound:
                     utterance.early = self._final_pass(utterance)
         if utterance.held is not None:
             if utterance.quiet >= HANG_FRAMES:  # no number came: the held result stands
                 self._utterance = None
                 events.append(utterance.held)
-        elif utterance.quiet >= END_FRAMES and not (
+        elif utterance.quiet >= (END_FRAMES if self._bound else ALONE_END_FRAMES) and not (
             utterance.quiet < HANG_FRAMES and self._may_go_on(utterance)
         ):
             self._end(utterance.speech_end, events, hold=utterance.quiet < HANG_FRAMES)
@@ -528,14 +566,20 @@ class SphinxRecogniser:
             self._end(self._clock, events)
 
     def _begin(self, speech_start: float, events: list[RecognitionEvent]) -> None:
-        compiled = self._engine.compiled()
-        if self._decoder is None:
-            self._decoder = self._engine.borrow()
-        self._decoder.install(compiled)  # a new grammar applies from the next utterance
         self._utterance = _Utterance(self._count, speech_start)
         self._count += 1
         self._flags.clear()
         events.append(SpeechStarted(self._utterance.number, speech_start))
+        if not self._bound:  # the listener alone hears the words
+            self._utterance.live = False
+            for begins, frame, suppressed, raw in self._recent:
+                if begins >= speech_start - PRE_ROLL:
+                    self._feed(frame, suppressed, raw, events)
+            return
+        compiled = self._engine.compiled(self._language)
+        if self._decoder is None:
+            self._decoder = self._engine.borrow()
+        self._decoder.install(compiled)  # a new grammar applies from the next utterance
         self._decoder.search(OPEN_SEARCH)
         decoder = self._decoder.decoder
         decoder.set_cmn(self._prior or self._decoder.prior)
@@ -549,12 +593,12 @@ class SphinxRecogniser:
     ) -> None:
         utterance = self._utterance
         assert utterance is not None
-        assert self._decoder is not None
         utterance.audio += pcm
         utterance.suppressed += suppressed
         utterance.raw += raw
         if not utterance.live:
             return
+        assert self._decoder is not None
         utterance.unfed += pcm
         if len(utterance.unfed) >= PARTIAL_EVERY * 32000:
             # The first pass only makes partials: it takes the audio in 0.1 s batches, which
@@ -577,25 +621,30 @@ class SphinxRecogniser:
         Whisper, at the end, hears as "turn left"."""
         utterance = self._utterance
         assert utterance is not None
-        assert self._decoder is not None
         self._utterance = None
         if self._segment and utterance.speech < MIN_SPEECH_FRAMES:
-            self._decoder.decoder.end_utt()
+            if self._bound:
+                assert self._decoder is not None
+                self._decoder.decoder.end_utt()
             self._count -= 1  # numbers count utterances that got a result
             if self._listener is not None:
                 self._listener.drop()
             return
-        result = utterance.early or self._final_pass(utterance)
+        if self._bound:
+            result = utterance.early or self._final_pass(utterance)
+        else:
+            result = _Result("", 0.0, "")  # no grammar's ear in this language
         transcription = third = None
         noisy = self._room.spread() < NOISY_SPREAD
         if self._listener is not None:
-            compiled = self._engine.compiled()
+            compiled = self._engine.compiled(self._language)
             heard = GrammarHeard(
                 result.text,
-                self._rejected(result),
+                self._rejected(result) if self._bound else "",
                 bool(result.verdict.doubts),
                 noisy,
                 frozenset(compiled.graph.words) - compiled.skip_words,
+                compiled.number_words,
             )
             transcription, third = self._listener.result(bytes(utterance.raw), heard)
         self._prior = result.mean
@@ -604,7 +653,7 @@ class SphinxRecogniser:
             utterance.number,
             result.text,
             round(result.confidence, 3),
-            self._rejected(result),
+            self._rejected(result) if self._bound else "",
             utterance.start,
             speech_end,
             heard=verdict.heard,
@@ -613,6 +662,7 @@ class SphinxRecogniser:
             transcription=transcription,
             third=third,
             noisy=noisy,
+            alone=not self._bound,
         )
         if hold and self._segment and self._awaits_number(final):
             utterance.held = final
@@ -622,7 +672,7 @@ class SphinxRecogniser:
 
     def _awaits_number(self, final: Final) -> bool:
         """Whether an ear's words are a command that a number may go on."""
-        compiled = self._engine.compiled()
+        compiled = self._engine.compiled(self._language)
         heard = [final.text, *(t.text for t in (final.transcription, final.third) if t)]
         return any(
             compiled.graph.awaits(_plain_words(text), compiled.number_words) for text in heard
@@ -632,7 +682,7 @@ class SphinxRecogniser:
         """Whether the words heard up to the pause, the grammar's or a free ear's, await a
         number (`HANG_FRAMES`); asked once per pause."""
         if utterance.hanging is None:
-            compiled = self._engine.compiled()
+            compiled = self._engine.compiled(self._language)
             heard = [utterance.early.text if utterance.early is not None else ""]
             if self._listener is not None:
                 heard.append(self._listener.paused_text())
@@ -705,7 +755,7 @@ class SphinxRecogniser:
             if not filler(s.word)
         ]
         verdict = judge(grammar, heard, self._vocabulary(), self._engine.thresholds)
-        if text and not self._engine.compiled().graph.accepts(text.split()):
+        if text and not self._engine.compiled(self._language).graph.accepts(text.split()):
             # The search ended inside a phrase (no path reached the grammar's end): the best
             # partial path is what pocketsphinx returns then, "reach a" for "turn left".
             verdict = replace(verdict, rejection="heard only part of a command: say it again")
@@ -713,7 +763,7 @@ class SphinxRecogniser:
 
     def _vocabulary(self) -> Vocabulary:
         assert self._decoder is not None
-        compiled = self._engine.compiled()
+        compiled = self._engine.compiled(self._language)
         return Vocabulary(
             words=frozenset(compiled.graph.words),
             skip_words=compiled.skip_words,

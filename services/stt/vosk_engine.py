@@ -62,6 +62,8 @@ def load(options: EngineOptions) -> VoskEngine:
 
 class VoskEngine:
     name = "vosk"
+    languages = frozenset({"en"})
+    """The model's language is not known to voicectl: its grammars are the English orders'."""
 
     def __init__(self, model_dir: Path, min_confidence: float = 0.5) -> None:
         self.min_confidence = min_confidence
@@ -111,7 +113,11 @@ class VoskEngine:
             self._numbers = frozenset(grammar.number_words)
         return missing
 
-    def recogniser(self, max_utterance: float, segment: bool = True) -> VoskRecogniser:
+    def recogniser(
+        self, max_utterance: float, segment: bool = True, language: str = "en"
+    ) -> VoskRecogniser:
+        if language not in self.languages:
+            raise EngineError(f"the vosk engine hears its model's language, not {language!r}")
         if self._grammar is None:
             raise EngineError("no grammar yet")
         return VoskRecogniser(self, max_utterance, segment)

@@ -51,6 +51,7 @@ class _Open(Struct, frozen=True, tag=True):
 
     max_utterance: float
     segment: bool
+    language: str = "en"
 
 
 class _Accept(Struct, frozen=True, tag=True):
@@ -89,11 +90,12 @@ class ProcessEngine:
         self.name = options.name
         context = multiprocessing.get_context("spawn")  # never fork Zenoh's threads
         self._workers: list[_Worker] = []
+        self.languages: frozenset[str] = frozenset()
         try:
             for number in range(workers):
                 self._workers.append(_Worker(context, replace(options, workers=0), number))
             for worker in self._workers:
-                worker.wait_ready()
+                self.languages = frozenset(worker.wait_ready())
         except BaseException:
             self.close()
             raise
@@ -104,9 +106,11 @@ class ProcessEngine:
             unpronounceable = worker.call(_UseGrammar(grammar))
         return unpronounceable
 
-    def recogniser(self, max_utterance: float, segment: bool = True) -> Recogniser:
+    def recogniser(
+        self, max_utterance: float, segment: bool = True, language: str = "en"
+    ) -> Recogniser:
         worker = min(self._workers, key=lambda w: w.sessions)
-        number: int = worker.call(_Open(max_utterance, segment))
+        number: int = worker.call(_Open(max_utterance, segment, language))
         worker.sessions += 1
         return _RemoteRecogniser(worker, number)
 
@@ -133,11 +137,13 @@ class _Worker:
         self._lock = threading.Lock()
         self.sessions = 0
 
-    def wait_ready(self) -> None:
+    def wait_ready(self) -> list[str]:
+        """The languages its engine hears, once it has loaded."""
         try:
             if not self._connection.poll(START_TIMEOUT):
                 raise EngineError(f"a decoding worker did not start within {START_TIMEOUT:.0f} s")
-            self._answer(self._connection.recv())
+            languages: list[str] = self._answer(self._connection.recv())
+            return languages
         except (EOFError, OSError) as exc:
             code = self._process.exitcode
             raise EngineError(f"a decoding worker exited as it started (exit code {code})") from exc
@@ -198,7 +204,7 @@ def _serve(connection: Connection, options: EngineOptions) -> None:
     except EngineError as exc:
         connection.send(_Reply(error=str(exc)))
         return
-    connection.send(_Reply())
+    connection.send(_Reply(sorted(engine.languages)))
     recognisers: dict[int, Recogniser] = {}
     count = 0
     while True:
@@ -210,9 +216,9 @@ def _serve(connection: Connection, options: EngineOptions) -> None:
             match call:
                 case _UseGrammar(grammar=grammar):
                     reply = _Reply(engine.use_grammar(grammar))
-                case _Open(max_utterance=limit, segment=segment):
+                case _Open(max_utterance=limit, segment=segment, language=language):
                     count += 1
-                    recognisers[count] = engine.recogniser(limit, segment)
+                    recognisers[count] = engine.recogniser(limit, segment, language)
                     reply = _Reply(count)
                 case _Accept(recogniser=number, pcm=pcm):
                     reply = _Reply(recognisers[number].accept(pcm))

@@ -54,7 +54,8 @@ from voicectl.shared.messages import (
     Via,
 )
 from voicectl.shared.process import running
-from voicectl.shared.tts import MAX_TEXT, Voice, to_wav
+from voicectl.shared.tts import MAX_TEXT, Voice, load_voice, to_wav
+from voicectl.shared.words import catalogue, from_header, known, languages, word
 
 from .audio import AudioSocket
 from .hub import END, Hub
@@ -88,11 +89,15 @@ class AmendBody(msgspec.Struct, forbid_unknown_fields=True):
 
 class TextBody(msgspec.Struct, forbid_unknown_fields=True):
     text: str
+    language: Annotated[str, msgspec.Meta(pattern="^([a-z]{2,3})?$")] = ""
+    """The language it is written in (the panel's); empty: the converter's default."""
 
 
 class SpeechBody(msgspec.Struct, forbid_unknown_fields=True):
     text: Annotated[str, msgspec.Meta(min_length=1, max_length=MAX_TEXT)]
     """A short answer to say aloud ("stopped"), as the panel shows it."""
+    language: Annotated[str, msgspec.Meta(pattern="^([a-z]{2,3})?$")] = ""
+    """The language it is in (the panel's); empty: English."""
 
 
 class CancelBody(msgspec.Struct, forbid_unknown_fields=True):
@@ -178,6 +183,8 @@ class Panel:
         """Robots the hub follows at most besides `robot` (`--max-robots`)."""
         self.access = access
         self.voice = voice
+        self._voices: dict[str, Voice] = {}
+        """espeak-ng's own voice for each other language the panel speaks, made once."""
         self._bus: Bus | None = None
         self._client: VoicectlClient | None = None
         self.hub: Hub | None = None
@@ -221,6 +228,7 @@ class Panel:
             Route("/", self._index),
             Route("/static/{name}", self._static),
             Route("/favicon.ico", self._favicon),
+            Route("/words", self._words),
             Route("/api/health", self._health),
             Route("/api/robots", api(self._robots)),
             Route("/api/parse", api(self._parse), methods=["POST"]),
@@ -263,6 +271,24 @@ class Panel:
             found = False
         return FileResponse(path) if found else missing
 
+    async def _words(self, request: Request) -> Response:
+        """The panel's words in its language (shared/words.py): the one asked for
+        (`?language=es`) when there is a catalogue for it, else the browser's
+        (Accept-Language), else English; English fills whatever a catalogue lacks. Not
+        secret: the login page needs them too."""
+        asked = request.query_params.get("language", "")[:8]
+        accept = request.headers.get("accept-language", "")
+        language = known(asked) if asked else from_header(accept)
+        return JSONResponse(
+            {
+                "language": language,
+                "languages": [
+                    {"code": code, "name": word(code, "language.name")} for code in languages()
+                ],
+                "words": catalogue(language),
+            }
+        )
+
     async def _health(self, _request: Request) -> Response:
         return JSONResponse({"ok": True, "robot": self.default_robot})
 
@@ -299,9 +325,9 @@ class Panel:
         assert self._client is not None, "the app has not started"
         return self._client
 
-    async def _ask_converter(self, text: str) -> ParseResult:
+    async def _ask_converter(self, text: str, language: str = "") -> ParseResult:
         with _as_api_errors():
-            return await self.client.parse(text)
+            return await self.client.parse(text, language)
 
     async def _ask_supervisor(self, keys: RobotKeys, request: Message) -> SupervisorReply:
         with _as_api_errors():
@@ -313,7 +339,7 @@ class Panel:
 
     async def _parse(self, request: Request) -> object:
         body = await self._body(request, TextBody)
-        return await self._ask_converter(body.text)
+        return await self._ask_converter(body.text, body.language)
 
     async def _submit(self, request: Request) -> object:
         """Orders queued, edits of the queue applied and questions answered, in order."""
@@ -351,7 +377,7 @@ class Panel:
         body = await self._body(request, TextBody)
         asked = Asked(via=Via.API, by=_who(request, Via.API))
         with _as_api_errors():
-            said = await self.client.say(keys.robot, body.text, asked=asked)
+            said = await self.client.say(keys.robot, body.text, asked=asked, language=body.language)
         result = said.result
         return {
             "orders": result.orders,
@@ -398,12 +424,23 @@ class Panel:
         body = await self._body(request, SpeechBody)
         try:
             # An engine is a child process per phrase: tens of milliseconds off the loop.
-            speech = await asyncio.to_thread(self.voice.speak, body.text)
+            voice = self._voice_for(body.language)
+            speech = await asyncio.to_thread(voice.speak, body.text)
         except ValueError as exc:
             raise ApiError(400, str(exc)) from exc
         except TtsError as exc:
             raise ApiError(503, str(exc)) from exc
         return Response(to_wav(speech), media_type="audio/wav")
+
+    def _voice_for(self, language: str) -> Voice:
+        """The voice that says `language`: espeak-ng's voice for it (an English voice reads
+        Spanish badly), the service's own for English or with another engine."""
+        assert self.voice is not None
+        if not language or language == "en" or self.voice.name != "espeak-ng":
+            return self.voice
+        if language not in self._voices:
+            self._voices[language] = load_voice("espeak-ng", voice=language)
+        return self._voices[language]
 
     async def _history(self, request: Request) -> object:
         keys = self._robot(request)

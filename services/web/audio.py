@@ -19,7 +19,7 @@ import queue
 import threading
 import uuid
 from collections.abc import Callable, MutableMapping
-from typing import Any
+from typing import Annotated, Any
 
 import msgspec
 from starlette.websockets import WebSocket, WebSocketDisconnect
@@ -57,6 +57,8 @@ TOO_BIG = 1009
 class Hello(msgspec.Struct, forbid_unknown_fields=True):
     token: str
     robot: str
+    language: Annotated[str, msgspec.Meta(pattern="^([a-z]{2,3})?$")] = ""
+    """What the person speaks (the panel's language); empty: the recogniser's own."""
 
 
 class AudioSocket:
@@ -89,10 +91,11 @@ class AudioSocket:
         except WebSocketDisconnect:
             return
         if robot is not None:
-            await self._bridge(websocket, robot)
+            await self._bridge(websocket, *robot)
 
-    async def _greet(self, websocket: WebSocket) -> str | None:
-        """The robot the first message names, once its token is right; else None."""
+    async def _greet(self, websocket: WebSocket) -> tuple[str, str] | None:
+        """The robot and the language the first message names, once its token is right;
+        else None."""
         async with asyncio.timeout(HELLO_TIMEOUT):
             message = await websocket.receive()
         if message["type"] == "websocket.disconnect":
@@ -110,12 +113,12 @@ class AudioSocket:
             await _refuse(websocket, UNAUTHORISED, "missing or wrong token")
             return None
         try:
-            return check_chunk(hello.robot, "robot name")
+            return check_chunk(hello.robot, "robot name"), hello.language
         except ValueError as exc:
             await _refuse(websocket, BAD_DATA, str(exc))
             return None
 
-    async def _bridge(self, websocket: WebSocket, robot: str) -> None:
+    async def _bridge(self, websocket: WebSocket, robot: str, language: str = "") -> None:
         session = uuid.uuid4().hex[:16]
         keys = RobotKeys(robot)
         bus = self._bus()
@@ -134,7 +137,7 @@ class AudioSocket:
             if not await stream.matched(MATCH_TIMEOUT):
                 await _refuse(websocket, UNAVAILABLE, "speech recognition is not running")
                 return
-            stream.send(AudioStart())
+            stream.send(AudioStart(language=language))
             await websocket.send_json({"type": "session", "session": session})
             _LOGGER.info("audio session %s for %s opened", session, robot)
             seq = 0

@@ -100,20 +100,20 @@ function knownExtent(grid) {
   });
 }
 
-// What is wrong with a goal on the robot's own map, in words for the person about to send
-// it ("" when nothing is, or when the map's cells are not read yet): outside the map, on an
-// occupied cell (map_server's grey below 89: more than 65 % sure), or on an unknown one.
+// What is wrong with a goal on the robot's own map, as the catalogue's word for it (words.js,
+// trouble.*; "" when nothing is, or when the map's cells are not read yet): outside the map,
+// on an occupied cell (map_server's grey below 89: more than 65 % sure), or on an unknown one.
 function goalTrouble(grid, pose) {
   if (!grid || !pose) return "";
   const column = Math.floor((pose.x - grid.origin.x) / grid.resolution);
   const row = Math.floor((pose.y - grid.origin.y) / grid.resolution);
   if (column < 0 || row < 0 || column >= grid.width || row >= grid.height) {
-    return "is outside the robot's map";
+    return "outside";
   }
   if (!grid.cells) return "";
   const grey = grid.cells[row * grid.width + column];
-  if (grey === 205) return "is in a part of the map the robot has not seen";
-  if (grey < 89) return "is on an obstacle on the robot's map";
+  if (grey === 205) return "unseen";
+  if (grey < 89) return "obstacle";
   return "";
 }
 
@@ -317,14 +317,15 @@ function draw(svg, scene, onPlace) {
   const size = mark * 2.8;
   for (const place of scene.places) {
     const group = node("g", { class: "place", tabindex: "0", role: "button",
-      "aria-label": `stage "${place.phrase}"` });
-    group.append(node("title", {}, `${place.description}: click to stage "${place.phrase}"`));
+      "aria-label": window.voicectlWords.t("map.stage", { phrase: place.phrase }) });
+    group.append(node("title", {}, window.voicectlWords.t("map.clickToStage", { description: place.description, phrase: place.phrase })));
     group.append(node("circle", { cx: place.pose.x, cy: -place.pose.y, r: mark * 2.2 }));
     const others = scene.places.filter((other) => other !== place)
       .map((other) => ({ x: other.pose.x, y: -other.pose.y }));
     // At a gap that clears a robot standing on the place.
-    const spot = placeLabel(taken, place.pose.x, -place.pose.y, place.name, size, mark * 3.4,
-      placeOrder(place, scene.places), others, textWidth(svg, place.name, size));
+    const title = place.title || place.name; // in the panel's language
+    const spot = placeLabel(taken, place.pose.x, -place.pose.y, title, size, mark * 3.4,
+      placeOrder(place, scene.places), others, textWidth(svg, title, size));
     // One target for the mouse: the circle, its label and the gap between them.
     const label = taken[taken.length - 1];
     const left = Math.min(label.x, place.pose.x - mark * 2.2);
@@ -332,7 +333,7 @@ function draw(svg, scene, onPlace) {
     group.append(node("rect", { class: "hit", x: left, y: top,
       width: Math.max(label.x + label.w, place.pose.x + mark * 2.2) - left,
       height: Math.max(label.y + label.h, -place.pose.y + mark * 2.2) - top }));
-    group.append(node("text", { x: spot.x, y: spot.y, "font-size": size, class: "label" }, place.name));
+    group.append(node("text", { x: spot.x, y: spot.y, "font-size": size, class: "label" }, title));
     group.onclick = () => onPlace(place);
     group.onkeydown = (event) => {
       if (event.key === "Enter" || event.key === " ") { event.preventDefault(); onPlace(place); }
@@ -369,7 +370,8 @@ function draw(svg, scene, onPlace) {
         "stroke-width": unit * 0.6, "stroke-dasharray": `${unit} ${unit * 0.6}` }));
     }
     group.append(node("title", {}, `${index + 1}. ${step.order.description}` +
-      (step.trouble ? `: the goal ${step.trouble}` : "")));
+      (step.trouble ? window.voicectlWords.t("map.theGoal",
+        { trouble: window.voicectlWords.t(`trouble.${step.trouble}`) }) : "")));
     layers.push(group);
   });
   svg.replaceChildren(...layers);

@@ -2,6 +2,7 @@
 "use strict";
 
 const $ = (id) => document.getElementById(id);
+const { t } = window.voicectlWords; // every word the panel writes, in its language
 const PAGE = 20;
 
 const store = {
@@ -44,17 +45,11 @@ const voice = { context: null, asked: null, playing: null }; // the spoken answe
 const answers = window.voicectlAnswers;
 const TRAIL = 300;
 const JUMP = 4; // metres: more than a drive covers between two poses (0.5 s apart; the simulator runs up to 10x)
-const PART_NAMES = { converter: "orders", stt: "speech", supervisor: "queue", executor: "executor", robot: "odometry" };
-// A part that is down, in the words of what the person notices (its name one hover away).
-const PART_DOWN = {
-  converter: "commands are not understood",
-  stt: "speech is not heard",
-  supervisor: "orders cannot be sent",
-  executor: "orders cannot run",
-  robot: "the robot is not answering",
-};
-// How an order that broke its command ended, after its description.
-const BROKE = { failed: "failed", rejected: "was refused", interrupted: "was interrupted" };
+const PARTS = ["converter", "stt", "supervisor", "executor", "robot", "navigation"];
+// A part that is down, in the words of what the person notices (its name one hover away):
+// catalogue entries part.NAME and partDown.NAME.
+// How an order that broke its command ended, after its description (broke.STATUS).
+const BROKE = new Set(["failed", "rejected", "interrupted"]);
 // Orders of this label are the supervisor's own: edits of the queue and questions about it.
 const QUEUE_LABEL = "queue";
 const isEdit = (order) => order.label === QUEUE_LABEL;
@@ -117,7 +112,7 @@ async function api(path, body, query) {
   }
   const response = await fetch(`${path}?${params}`, init);
   const data = await response.json().catch(() => ({}));
-  if (response.status === 401) showLogin("wrong or missing token");
+  if (response.status === 401) showLogin(t("login.wrongToken"));
   if (!response.ok) throw new Error(data.error || response.statusText);
   clearNotes("ok");
   return data;
@@ -141,7 +136,7 @@ function showLogin(why) {
   $("login").hidden = false;
   stopMic();
   if (view.events) view.events.abort();
-  showConnected("not connected");
+  showConnected(t("connection.notConnected"));
   setStatus(why || "");
 }
 
@@ -150,12 +145,11 @@ function showConnected(trouble) {
   // STOP cannot work from here and says why; while the stream reconnects it stays armed
   // (the stop request may still get through).
   const badge = $("connection");
-  badge.textContent = trouble || "connected";
+  badge.textContent = trouble || t("connection.connected");
   badge.className = `badge ${trouble ? "offline" : "online"}`;
-  const loggedOut = trouble === "not connected";
+  const loggedOut = trouble === t("connection.notConnected");
   $("stop").disabled = loggedOut;
-  $("stop").title = loggedOut ? "Not connected: this panel cannot stop the robot"
-    : "Emergency stop: halt now and clear the queue";
+  $("stop").title = loggedOut ? t("header.stopOffline") : t("header.stopTitle");
   $("mic").disabled = Boolean(trouble);
   const wasOffline = document.body.classList.contains("offline");
   document.body.classList.toggle("offline", Boolean(trouble));
@@ -167,13 +161,17 @@ function showConnected(trouble) {
     $("current").textContent = trouble;
     $("current").className = "muted";
     $("parts").replaceChildren();
-    $("stt-summary").textContent = "Not connected: speech is not being heard";
-    if (view.stt) $("stt-status").textContent = `last known, not live: ${$("stt-status").textContent.replace(/^last known, not live: /, "")}`;
+    $("stt-summary").textContent = t("stt.offline");
+    if (view.stt) {
+      const stale = t("stt.lastKnown", { status: "" });
+      const status = $("stt-status").textContent;
+      $("stt-status").textContent = t("stt.lastKnown", { status: status.startsWith(stale) ? status.slice(stale.length) : status });
+    }
     if (!wasOffline) view.trail.push(null); // whatever comes back, the trail does not join it
   } else {
     clearNotes("connected");
     if (view.stt) showStt(view.stt);
-    if (!view.state) $("current").textContent = "waiting for the queue's state";
+    if (!view.state) $("current").textContent = t("now.waiting");
   }
 }
 
@@ -205,11 +203,11 @@ function selectRobot(name) {
   view.map = null;
   view.startedAt = {};
   view.finished = null;
-  $("pose").textContent = "no position yet";
+  $("pose").textContent = t("header.noPosition");
   $("parts").replaceChildren();
   $("queue").replaceChildren();
   $("history").replaceChildren();
-  $("current").textContent = "waiting for the queue's state";
+  $("current").textContent = t("now.waiting");
   $("current").className = "muted";
   showStaged();
   stopMic();
@@ -232,9 +230,11 @@ function showParts(parts) {
   // Only what is down is shown (what is up is there, hidden, for whoever inspects it), in
   // words of what it means for the person; the part's own name is in its title.
   $("parts").replaceChildren(...Object.entries(parts).map(([name, alive]) => {
-    const shown = alive ? PART_NAMES[name] || name : PART_DOWN[name] || `${name} is down`;
+    const known = PARTS.includes(name);
+    const shown = alive ? (known ? t(`part.${name}`) : name)
+      : (known ? t(`partDown.${name}`) : t("partDown.other", { name }));
     const item = el("li", shown, `badge ${alive ? "online" : "offline"}`);
-    item.title = `${name} ${alive ? "online" : "offline"}`;
+    item.title = t(alive ? "part.online" : "part.offline", { name });
     item.dataset.part = name;
     return item;
   }));
@@ -244,20 +244,20 @@ function showStt(status) {
   // A calm line for the person at the microphone; what the recogniser listens with one
   // click away, for whoever looks after it.
   view.stt = status;
-  const parts = [status.engine, status.grammar_version && `grammar ${status.grammar_version.slice(0, 8)}`,
-    status.detail, status.sessions ? `${status.sessions} microphone(s) open` : ""];
+  const parts = [status.engine, status.grammar_version && t("stt.grammar", { version: status.grammar_version.slice(0, 8) }),
+    status.detail, status.sessions ? t("stt.microphones", { count: status.sessions }) : ""];
   $("stt-status").textContent = parts.filter(Boolean).join(" · ");
   if (!document.body.classList.contains("offline")) {
-    $("stt-summary").textContent = view.mic && view.mic.socket ? "Listening" : "Ready to listen";
+    $("stt-summary").textContent = view.mic && view.mic.socket ? t("stt.listening") : t("stt.ready");
   }
   const deaf = status.unpronounceable || [];
   $("stt-deaf").hidden = !deaf.length;
-  $("stt-deaf").textContent = deaf.length ? `Cannot hear (no pronunciation): ${deaf.join(", ")}` : "";
+  $("stt-deaf").textContent = deaf.length ? t("stt.deaf", { words: deaf.join(", ") }) : "";
 }
 
 function showPose(pose) {
   const degrees = Math.round((pose.yaw * 180) / Math.PI);
-  $("pose").textContent = `x ${pose.x.toFixed(1)} m, y ${pose.y.toFixed(1)} m, facing ${degrees}°`;
+  $("pose").textContent = t("pose.line", { x: pose.x.toFixed(1), y: pose.y.toFixed(1), degrees });
   view.pose = { x: pose.x, y: pose.y, yaw: pose.yaw };
   const last = view.trail[view.trail.length - 1];
   // A restarted executor, or a jump no drive makes between two poses (a relocalised
@@ -329,13 +329,19 @@ function showGoalWarning(troubled) {
   const count = (description) => troubled.filter((step) => step.order.description === description).length;
   box.replaceChildren(...[...kinds].map(([trouble, steps]) => {
     const names = steps.map((step) => `“${step.order.description}”` +
-      (count(step.order.description) > 1 ? ` (${step.number} on the map)` : ""));
-    const named = names.length > 1 ? `${names.slice(0, -1).join(", ")} and ${names[names.length - 1]}` : names[0];
+      (count(step.order.description) > 1 ? t("staging.onMap", { number: step.number }) : ""));
+    const named = names.length > 1 ? `${names.slice(0, -1).join(", ")}${t("list.and")}${names[names.length - 1]}` : names[0];
     const goals = steps.length > 1
-      ? `their goals ${trouble.replace(/^is /, "are ").replace("an obstacle", "obstacles")}`
-      : `its goal ${trouble}`;
-    return el("span", `${named}: ${goals}; the robot may not get there. `);
+      ? t("staging.goals", { trouble: t(`trouble.${trouble}.many`) })
+      : t("staging.goal", { trouble: t(`trouble.${trouble}`) });
+    return el("span", t("staging.mayNot", { named, goals }));
   }));
+}
+
+function placesIn(places) {
+  // Each language's orders give their own places: the panel's, else the default's.
+  const mine = places.filter((place) => (place.language || "en") === window.voicectlWords.language);
+  return mine.length ? mine : places.filter((place) => (place.language || "en") === "en");
 }
 
 // --- the live stream ---------------------------------------------------------------------------
@@ -352,7 +358,7 @@ async function listen() {
         headers: { Authorization: `Bearer ${store.token}` },
         signal: controller.signal,
       });
-      if (response.status === 401) { showLogin("wrong or missing token"); return; }
+      if (response.status === 401) { showLogin(t("login.wrongToken")); return; }
       if (!response.ok) throw new Error((await response.json()).error || response.statusText);
       showConnected("");
       const reader = response.body.getReader();
@@ -371,8 +377,8 @@ async function listen() {
       }
     } catch (error) {
       if (controller.signal.aborted) return;
-      showConnected("reconnecting");
-      note("banner", "Connection to the robot lost: trying again. What you see is not live.", "connected");
+      showConnected(t("connection.reconnecting"));
+      note("banner", t("connection.lost"), "connected");
     }
     await new Promise((resolve) => setTimeout(resolve, 1000));
   }
@@ -386,7 +392,7 @@ function handle(message) {
     case "robots": showRobots(message.robots); break;
     case "labels": if (message.robot === view.robot) { view.labels = message.labels; showStaged(); } break;
     case "robotpose": showPose(message); showTalk(); break;
-    case "places": view.places = message.places; redraw(); showTalk(); break;
+    case "places": view.places = placesIn(message.places); redraw(); showTalk(); break;
     case "robotmap": showMap(message); break;
     case "sttstatus": showStt(message); break;
     case "partialtranscript":
@@ -399,7 +405,7 @@ function handle(message) {
     case "proposal":
       if (mine) propose(message);
       else if (view.dropped && message.session === view.dropped.session) {
-        showHeard(`dropped: “${view.dropped.unfinished}” (it ended “${message.transcript}”; not added)`, "partial");
+        showHeard(t("heard.droppedEnded", { text: view.dropped.unfinished, ended: message.transcript }), "partial");
         view.dropped = null;
       }
       break;
@@ -411,8 +417,7 @@ function handle(message) {
 
 function micUnavailable() {
   if (!window.isSecureContext || !navigator.mediaDevices || !window.AudioWorkletNode) {
-    return "The browser gives pages a microphone only over HTTPS or on localhost. Open the " +
-      "panel at its https:// address (ask whoever set up the robot) or type below.";
+    return t("mic.insecure");
   }
   return "";
 }
@@ -427,12 +432,8 @@ async function startMic() {
       audio: { echoCancellation: false, noiseSuppression: false, autoGainControl: false, channelCount: 1 },
     });
   } catch (error) {
-    const reasons = {
-      NotAllowedError: "Microphone permission was refused; allow it in the address bar.",
-      NotFoundError: "No microphone was found.",
-      NotReadableError: "The microphone is in use by another program.",
-    };
-    showMicNote(reasons[error.name] || `No microphone: ${error.message}`);
+    const reasons = { NotAllowedError: "mic.refused", NotFoundError: "mic.notFound", NotReadableError: "mic.busy" };
+    showMicNote(reasons[error.name] ? t(reasons[error.name]) : t("mic.none", { error: error.message }));
     return;
   }
   const context = new AudioContext();
@@ -446,7 +447,8 @@ async function startMic() {
   socket.binaryType = "arraybuffer";
   const mic = { stream, context, node, socket, session: "", waiting: [] };
   view.mic = mic;
-  socket.onopen = () => socket.send(JSON.stringify({ token: store.token, robot: view.robot }));
+  // The recogniser hears the person in the panel's language.
+  socket.onopen = () => socket.send(JSON.stringify({ token: store.token, robot: view.robot, language: window.voicectlWords.language }));
   socket.onmessage = (event) => {
     const message = JSON.parse(event.data);
     if (message.type === "session") {
@@ -465,11 +467,11 @@ async function startMic() {
     else if (mic.waiting.length < 100) mic.waiting.push(event.data.pcm);
   };
   showMicNote("");
-  showHeard("listening…", "partial");
+  showHeard(t("heard.listening"), "partial");
   $("discard").hidden = true;
-  $("stt-summary").textContent = "Listening";
+  $("stt-summary").textContent = t("stt.listening");
   $("mic").setAttribute("aria-pressed", "true");
-  $("mic").lastChild.textContent = " Stop listening";
+  $("mic").lastChild.textContent = t("speak.stopListening");
   $("mic").classList.add("live");
 }
 
@@ -479,13 +481,13 @@ function stopMic() {
   // A sentence cut off mid-way is finished by the recogniser: the page says so, and a
   // "discard" drops it. Whatever the person does next with the orders (Send, Add, Clear,
   // Listen again) drops it too: a late answer never fills "To send" behind their back.
-  const unfinished = $("heard").classList.contains("partial") && $("heard").textContent !== "listening…"
+  const unfinished = $("heard").classList.contains("partial") && $("heard").textContent !== t("heard.listening")
     ? $("heard").textContent : "";
   view.mic = { session: mic.session, unfinished }; // its last transcript may still come
   if (unfinished) {
-    showHeard(`finishing “${unfinished}”…`, "partial");
+    showHeard(t("heard.finishing", { text: unfinished }), "partial");
     $("discard").hidden = false;
-  } else if ($("heard").textContent === "listening…") {
+  } else if ($("heard").textContent === t("heard.listening")) {
     showHeard("", "partial");
   }
   if (mic.socket.readyState === WebSocket.OPEN) mic.socket.send(JSON.stringify({ type: "stop" }));
@@ -493,9 +495,9 @@ function stopMic() {
   mic.context.close();
   $("level").style.width = "0";
   $("mic").setAttribute("aria-pressed", "false");
-  $("mic").lastChild.textContent = " Listen";
+  $("mic").lastChild.textContent = t("speak.listen");
   $("mic").classList.remove("live");
-  if (!document.body.classList.contains("offline")) $("stt-summary").textContent = "Ready to listen";
+  if (!document.body.classList.contains("offline")) $("stt-summary").textContent = t("stt.ready");
 }
 
 function discardUnfinished() {
@@ -504,7 +506,7 @@ function discardUnfinished() {
   if (!mic || mic.socket) return;
   view.mic = null;
   if (mic.unfinished && !$("discard").hidden) {
-    showHeard(`dropped: “${mic.unfinished}”`, "partial");
+    showHeard(t("heard.dropped", { text: mic.unfinished }), "partial");
     view.dropped = mic; // its answer, when it comes, is shown for what it was and not staged
   }
   $("discard").hidden = true;
@@ -529,8 +531,8 @@ function showEars(proposal) {
   $("ears-more").hidden = !hearings.length; // the engines' words, one click away
   box.replaceChildren(...hearings.map((hearing) => {
     const item = el("li", "", hearing.accepted ? "ear accepted" : "ear refused");
-    item.append(el("span", hearing.ear === "grammar" ? "grammar" : hearing.ear, "ear-name"), " ",
-      el("q", hearing.text || "(nothing)"), " ", el("span", hearing.verdict, "muted"));
+    item.append(el("span", hearing.ear === "grammar" ? t("heard.grammar") : hearing.ear, "ear-name"), " ",
+      el("q", hearing.text || t("heard.nothing")), " ", el("span", hearing.verdict, "muted"));
     return item;
   }));
   if (hearings.length && proposal.decision) box.append(el("li", proposal.decision, "ear-decision"));
@@ -548,8 +550,8 @@ async function propose(proposal) {
     // Why, in plain words, on the line that showed what was heard ("I heard '…': not a
     // command"); a suggestion, if the converter had one, below it.
     const [why] = proposal.errors;
-    if (why) showHeard(why.reason, "rejected");
-    showErrors(proposal.transcript, (why && why.candidates.length) ? [{ ...why, reason: "— did you mean" }] : []);
+    if (why) showHeard(t("heard.rejected", { reason: why.reason, text: proposal.transcript }), "rejected");
+    showErrors(proposal.transcript, (why && why.candidates.length) ? [{ ...why, reason: t("errors.didYouMean") }] : []);
     showDoubt(null);
     return;
   }
@@ -665,20 +667,20 @@ function showDoubt(proposal) {
     if (i >= doubt.position && i < doubt.position + size) mark.className = "asking";
     shown.append(mark);
   });
-  const count = open.length > 1 ? ` (${open.length} to answer)` : "";
-  box.replaceChildren(el("strong", "Did you say"), " ", shown, count, " ");
-  const staged = (choice) => `${later.length ? "answer" : "stage"} "${answered(choice).transcript}"; nothing is sent until you send`;
+  const count = open.length > 1 ? t("doubt.toAnswer", { count: open.length }) : "";
+  box.replaceChildren(el("strong", t("doubt.didYouSay")), " ", shown, count, " ");
+  const staged = (choice) => t(later.length ? "doubt.answerTitle" : "doubt.stageTitle", { text: answered(choice).transcript });
   if (!doubt.alternatives.length) {
     // Nothing to choose between: a yes or a no, not a list of one.
-    box.append("? ", button(later.length ? "yes" : "yes, add it", "choice", () => choose(doubt.words), staged(doubt.words)), " ");
-    box.append(button("say again", "choice", () => showDoubt(null), "drop it and speak again"));
+    box.append("? ", button(later.length ? t("doubt.yes") : t("doubt.yesAdd"), "choice", () => choose(doubt.words), staged(doubt.words)), " ");
+    box.append(button(t("doubt.sayAgain"), "choice", () => showDoubt(null), t("doubt.sayAgainTitle")));
     box.hidden = false;
     return;
   }
   for (const choice of [doubt.words, ...doubt.alternatives]) {
     box.append(button(choice, "choice", () => choose(choice), staged(choice)), " ");
   }
-  box.append(button("say again", "choice", () => showDoubt(null), "drop it and speak again"));
+  box.append(button(t("doubt.sayAgain"), "choice", () => showDoubt(null), t("doubt.sayAgainTitle")));
   box.hidden = false;
 }
 
@@ -695,11 +697,11 @@ function showErrors(said, errors) {
   // other suggestions with it, if they still apply).
   $("errors").replaceChildren(...errors.map((error) => {
     const item = el("li");
-    item.append(el("strong", error.text || said || "(nothing)"), ` ${error.reason}`);
+    item.append(el("strong", error.text || said || t("heard.nothing")), ` ${t("errors.reason", { reason: error.reason })}`);
     for (const phrase of suggestions(error)) {
       const fixed = error.text && said && said.includes(error.text) ? said.replace(error.text, phrase) : phrase;
       item.append(" ", button(phrase, "suggestion", () => addText(fixed),
-        `check "${fixed}" again; nothing is sent until you send`));
+        t("errors.checkAgain", { text: fixed })));
     }
     return item;
   }));
@@ -711,7 +713,7 @@ async function addText(text) {
   // the order they were said in.
   discardUnfinished();
   try {
-    const result = await api("/api/parse", { text });
+    const result = await api("/api/parse", { text, language: window.voicectlWords.language });
     const repairable = result.errors.some((error) => suggestions(error).length);
     if (!repairable) stage(await take(result.orders, text, false), text);
     const left = result.errors.map((error) => error.text).filter(Boolean);
@@ -736,16 +738,16 @@ function showStaged() {
     row.append(el("span", item.order.description, "what"));
     if (isEdit(item.order)) {
       row.classList.add("edit");
-      row.append(el("span", "changes the queue", "muted edit-note"));
+      row.append(el("span", t("staging.changesQueue"), "muted edit-note"));
     }
     if (first) row.append(el("span", item.said, "muted said"));
     if (view.labels && !isEdit(item.order) && !view.labels.includes(item.order.label)) {
       // Said before it is sent: the executor would refuse it.
-      row.append(el("span", `no executor serves '${item.order.label}'`, "unserved"));
+      row.append(el("span", t("staging.unserved", { label: item.order.label }), "unserved"));
     }
-    row.append(button("↑", "small", () => move(index, index - 1), "earlier"));
-    row.append(button("↓", "small", () => move(index, index + 1), "later"));
-    row.append(button("✕", "small", () => remove(index), "remove"));
+    row.append(button("↑", "small", () => move(index, index - 1), t("staging.earlier")));
+    row.append(button("↓", "small", () => move(index, index + 1), t("staging.later")));
+    row.append(button("✕", "small", () => remove(index), t("staging.remove")));
     row.onkeydown = (event) => {
       if (event.altKey && event.key === "ArrowUp") { move(index, index - 1, true); event.preventDefault(); }
       if (event.altKey && event.key === "ArrowDown") { move(index, index + 1, true); event.preventDefault(); }
@@ -805,23 +807,23 @@ function progressLine(progress) {
   // The executor's own words when it has any ("2.1 m to go"); the numbers otherwise.
   if (progress.text) return progress.text;
   const given = (value) => value !== null && value !== undefined;
-  if (given(progress.distance_linear)) return `${progress.distance_linear.toFixed(1)} m to go`;
+  if (given(progress.distance_linear)) return t("progress.distance", { distance: progress.distance_linear.toFixed(1) });
   if (given(progress.distance_angular)) {
-    return `${Math.round((progress.distance_angular * 180) / Math.PI)}° to turn`;
+    return t("progress.angle", { degrees: Math.round((progress.distance_angular * 180) / Math.PI) });
   }
-  return given(progress.percent) ? `${Math.round(progress.percent)} % done` : "";
+  return given(progress.percent) ? t("progress.percent", { percent: Math.round(progress.percent) }) : "";
 }
 
 function queueLine(record, index, length) {
   const item = el("li");
   item.append(el("span", record.order.description, "what"));
   if (index > 0) {
-    item.append(button("↑", "small", () => reorder(record, index - 1), "run earlier"));
+    item.append(button("↑", "small", () => reorder(record, index - 1), t("queue.earlier")));
   }
   if (index >= 0 && index < length - 1) {
-    item.append(button("↓", "small", () => reorder(record, index + 1), "run later"));
+    item.append(button("↓", "small", () => reorder(record, index + 1), t("queue.later")));
   }
-  item.append(button("cancel", "small", () => api("/api/cancel", { order_id: record.id }).catch(report)));
+  item.append(button(t("queue.cancel"), "small", () => api("/api/cancel", { order_id: record.id }).catch(report)));
   return item;
 }
 
@@ -832,7 +834,7 @@ function reorder(record, position) {
 function showState(state) {
   view.state = state;
   const why = state.stopped
-    ? "Stopped: the robot is halted and its orders cancelled. Release it to send new orders."
+    ? t("now.stopped")
     : state.paused;
   $("held").hidden = !why;
   $("held-why").textContent = why || "";
@@ -843,7 +845,7 @@ function showState(state) {
   $("resume").hidden = state.stopped || !state.paused;
   // The last change to the queue, by whoever made it, can be taken back from here.
   $("undo").hidden = !state.undo;
-  $("undo").textContent = state.undo ? `undo “${state.undo}”` : "undo";
+  $("undo").textContent = state.undo ? t("queue.undoWhat", { what: state.undo }) : t("queue.undo");
   showTalk();
   // Latched, the header itself says so on every screen: "Stopped — Release" in STOP's place.
   $("stop").classList.toggle("latched", state.stopped);
@@ -872,13 +874,13 @@ function showState(state) {
   } else if (lastFailure(state)) {
     showFailure(lastFailure(state));
   } else {
-    $("current").textContent = "idle";
+    $("current").textContent = t("now.idle");
     $("current").className = "muted";
   }
   const length = state.queue_length;
   $("queue").replaceChildren(...state.queue.map((record, index) => queueLine(record, index, length)));
   const more = length - state.queue.length;
-  if (more > 0) $("queue").append(el("li", `… and ${more} more`, "muted"));
+  if (more > 0) $("queue").append(el("li", t("queue.more", { count: more }), "muted"));
   if (view.historyOffset === 0) showHistory(state.history, null);
   announceEnded(state);
   redraw();
@@ -888,7 +890,7 @@ function lastFailure(state) {
   // The newest order that failed (or was refused, or interrupted), while no order has
   // started since: "Now" says so until the next one starts or the person dismisses it.
   if (state.current) return null;
-  const index = state.history.findIndex((record) => BROKE[record.status]);
+  const index = state.history.findIndex((record) => BROKE.has(record.status));
   if (index < 0 || view.dismissed.has(state.history[index].id)) return null;
   if (state.history.slice(0, index).some((record) => record.started_at)) return null;
   return state.history[index];
@@ -897,9 +899,9 @@ function lastFailure(state) {
 function showFailure(record) {
   const [said] = splitDetail(forPerson(record.message));
   const box = el("div", undefined, `ended ${record.status}`);
-  box.append(el("span", `${record.order.description} ${BROKE[record.status]}${said ? `: ${said}` : ""}`, "what"),
-    " ", button("dismiss", "small", () => { view.dismissed.add(record.id); showState(view.state); },
-      "put it away; History keeps it"));
+  box.append(el("span", `${record.order.description} ${t(`broke.${record.status}`)}${said ? `: ${said}` : ""}`, "what"),
+    " ", button(t("now.dismiss"), "small", () => { view.dismissed.add(record.id); showState(view.state); },
+      t("now.dismissTitle")));
   $("current").replaceChildren(box);
   $("current").className = "";
 }
@@ -942,7 +944,7 @@ async function say(text) {
     const response = await fetch("/api/speech", {
       method: "POST",
       headers: { Authorization: `Bearer ${store.token}`, "Content-Type": "application/json" },
-      body: JSON.stringify({ text }),
+      body: JSON.stringify({ text, language: window.voicectlWords.language }),
       signal: asked.signal,
     });
     if (!response.ok) throw new Error((await response.json().catch(() => ({}))).error || response.statusText);
@@ -950,7 +952,7 @@ async function say(text) {
     const sound = await context.decodeAudioData(await response.arrayBuffer());
     if (voice.asked !== asked) return; // a newer answer came meanwhile
     if (context.state !== "running") {
-      note("banner", "Click anywhere on the page once to let it speak answers.", "ok");
+      note("banner", t("voice.click"), "ok");
       return;
     }
     const source = context.createBufferSource();
@@ -960,7 +962,7 @@ async function say(text) {
     source.start();
     voice.playing = source;
   } catch (error) {
-    if (error.name !== "AbortError") note("banner", `Cannot speak answers: ${forPerson(error.message)}`, "ok");
+    if (error.name !== "AbortError") note("banner", t("voice.cannot", { error: forPerson(error.message) }), "ok");
   }
 }
 
@@ -969,15 +971,17 @@ function showHistory(records, total) {
     const row = el("tr");
     const ended = record.ended_at ? new Date(record.ended_at * 1000).toLocaleString() : "";
     // Who asked, and how: an edit of the queue says so too.
-    const asked = record.asked ? ` (${record.asked.via}${record.asked.spoken ? ", spoken" : ""})` : "";
+    const how = record.asked && record.asked.spoken ? t("history.spoken", { via: record.asked.via }) : record.asked ? record.asked.via : "";
+    const asked = how ? ` (${how})` : "";
     row.append(el("td", record.order.description, isEdit(record.order) ? "what edit" : "what"),
-      el("td", record.status, record.status), resultCell(record),
-      el("td", `${record.transcript}${asked}`, "muted said"), el("td", ended, "muted ended"));
+      el("td", t(`status.${record.status}`) || record.status, record.status),
+      resultCell(record), el("td", `${record.transcript}${asked}`, "muted said"),
+      el("td", ended, "muted ended"));
     return row;
   }));
   const first = view.historyOffset + 1;
   $("page").textContent = records.length ? `${first}–${view.historyOffset + records.length}` +
-    (total !== null ? ` of ${total}` : "") : "";
+    (total !== null ? t("history.of", { total }) : "") : "";
   $("newer").disabled = view.historyOffset === 0;
   $("older").disabled = total !== null ? view.historyOffset + records.length >= total
     : records.length < PAGE; // the live page is the most recent records only
@@ -1000,7 +1004,7 @@ function resultCell(record) {
     const more = el("details", undefined, "more");
     more.open = view.opened.has(record.id);
     more.ontoggle = () => { if (more.open) view.opened.add(record.id); else view.opened.delete(record.id); };
-    more.append(el("summary", "more"), el("span", detail, "detail"));
+    more.append(el("summary", t("history.more")), el("span", detail, "detail"));
     cell.append(" ", more);
   }
   if (record.order.label !== "pic" || record.status !== "succeeded") return cell;
@@ -1008,10 +1012,10 @@ function resultCell(record) {
   if (shown) {
     const image = el("img", undefined, "photo");
     image.src = shown;
-    image.alt = `photo taken by “${record.order.description}”`;
+    image.alt = t("photo.alt", { what: record.order.description });
     cell.append(image);
   } else {
-    cell.append(" ", button("Show photo", "show-photo", () => showPhoto(record, cell)));
+    cell.append(" ", button(t("photo.show"), "show-photo", () => showPhoto(record, cell)));
   }
   return cell;
 }
@@ -1027,7 +1031,7 @@ async function showPhoto(record, cell) {
     cell.replaceWith(resultCell(record));
   } catch (error) {
     cell.querySelector(".show-photo")?.remove();
-    cell.append(el("span", ` No photo: ${forPerson(error.message)}`, "muted"));
+    cell.append(el("span", t("photo.none", { error: forPerson(error.message) }), "muted"));
   }
 }
 
@@ -1067,11 +1071,9 @@ $("send").onclick = async () => {
     showStaged();
     if (view.state && view.state.stopped) {
       // Said where the person looks, and gone once the stop is released.
-      note("send-note", "Not sent: the emergency stop is on. Press Release (at the top), then Send " +
-        "again; your orders are kept here.", "released");
+      note("send-note", t("send.stopped"), "released");
     } else {
-      note("send-note", `Not sent: ${forPerson(error.message)}. Your orders are kept here; Send tries again.`,
-        "staged");
+      note("send-note", t("send.failed", { error: forPerson(error.message) }), "staged");
     }
   }
 };
@@ -1086,7 +1088,7 @@ for (const kind of ["pointerdown", "keydown"]) {
   document.addEventListener(kind, () => { if (store.speakAnswers) voiceContext(); }, true);
 }
 $("cancel-all").onclick = () => {
-  if (confirm("Cancel the running order and every queued one?")) {
+  if (confirm(t("queue.cancelAllConfirm"))) {
     api("/api/cancel_all", {}).catch(report);
   }
 };
@@ -1098,7 +1100,7 @@ $("stop").onclick = () =>
       view.unconfirmed = !stopped.confirmed;
       if (view.state) showState(view.state);
       if (!stopped.confirmed) {
-        note("banner", `The stop was not confirmed: ${forPerson(stopped.detail)}. Press STOP again.`, "ok");
+        note("banner", t("stop.unconfirmed", { detail: forPerson(stopped.detail) }), "ok");
       }
       say(answers.stoppedWords(stopped));
     })
@@ -1121,6 +1123,10 @@ window.addEventListener("hashchange", () => {
   if (tokenFromAddress()) start(); // the address voicectl up printed, opened in this tab
 });
 
-tokenFromAddress();
-showStaged();
-if (store.token) start(); else showLogin();
+// The panel's words first (words.js), in its language; then the rest.
+window.voicectlWords.load().then(() => {
+  window.voicectlWords.chooser($("language"));
+  tokenFromAddress();
+  showStaged();
+  if (store.token) start(); else showLogin();
+});
