@@ -390,6 +390,9 @@ class Grammar(Message):
     """Small words that may stand between and around the words of a command."""
     number_words: list[str] = msgspec.field(default_factory=list)
     """The words of spoken numbers in slots: values, which the recogniser checks apart."""
+    leading: list[str] = msgspec.field(default_factory=list)
+    """Phrases said before the orders they bring ("after that"): an utterance heard so far
+    as one of them goes on, and the recogniser waits longer at its pause."""
     unexpandable: list[str] = msgspec.field(default_factory=list)
     """Orders whose alias cannot be expanded to a finite set, one line each saying why."""
     version: str = ""

@@ -66,6 +66,7 @@ def build_grammar(orders: OrderSet) -> Grammar:
         skip_words=list(orders.skip_words),
         language=orders.language,
         number_words=sorted(builder.number_words),
+        leading=sorted(builder.leading),
         unexpandable=builder.unexpandable,
         version=digest[:16],
     )
@@ -84,6 +85,8 @@ class _Builder:
         """The rules of edits of the queue."""
         self.number_rules: dict[tuple[str, ...], str] = {}
         self.number_words: set[str] = set()
+        self.leading: set[str] = set()
+        """The phrases of edits that bring the orders said after them."""
         self.phrases: list[str] = []
         self.words: set[str] = set(skip_words)
         self.unexpandable: list[str] = []
@@ -117,6 +120,9 @@ class _Builder:
             return
         for template in expansion.templates:
             self.phrases.extend(_phrases(template, values))
+        if command.order.label == QUEUE_LABEL and command.order.values.get("edit") == "after":
+            for template in expansion.templates:
+                self.leading.update(_phrases(template, values))
 
     def _jsgf_template(self, template: Template, values: dict[str, list[str]]) -> str:
         words = []

@@ -93,10 +93,11 @@ ROOM_NEEDED = 10
 END_FRAMES = 8
 """It ends after this many frames without speech (0.24 s)..."""
 HANG_FRAMES = 17
-"""...or this many (0.51 s) when the words so far are a command that a number may go on
-("turn left" before "forty five degrees", "go forward" before "eight meters"): ended at
-the pause, they made another order than the one said. On the dev split, Kokoro's
-speakers paused up to 0.33 s there."""
+"""...or this many (0.51 s) when the words so far may go on: a command that a number may
+follow ("turn left" before "forty five degrees", "go forward" before "eight meters"), or
+words no command ends on ("after this," before "turn left"). Ended at the pause, they
+made another order than the one said, or none. On the dev split, Kokoro's speakers paused
+up to 0.33 s before a number."""
 ALONE_END_FRAMES = HANG_FRAMES
 """In a language only a free ear hears, an utterance ends after this many (0.51 s): the
 detector stops flagging speech before a soft last syllable ends ("coci-na"), and with no
@@ -174,6 +175,17 @@ class _Compiled:
     skip_words: frozenset[str]
     number_words: frozenset[str]
     unpronounceable: frozenset[str]
+    leading: frozenset[tuple[str, ...]] = frozenset()
+    """The grammar's `leading` phrases, as words."""
+
+    def goes_on(self, text: str) -> bool:
+        """Whether an ear's words so far may go on: a path of the automaton that a number
+        may follow or no command ends on (`WordGraph.goes_on`), or a phrase that brings
+        the orders said after it ("after that"), skip words aside."""
+        words = _plain_words(text)
+        return self.graph.goes_on(words, self.number_words) or (
+            tuple(w for w in words if w not in self.skip_words) in self.leading
+        )
 
 
 class _Decoder:
@@ -275,6 +287,13 @@ class _Decoder:
         return fsg
 
 
+def _leading(grammar: Grammar) -> frozenset[tuple[str, ...]]:
+    skip = frozenset(grammar.skip_words)
+    return frozenset(
+        tuple(w for w in phrase.split() if w not in skip) for phrase in grammar.leading
+    )
+
+
 def _plain_words(text: str) -> list[str]:
     """A transcript's words as the grammar spells them: "Go forward." -> go, forward;
     "Gira atrás." -> gira, atrás."""
@@ -324,6 +343,7 @@ class PocketsphinxEngine:
                 skip_words=frozenset(grammar.skip_words),
                 number_words=frozenset(grammar.number_words),
                 unpronounceable=frozenset(),
+                leading=_leading(grammar),
             )
             return []
         decoder = self.borrow()
@@ -338,6 +358,7 @@ class PocketsphinxEngine:
             skip_words=frozenset(grammar.skip_words),
             number_words=frozenset(grammar.number_words),
             unpronounceable=frozenset(found.unpronounceable),
+            leading=_leading(grammar),
         )
         return found.unpronounceable
 
@@ -416,7 +437,7 @@ class _Utterance:
         self.heard: list[Word] = []
         """What the open pass heard in the decodes that ended, in frames of `audio`."""
         self.hanging: bool | None = None
-        """Whether the words at the current pause await a number (`HANG_FRAMES`)."""
+        """Whether the words at the current pause may go on (`HANG_FRAMES`)."""
         self.held: Final | None = None
         """The result at the pause, kept back while a number may still come."""
 
@@ -615,7 +636,7 @@ class SphinxRecogniser:
     def _end(self, speech_end: float, events: list[RecognitionEvent], hold: bool = False) -> None:
         """The final result: the early pass if the speech ended where it paused, else a
         final pass now. A blip too short to be a word ends without one. With `hold`, a
-        result whose words a free ear heard awaiting a number is kept back until
+        result whose words a free ear heard going on is kept back until
         `HANG_FRAMES` have passed without speech (else it is dropped, and the utterance
         goes on): in babble the grammar and Moonshine may hear nothing at the pause that
         Whisper, at the end, hears as "turn left"."""
@@ -664,31 +685,28 @@ class SphinxRecogniser:
             noisy=noisy,
             alone=not self._bound,
         )
-        if hold and self._segment and self._awaits_number(final):
+        if hold and self._segment and self._goes_on(final):
             utterance.held = final
             self._utterance = utterance
             return
         events.append(final)
 
-    def _awaits_number(self, final: Final) -> bool:
-        """Whether an ear's words are a command that a number may go on."""
+    def _goes_on(self, final: Final) -> bool:
+        """Whether an ear's words may go on: a command that a number may follow, or words
+        no command ends on (`WordGraph.goes_on`)."""
         compiled = self._engine.compiled(self._language)
         heard = [final.text, *(t.text for t in (final.transcription, final.third) if t)]
-        return any(
-            compiled.graph.awaits(_plain_words(text), compiled.number_words) for text in heard
-        )
+        return any(compiled.goes_on(text) for text in heard)
 
     def _may_go_on(self, utterance: _Utterance) -> bool:
-        """Whether the words heard up to the pause, the grammar's or a free ear's, await a
-        number (`HANG_FRAMES`); asked once per pause."""
+        """Whether the words heard up to the pause, the grammar's or a free ear's, may go
+        on (`HANG_FRAMES`); asked once per pause."""
         if utterance.hanging is None:
             compiled = self._engine.compiled(self._language)
             heard = [utterance.early.text if utterance.early is not None else ""]
             if self._listener is not None:
                 heard.append(self._listener.paused_text())
-            utterance.hanging = any(
-                compiled.graph.awaits(_plain_words(text), compiled.number_words) for text in heard
-            )
+            utterance.hanging = any(compiled.goes_on(text) for text in heard)
         return utterance.hanging
 
     def _final_pass(self, utterance: _Utterance) -> _Result:

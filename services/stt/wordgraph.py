@@ -16,7 +16,7 @@ are ignored. Recursive rules and imports are refused.
 from __future__ import annotations
 
 import re
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 
 from voicectl.shared.errors import VoicectlError
@@ -49,14 +49,18 @@ class WordGraph:
             state = table.get((state, word)) if state is not None else None
         return state in self.finals
 
-    def awaits(self, words: Iterable[str], wanted: frozenset[str]) -> bool:
-        """Whether `words` are a path from the start after which one of `wanted` may come:
-        "turn left" awaits a number where "turn left forty five degrees" is a command too."""
+    def goes_on(self, words: Sequence[str], wanted: frozenset[str]) -> bool:
+        """Whether `words` are a path from the start that may go on: one of `wanted` may
+        come next ("turn left" before "forty five degrees" is a command too), or no
+        command ends there ("after this" before "turn left", "not the kitchen" before
+        "the bathroom")."""
         table = {(source, word): target for source, target, word in self.arcs}
         state: int | None = 0
         for word in words:
             state = table.get((state, word)) if state is not None else None
-        return state is not None and any(
+        if state is None or not words:
+            return False
+        return state not in self.finals or any(
             source == state and word in wanted for source, _, word in self.arcs
         )
 
