@@ -18,7 +18,7 @@ from typing import Any, TypeVar
 
 import msgspec
 
-from .bus import Bus, json_decoder
+from .bus import Bus, Decode, json_decoder
 from .edits import requests
 from .errors import BusError, VoicectlError
 from .keys import ConverterKeys, RobotKeys, robot_of
@@ -203,34 +203,26 @@ class VoicectlClient:
 
     async def parse(self, text: str, language: str = "") -> ParseResult:
         """What the converter makes of `text`, written in `language` (empty: its default)."""
-        try:
-            reply: ParseReply | Failed = await self.bus.request(
-                ConverterKeys().parse,
-                ParseRequest(text=text, language=language),
-                self._parse_decode,
-                self.timeout,
-            )
-        except BusError as exc:
-            raise Unreachable("converter", exc) from exc
-        if isinstance(reply, Failed):
-            raise Refused("converter", reply.reason)
+        request = ParseRequest(text=text, language=language)
+        reply: ParseReply = await self._converter(request, self._parse_decode)
         return reply.result
 
     async def amend(self, order: Order, change: Order) -> Order:
         """`order` made again as the correction `change` says ("no, three"); Refused, with
         the converter's reason, when it does not fit."""
+        request = Amend(order=order, change=change)
+        reply: Amended = await self._converter(request, self._amend_decode)
+        return reply.order
+
+    async def _converter(self, request: Message, decode: Decode[T | Failed]) -> T:
+        """The converter's answer to `request`; Unreachable, or Refused with its reason."""
         try:
-            reply: Amended | Failed = await self.bus.request(
-                ConverterKeys().parse,
-                Amend(order=order, change=change),
-                self._amend_decode,
-                self.timeout,
-            )
+            reply = await self.bus.request(ConverterKeys().parse, request, decode, self.timeout)
         except BusError as exc:
             raise Unreachable("converter", exc) from exc
         if isinstance(reply, Failed):
             raise Refused("converter", reply.reason)
-        return reply.order
+        return reply
 
     async def request(self, robot: str, request: Message) -> SupervisorReply:
         """Ask `robot`'s supervisor; its reply as it is, `Failed` included. An emergency

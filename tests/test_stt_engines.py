@@ -13,7 +13,7 @@ import subprocess
 import sys
 import time
 import wave
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
@@ -410,51 +410,45 @@ def test_the_recogniser_switches_grammars_between_utterances(
     assert texts[1][0][1] != ""  # forced towards "reach kitchen" or nothing: either way rejected
 
 
+@pytest.fixture
+def paused(local_engine: Engine, speech: Speak) -> Callable[[str, str, float], list[list[str]]]:
+    """The orders of each utterance the recogniser finds in Flite saying one phrase, then
+    after a pause of so many seconds another, with the shipped orders."""
+    local_engine.use_grammar(build_grammar(OrderSet.load(ORDERS)))
+    parser = Parser(OrderSet.load(ORDERS))
+    lead, tail = (int(0.5 * 16000) * 2, int(0.6 * 16000) * 2)
+
+    def said(first: str, then: str, pause: float) -> list[list[str]]:
+        one, two = (read_wav(speech(text, "flite:slt")) for text in (first, then))
+        pcm = bytes(lead) + one[lead:-tail] + bytes(int(pause * 16000) * 2) + two[lead:]
+        decided = [decide(*readings(transcript_of(f), parser)) for f in finals(local_engine, pcm)]
+        return [[o.description for o in d.orders] for d in decided]
+
+    return said
+
+
 def test_a_pause_before_a_number_does_not_end_the_command(
-    local_engine: Engine, speech: Speak
+    paused: Callable[[str, str, float], list[list[str]]],
 ) -> None:
     """ "Turn left" and "turn left forty five degrees" are different orders: a person who
     pauses 0.3 s before the number is heard as one utterance (ended at the pause, it was
     "turn left"), while a longer silence still ends "turn left" on its own."""
-    local_engine.use_grammar(build_grammar(OrderSet.load(ORDERS)))
-    parser = Parser(OrderSet.load(ORDERS))
-    turn = read_wav(speech("turn left", "flite:slt"))
-    number = read_wav(speech("forty five degrees", "flite:slt"))
-    lead, tail = (int(0.5 * 16000) * 2, int(0.6 * 16000) * 2)
-
-    def said(pause: float) -> list[list[str]]:
-        """The orders of each utterance the recogniser found."""
-        pcm = bytes(lead) + turn[lead:-tail] + bytes(int(pause * 16000) * 2) + number[lead:]
-        decided = [decide(*readings(transcript_of(f), parser)) for f in finals(local_engine, pcm)]
-        return [[o.description for o in d.orders] for d in decided]
-
-    assert said(0.3) == [["turn left 45 degrees"]]
-    apart = said(1.2)
+    assert paused("turn left", "forty five degrees", 0.3) == [["turn left 45 degrees"]]
+    apart = paused("turn left", "forty five degrees", 1.2)
     assert len(apart) == 2
     assert apart[0] == ["turn left"]
     assert apart[1] != ["turn left 45 degrees"]
 
 
 def test_a_pause_after_words_that_bring_an_order_does_not_end_them(
-    local_engine: Engine, speech: Speak
+    paused: Callable[[str, str, float], list[list[str]]],
 ) -> None:
     """ "After this, turn left" is one edit and its order: ended at the comma's pause,
     "after this" brought nothing ("after what?") and "turn left" was queued as said
     (bench/edits.py's test split, 2 of 120 clean). The pause there is held as before a
     number; a longer silence still ends it."""
-    local_engine.use_grammar(build_grammar(OrderSet.load(ORDERS)))
-    parser = Parser(OrderSet.load(ORDERS))
-    after = read_wav(speech("after this", "flite:slt"))
-    turn = read_wav(speech("turn left", "flite:slt"))
-    lead, tail = (int(0.5 * 16000) * 2, int(0.6 * 16000) * 2)
-
-    def said(pause: float) -> list[list[str]]:
-        pcm = bytes(lead) + after[lead:-tail] + bytes(int(pause * 16000) * 2) + turn[lead:]
-        decided = [decide(*readings(transcript_of(f), parser)) for f in finals(local_engine, pcm)]
-        return [[o.description for o in d.orders] for d in decided]
-
-    assert said(0.35) == [["after that", "turn left"]]
-    assert len(said(1.2)) == 2
+    assert paused("after this", "turn left", 0.35) == [["after that", "turn left"]]
+    assert len(paused("after this", "turn left", 1.2)) == 2
 
 
 def test_worker_processes_decode_sessions_at_once_as_one_process_does(
