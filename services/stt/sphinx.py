@@ -94,9 +94,10 @@ END_FRAMES = 8
 """It ends after this many frames without speech (0.24 s)..."""
 HANG_FRAMES = 17
 """...or this many (0.51 s) when the words so far may go on: a command that a number may
-follow ("turn left" before "forty five degrees", "go forward" before "eight meters"), or
-words no command ends on ("after this," before "turn left"). Ended at the pause, they
-made another order than the one said, or none. On the dev split, Kokoro's speakers paused
+follow ("turn left" before "forty five degrees", "go forward" before "eight meters"),
+words no command ends on ("not the kitchen," before "the bathroom"), or a phrase that
+brings the orders said after it ("after this," before "turn left"). Ended at the pause,
+they made another order than the one said, or none. On the dev split, Kokoro's speakers paused
 up to 0.33 s before a number."""
 ALONE_END_FRAMES = HANG_FRAMES
 """In a language only a free ear hears, an utterance ends after this many (0.51 s): the

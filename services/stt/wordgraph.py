@@ -52,8 +52,7 @@ class WordGraph:
     def goes_on(self, words: Sequence[str], wanted: frozenset[str]) -> bool:
         """Whether `words` are a path from the start that may go on: one of `wanted` may
         come next ("turn left" before "forty five degrees" is a command too), or no
-        command ends there ("after this" before "turn left", "not the kitchen" before
-        "the bathroom")."""
+        command ends there ("not the kitchen" before "the bathroom")."""
         table = {(source, word): target for source, target, word in self.arcs}
         state: int | None = 0
         for word in words:
