@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import math
+import threading
 from pathlib import Path
 
 import pytest
@@ -13,6 +14,7 @@ from hypothesis import strategies as st
 from PIL import Image as PilImage
 
 from harness.wait import async_wait_until
+from voicectl.services.executor.fence import OrderRobot
 from voicectl.services.executor.robot import RobotLink
 from voicectl.services.executor.speed import CONTROL_STEP, SAFE_LIMITS, limited
 from voicectl.services.sim.robot import Bounds
@@ -306,6 +308,54 @@ async def test_an_order_cancelled_as_a_pose_arrives_is_cancelled(router: str) ->
         done, _ = await asyncio.wait({waiting}, timeout=10.0)
         assert done, "no pose came"
         assert waiting.cancelled(), f"the cancel was lost: {waiting.result()}"
+
+
+async def test_a_stop_that_overtakes_a_command_on_its_way_is_sent_again_after_it(
+    router: str,
+) -> None:
+    """An executor's thread is inside `drive` when the emergency stop latches on another
+    thread, whose zero goes out first: the robot heard the command last and moved on
+    (tests/test_stop.py's commanding-from-blocked-loop, once, with the suite on three
+    workers at load 7). The command is held in the transport until the stop has sent its
+    zero, to make that order of events every time; another zero must follow it."""
+    with joined(router) as bus, joined(router) as robot:
+        link = RobotLink(open_transport(bus, TransportKind.BRIDGE, "voicectl_test"), RobotOptions())
+        heard = CmdVel(robot)
+        await until_heard(bus, RobotNames().cmd_vel)
+        handle = OrderRobot(link, "o1")
+        inside, stopped = threading.Event(), threading.Event()
+        send = link.transport.publish
+
+        def held(name: str, ros_type: str, payload: bytes, urgent: bool = False) -> None:
+            if threading.current_thread().name == "executor" and not stopped.is_set():
+                inside.set()
+                assert stopped.wait(10.0), "the stop never came"
+            send(name, ros_type, payload, urgent)
+
+        link.transport.publish = held  # type: ignore[method-assign]
+
+        def stop() -> None:  # as the executor's latch does it (runner.py, `_on_latch`)
+            assert inside.wait(10.0), "the command never went out"
+            link.latched = True
+            handle.revoke()
+            link.stop_moving()
+            stopped.set()
+
+        driving = threading.Thread(target=handle.drive, args=(0.3, 0.0), name="executor")
+        stopping = threading.Thread(target=stop, name="latch")
+        driving.start()
+        stopping.start()
+        await asyncio.to_thread(driving.join, 10.0)
+        await asyncio.to_thread(stopping.join, 10.0)
+        await async_wait_until(
+            lambda: any(v[1] > 0.0 for v in heard.heard), 10.0, "the command on cmd_vel"
+        )
+        commanded = next(i for i, v in enumerate(heard.heard) if v[1] > 0.0)  # as limits let it
+        assert heard.heard[0][1] == 0.0  # the stop's zero went first
+        await async_wait_until(
+            lambda: len(heard.heard) > commanded + 1, 10.0, "a zero after the command"
+        )
+        assert all(v[1:] == (0.0, 0.0) for v in heard.heard[commanded + 1 :]), heard.heard
 
 
 class CmdVel:

@@ -114,6 +114,16 @@ class OrderRobot:
             link.drive(linear_x, angular_z)
         except UnsafeCommand as exc:
             raise self._unsafe(exc) from None
+        self._stop_again_if_overtaken(link)
+
+    def _stop_again_if_overtaken(self, link: RobotLink) -> None:
+        """A stop that latched or revoked this handle while a command was on its way (on
+        another thread: the emergency stop's, the watchdog's) may have sent its zero
+        first, and the robot took the command after it. The stop sets its flag before it
+        sends, so a command that finds the flag set here is followed by another zero; one
+        that does not went out before the stop's own."""
+        if link.latched or self._revoked:
+            link.stop_moving()
 
     async def next_pose(self, timeout: float = 5.0) -> Pose2D:
         return await self._live().next_pose(timeout)
@@ -140,6 +150,7 @@ class OrderRobot:
             self._publish(link, name, ros_type, payload)
         except UnsafeCommand as exc:
             raise self._unsafe(exc) from None
+        self._stop_again_if_overtaken(link)
 
     def _publish(self, link: RobotLink, name: str, ros_type: str, payload: bytes) -> None:
         if name != link.names.cmd_vel:
