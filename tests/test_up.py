@@ -60,9 +60,20 @@ def test_a_service_waiting_for_the_router_stops_on_sigterm(tmp_path: Path) -> No
         text=True,
     ) as process:
         try:
-            time.sleep(2.0)  # well into the wait for the router
+            # Well into the wait for the router: its first warning says so (after 10 s),
+            # where a fixed sleep sent the signal before the handler was in place on a
+            # busy machine.
+            assert process.stdout is not None
+            said = []
+            for line in process.stdout:
+                said.append(line)
+                if "still waiting for the router" in line:
+                    break
+            else:
+                raise AssertionError(f"it ended without waiting for the router: {said}")
             process.send_signal(signal.SIGTERM)
-            output, _ = process.communicate(timeout=10)
+            rest, _ = process.communicate(timeout=10)
+            output = "".join(said) + rest
         finally:
             if process.poll() is None:
                 process.kill()
