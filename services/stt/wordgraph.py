@@ -18,6 +18,7 @@ from __future__ import annotations
 import re
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
+from functools import cached_property
 
 from voicectl.shared.errors import VoicectlError
 
@@ -42,26 +43,29 @@ class WordGraph:
     def words(self) -> set[str]:
         return {word for _, _, word in self.arcs}
 
-    def accepts(self, words: Iterable[str]) -> bool:
-        table = {(source, word): target for source, target, word in self.arcs}
+    @cached_property
+    def _next(self) -> dict[tuple[int, str], int]:
+        """The arcs by (state, word): made once per grammar, asked at every utterance."""
+        return {(source, word): target for source, target, word in self.arcs}
+
+    def _walk(self, words: Iterable[str]) -> int | None:
+        """The state `words` lead to from the start; None off the automaton."""
         state: int | None = 0
         for word in words:
-            state = table.get((state, word)) if state is not None else None
-        return state in self.finals
+            state = self._next.get((state, word)) if state is not None else None
+        return state
+
+    def accepts(self, words: Iterable[str]) -> bool:
+        return self._walk(words) in self.finals
 
     def goes_on(self, words: Sequence[str], wanted: frozenset[str]) -> bool:
         """Whether `words` are a path from the start that may go on: one of `wanted` may
         come next ("turn left" before "forty five degrees" is a command too), or no
         command ends there ("not the kitchen" before "the bathroom")."""
-        table = {(source, word): target for source, target, word in self.arcs}
-        state: int | None = 0
-        for word in words:
-            state = table.get((state, word)) if state is not None else None
+        state = self._walk(words)
         if state is None or not words:
             return False
-        return state not in self.finals or any(
-            source == state and word in wanted for source, _, word in self.arcs
-        )
+        return state not in self.finals or any((state, word) in self._next for word in wanted)
 
     def out_degree(self) -> dict[int, int]:
         degree = dict.fromkeys(range(self.states), 0)
