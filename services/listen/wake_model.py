@@ -35,8 +35,16 @@ EMBEDDING_STRIDE = 8
 EMBEDDING_SIZE = 96
 WINDOW = 16
 """Embeddings the head hears at once."""
+SMOOTH = 3
+"""Windows (80 ms apart) whose scores are averaged before the threshold: the phrase holds
+a high score over four or five windows, speech that merely resembles it for one (dev
+voices reading a licence: single windows at 0.98, never three)."""
 REFRACTORY = 1.5
 """Seconds after a hit during which the same phrase is not reported again."""
+PRIME = 2.0
+"""Seconds of near-silence heard before a stream starts (and after a muted stretch): the
+head needs 16 embeddings (about 2 s) before its first score, and a phrase said in the
+first second must not go unheard for want of them. Training clips start the same way."""
 MODEL_SUFFIX = ".npz"
 FORMAT = 1
 
@@ -154,7 +162,8 @@ class WakeModel:
     out_weights: Floats
     out_bias: float
     threshold: float
-    """Score (0..1) at or above which the phrase is heard (chosen on the dev voices)."""
+    """Score (0..1, averaged over `SMOOTH` windows) at or above which the phrase is heard
+    (chosen on the dev voices)."""
     lag: float
     """Seconds from the phrase's end to where the head usually fires first (dev voices):
     the listener streams the command from `fired - lag`."""
@@ -228,6 +237,16 @@ class WakeModel:
             raise SpotterError(f"wake model {path}: {exc} is missing or wrong") from None
 
 
+def smoothed(scores: Floats) -> Floats:
+    """Each score averaged with the `SMOOTH` - 1 before it (fewer at the start)."""
+    sums = np.cumsum(np.concatenate([np.zeros(1, np.float32), scores]))
+    index = np.arange(1, len(scores) + 1)
+    out: Floats = (
+        (sums[index] - sums[np.maximum(index - SMOOTH, 0)]) / np.minimum(index, SMOOTH)
+    ).astype(np.float32)
+    return out
+
+
 def is_model_path(text: str) -> bool:
     """Whether `--wake` names a model file rather than a phrase to spell."""
     return text.endswith(MODEL_SUFFIX) or "/" in text
@@ -243,8 +262,9 @@ class TrainedSpotter:
         self._model = model
         self._threshold = model.threshold if threshold is None else threshold
         self._embedder = embedder or Embedder()
-        self._features = Features(self._embedder)
         self._window: deque[Floats] = deque(maxlen=WINDOW)
+        self._scores: deque[float] = deque(maxlen=SMOOTH)
+        self._features = self._primed()
         self._origin = 0.0
         """Seconds of the stream before the current features began."""
         self._fed = 0
@@ -277,9 +297,10 @@ class TrainedSpotter:
             self._window.append(embedding)
             if len(self._window) < WINDOW:
                 continue
-            score = float(self._model.scores(np.stack(self._window)[np.newaxis])[0])
+            self._scores.append(float(self._model.scores(np.stack(self._window)[np.newaxis])[0]))
+            score = sum(self._scores) / len(self._scores)
             self.last_score = score
-            now = self._origin + embedding_end(index)
+            now = self._origin - PRIME + embedding_end(index)
             if score >= self._threshold and now >= self._quiet_until:
                 end = max(self._origin, now - self._model.lag)
                 start = max(self._origin, end - self._model.seconds)
@@ -291,8 +312,18 @@ class TrainedSpotter:
         """Audio not heard (the robot speaking): the phrase must start anew after it."""
         self._origin = self.clock + pcm_bytes / 2 / SAMPLE_RATE
         self._fed = 0
-        self._features = Features(self._embedder)
         self._window.clear()
+        self._scores.clear()
+        self._features = self._primed()
 
     def close(self) -> None:
         """Nothing to release: the sessions go with the object."""
+
+    def _primed(self) -> Features:
+        """New features that have heard `PRIME` seconds of near-silence (its scores are
+        dropped: nothing was said)."""
+        features = Features(self._embedder)
+        quiet = np.random.default_rng(0).normal(scale=1e-4, size=int(PRIME * SAMPLE_RATE))
+        for embedding in features.push(quiet.astype(np.float32)):
+            self._window.append(embedding)
+        return features

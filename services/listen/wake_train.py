@@ -45,6 +45,7 @@ from .wake_model import (
     WakeModel,
     embed_clip,
     embedding_end,
+    smoothed,
 )
 
 _LOGGER = logging.getLogger(__name__)
@@ -645,7 +646,7 @@ def train(config: TrainConfig, progress: Progress | None = None) -> WakeModel:
     commands = said(command_jobs, "commands")
     near_jobs = [(text, varied(s)) for text in near for s in speakers]
     misses = said(near_jobs, "near-misses")
-    long_texts = reading(TRAIN_READING, phrase, int(3000 * n))
+    long_texts = reading(TRAIN_READING, phrase, int(8000 * n))
     espeakers = [s for s in speakers if s.engine == "espeak"]
     long_jobs = [(text, espeakers[i % len(espeakers)]) for i, text in enumerate(long_texts)]
     readings = said(long_jobs, "ordinary speech")
@@ -663,10 +664,16 @@ def train(config: TrainConfig, progress: Progress | None = None) -> WakeModel:
             clips.append(Clip(mixer.scene(miss, after, noisy=True)[0], hard=True))
     for command in commands:
         clips.append(Clip(mixer.scene(command, None, noisy=True)[0]))
-    stream = np.concatenate(readings) if readings else np.zeros(0, np.float32)
+    # Half the sentences each in a scene of its own (speech that ends in a pause is not
+    # yet the phrase), half read on, with short pauses, in 30 s pieces.
+    for sentence in readings[::2]:
+        clips.append(Clip(mixer.scene(sentence, None, noisy=True)[0], hard=True))
+    pauses = [np.zeros(int(nprng.uniform(0.05, 0.5) * SAMPLE_RATE), np.float32) for _ in readings]
+    read_on = [part for pair in zip(readings[1::2], pauses, strict=False) for part in pair]
+    stream = np.concatenate(read_on) if read_on else np.zeros(0, np.float32)
     for at in range(0, len(stream), 30 * SAMPLE_RATE):
         part = stream[at : at + 30 * SAMPLE_RATE]
-        clips.append(Clip(mixer.noise(part * 10 ** (nprng.uniform(-12, 3) / 20))))
+        clips.append(Clip(mixer.noise(_level(part) * 10 ** (nprng.uniform(-12, 3) / 20))))
     for _ in range(max(4, round(40 * n))):
         quiet = np.zeros(4 * SAMPLE_RATE, np.float32)
         clips.append(Clip(mixer.noise(quiet + pink(len(quiet), nprng) * 0.01)))
@@ -747,7 +754,7 @@ def choose_threshold(
 
     def scored(clip: Floats) -> tuple[Floats, Floats]:
         windows, ends = windows_of(embed_clip(embedder, clip))
-        return model.scores(windows), ends
+        return smoothed(model.scores(windows)), ends
 
     def framed(speech: Floats) -> Floats:
         lead = np.zeros(int(1.5 * SAMPLE_RATE), np.float32)
