@@ -56,6 +56,8 @@ EPOCHS = 40
 BATCH = 512
 LEARNING_RATE = 1e-3
 WEIGHT_DECAY = 1e-4
+HARD_SCORE = 0.1
+HARD_BOOST = 4.0
 POSITIVE_AFTER = (0.0, 0.32)
 """A window whose end is this many seconds after the phrase's end has heard it whole:
 the head must fire there. Windows that end more than `INCOMPLETE` seconds before the
@@ -368,17 +370,23 @@ def confusables(phrase: str, extra: Sequence[str]) -> list[str]:
     return list(seen)
 
 
-def reading(names: Sequence[str], phrase: str, words: int) -> list[str]:
-    """Sentences of about `words` words in all from the named licence texts, none that
-    holds a word of the phrase."""
+def reading(
+    names: Sequence[str], phrase: str, words: int, reference: int | None = None
+) -> list[str]:
+    """Sentences of about `words` words in all from the named licence texts, then (with
+    `reference` 0 or 1) every other topic of the Python language reference that Python
+    carries (pydoc's), from the first or the second; none that holds a word of the
+    phrase."""
     banned = set(phrase.lower().split())
     sentences: list[str] = []
     total = 0
-    for name in names:
-        path = LICENCES / name
-        if not path.exists():
-            continue
-        text = re.sub(r"[^A-Za-z.,;:!?' ]+", " ", path.read_text(errors="replace"))
+    texts = [(LICENCES / n).read_text(errors="replace") for n in names if (LICENCES / n).exists()]
+    if reference is not None:
+        from pydoc_data.topics import topics
+
+        texts += [topics[key] for key in sorted(topics)[reference::2]]
+    for raw in texts:
+        text = re.sub(r"[^A-Za-z.,;:!?' ]+", " ", raw)
         for sentence in re.split(r"[.;:!?]+", text):
             chunk = sentence.split()
             for at in range(0, len(chunk), 20):
@@ -524,6 +532,8 @@ class Examples:
 
     def add(self, embeddings: Floats, clip: Clip, every: int = 1) -> None:
         windows, ends = windows_of(embeddings)
+        if len(windows) == 0:  # shorter than one window: the end of a stream cut in pieces
+            return
         if clip.end < 0:
             keep = np.arange(0, len(windows), every)
             label = np.zeros(len(keep), np.float32)
@@ -550,25 +560,64 @@ def train_head(
     x: Floats, y: Floats, weight: Floats, seed: int, progress: Progress
 ) -> dict[str, Floats]:
     """A one-hidden-layer network by Adam on weighted cross-entropy, positives and
-    negatives each carrying half the loss."""
-    rng = np.random.default_rng(seed)
+    negatives each carrying half the loss; then again, from there, with the negatives the
+    first round scores highest weighing `HARD_BOOST` times more (hard-negative mining on
+    what it has heard)."""
     mean = x.mean(axis=0)
     scale = x.std(axis=0) + 1e-3
     xs = ((x - mean) / scale).astype(np.float32)
-    positives = y > 0
-    weight = weight.copy()
-    weight[positives] *= weight[~positives].sum() / max(weight[positives].sum(), 1e-9)
-    weight /= weight.mean()
+    del x
+    rng = np.random.default_rng(seed)
     params = {
-        "hidden_weights": (rng.normal(size=(x.shape[1], HIDDEN)) * np.sqrt(2 / x.shape[1])),
+        "hidden_weights": (rng.normal(size=(xs.shape[1], HIDDEN)) * np.sqrt(2 / xs.shape[1])),
         "hidden_bias": np.zeros(HIDDEN),
         "out_weights": rng.normal(size=HIDDEN) * np.sqrt(1 / HIDDEN),
         "out_bias": np.zeros(1),
     }
     params = {name: value.astype(np.float32) for name, value in params.items()}
+    _descend(params, xs, y, _balanced(y, weight), rng, EPOCHS, progress)
+    scores = np.concatenate(
+        [_forward(params, xs[at : at + 8192]) for at in range(0, len(xs), 8192)]
+    )
+    hard = (y == 0) & (scores > HARD_SCORE)
+    progress.stage(f"{int(hard.sum())} negative windows score above {HARD_SCORE}: again")
+    boosted = weight.copy()
+    boosted[hard] *= HARD_BOOST
+    _descend(params, xs, y, _balanced(y, boosted), rng, EPOCHS // 2, progress)
+    params["mean"] = mean.astype(np.float32)
+    params["scale"] = scale.astype(np.float32)
+    return params
+
+
+def _balanced(y: Floats, weight: Floats) -> Floats:
+    """Weights with the positives' sum equal to the negatives', averaging 1."""
+    positives = y > 0
+    weight = weight.copy()
+    weight[positives] *= weight[~positives].sum() / max(weight[positives].sum(), 1e-9)
+    out: Floats = (weight / weight.mean()).astype(np.float32)
+    return out
+
+
+def _forward(params: dict[str, Floats], x: Floats) -> Floats:
+    hidden = np.maximum(x @ params["hidden_weights"] + params["hidden_bias"], 0.0)
+    logits = hidden @ params["out_weights"] + params["out_bias"][0]
+    out: Floats = (1.0 / (1.0 + np.exp(-np.clip(logits, -50, 50)))).astype(np.float32)
+    return out
+
+
+def _descend(
+    params: dict[str, Floats],
+    xs: Floats,
+    y: Floats,
+    weight: Floats,
+    rng: np.random.Generator,
+    epochs: int,
+    progress: Progress,
+) -> None:
+    """`epochs` of Adam over `xs` (standardized), each input jittered by noise."""
     moments = {name: (np.zeros_like(v), np.zeros_like(v)) for name, v in params.items()}
     step = 0
-    for epoch in range(EPOCHS):
+    for epoch in range(epochs):
         order = rng.permutation(len(xs))
         total = 0.0
         for start in range(0, len(order), BATCH):
@@ -588,10 +637,7 @@ def train_head(
                 params[name] -= (
                     LEARNING_RATE * corrected / (np.sqrt(second / (1 - 0.999**step)) + 1e-8)
                 ).astype(np.float32)
-        progress.step(f"epoch (loss {total / len(xs):.4f})", epoch + 1, EPOCHS)
-    params["mean"] = mean.astype(np.float32)
-    params["scale"] = scale.astype(np.float32)
-    return params
+        progress.step(f"epoch (loss {total / len(xs):.4f})", epoch + 1, epochs)
 
 
 def _gradients(
@@ -646,7 +692,7 @@ def train(config: TrainConfig, progress: Progress | None = None) -> WakeModel:
     commands = said(command_jobs, "commands")
     near_jobs = [(text, varied(s)) for text in near for s in speakers]
     misses = said(near_jobs, "near-misses")
-    long_texts = reading(TRAIN_READING, phrase, int(8000 * n))
+    long_texts = reading(TRAIN_READING, phrase, int(20000 * n), reference=0)
     espeakers = [s for s in speakers if s.engine == "espeak"]
     long_jobs = [(text, espeakers[i % len(espeakers)]) for i, text in enumerate(long_texts)]
     readings = said(long_jobs, "ordinary speech")
@@ -769,7 +815,7 @@ def choose_threshold(
         (near_top if is_near else ordinary_top).append(top)
         progress.step("dev speech that is not the phrase", number, len(jobs))
     plain = [s for s in speakers if s.engine != "kokoro"]
-    long_texts = reading(DEV_READING, phrase, int(1500 * size))
+    long_texts = reading(DEV_READING, phrase, int(6000 * size), reference=1)
     read = [voices.say(text, plain[i % len(plain)]) for i, text in enumerate(long_texts)]
     stream = np.concatenate(read) if read else np.zeros(0, np.float32)
     dev_long = len(stream) / SAMPLE_RATE
