@@ -77,6 +77,17 @@ def test_listen_takes_a_model_file_for_wake_and_a_phrase_as_before() -> None:
     assert (config.wake, config.wake_model, config.wake_check) == ("hey robot", "", True)
 
 
+def test_listen_refuses_a_missing_model_before_it_joins_the_bus(
+    tmp_path: Path, capsys: pytest.CaptureFixture[str]
+) -> None:
+    with pytest.raises(SystemExit) as exited:
+        parse_args(["--wake", str(tmp_path / "missing.npz")])
+    assert exited.value.code == 2
+    error = capsys.readouterr().err.strip().splitlines()[-1]
+    wanted = f"wake model {tmp_path}/missing.npz: no such file"
+    assert error == f"voicectl listen: error: argument --wake: {wanted}"
+
+
 def test_the_shipped_model_says_how_it_was_made() -> None:
     made = WakeModel.load(MODEL).made
     assert made["command"].startswith("voicectl wake train 'hey robot'")

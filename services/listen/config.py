@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from voicectl.shared.messages import check_phrase
 from voicectl.shared.process import add_bus_arguments, robot_name
 
 from .listener import ListenConfig
-from .spotter import STOP_THRESHOLD, WAKE_THRESHOLD
-from .wake_model import is_model_path
+from .spotter import STOP_THRESHOLD, WAKE_THRESHOLD, SpotterError
+from .wake_model import WakeModel, is_model_path
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -91,6 +92,10 @@ def _wake_phrase(text: str) -> str:
     if not text.strip():
         return ""
     if is_model_path(text):
+        try:  # a wrong file is said at once, not once the bus is joined
+            WakeModel.load(Path(text))
+        except SpotterError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from exc
         return text
     try:
         return check_phrase(text)
