@@ -1,6 +1,7 @@
 """The listener's ear: wake phrase and "stop" hits, false triggers per hour, delays.
 
-    .venv/bin/python -m bench.wake [--split test] [--wake "hey robot"]
+    .venv/bin/python -m bench.wake [--split test] [--wake "hey robot"] [--model FILE]
+        [--no-stop] [--long-hours 2]
 
 Hits: the phrase said alone and at the start of a command ("hey robot, turn right"), in
 the split's voices (harness/speech_set.py: espeak-ng, Festival, Flite and Kokoro's
@@ -9,6 +10,15 @@ speech that never says either phrase, heard as one stream, per hour. The long sp
 each split is half of Debian's Asterisk prompts (a person, Allison Smith: every other
 file, 13 and 13 minutes) and the split's chatter; test adds the LibriVox readings and card
 names of pocketsphinx's source (people).
+
+With `--model` (default: the shipped services/listen/hey_robot.npz), the same run also
+hears the trained spotter (`voicectl wake train`, wake_model.py), alone and with
+Moonshine's check behind it; it refuses a model trained or tuned on one of the test
+voices. Its wake hits are also heard in babble (four other test voices' chatter, 10 dB
+below), and the long speech grows with licence texts no training or dev voice read
+(GPL-1, GPL-2, GPL-3, read sentence by sentence by the test split's espeak-ng, Festival and
+Flite voices in turn, over again until `--long-hours` of speech in all). Each setting's
+CPU time per second of audio is its spotter's, on the long speech.
 
 For the wake phrase, each hit is checked as the listener has it checked: Moonshine, the
 recogniser's neural ear, on the phrase's audio (`CheckPhrase`). Reported beside it, in the
@@ -25,9 +35,11 @@ from __future__ import annotations
 
 import argparse
 import statistics
+import sys
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from pathlib import Path
 
 from harness.speech_set import (
     ASTERISK_SOUNDS,
@@ -38,6 +50,7 @@ from harness.speech_set import (
     TEST_KOKORO,
     TEST_VOICES,
     Voice,
+    in_babble,
     in_pink_noise,
     real_recordings,
     speak,
@@ -45,12 +58,16 @@ from harness.speech_set import (
 from voicectl.services.listen import spotter as shipped
 from voicectl.services.listen.listener import CHECK_BEFORE
 from voicectl.services.listen.spotter import Phrase, Spotted, Spotter
+from voicectl.services.listen.wake_model import Embedder, TrainedSpotter, WakeModel
+from voicectl.services.listen.wake_train import LICENCES, reading
 from voicectl.services.stt.audio import read_wav
 from voicectl.services.stt.engine import Engine, EngineOptions
 from voicectl.services.stt.load import load_engine
 from voicectl.shared.config import cache_dir
 
 PIECE = 640
+SHIPPED_MODEL = Path(__file__).parents[1] / "services" / "listen" / "hey_robot.npz"
+TEST_READING = ("GPL-3", "GPL-2", "GPL-1")
 COMMANDS = {
     "dev": ["go to the kitchen", "turn left", "take a picture"],
     "test": ["reach the bathroom", "move back", "turn right then take a photo"],
@@ -64,6 +81,13 @@ class Setting:
     phrase: Phrase
     loop_penalty: float
     checked: bool = False
+    model: WakeModel | None = None
+    """A trained spotter instead of pocketsphinx's search (`phrase` names its phrase)."""
+
+    def spotter(self, embedder: Embedder) -> Spotter | TrainedSpotter:
+        if self.model is not None:
+            return TrainedSpotter(self.model, embedder=embedder)
+        return Spotter([self.phrase], self.loop_penalty)
 
 
 @dataclass
@@ -104,10 +128,12 @@ def acted_on(found: list[Spotted], pcm: bytes, now: float, check: Check | None) 
     return kept
 
 
-def run(setting: Setting, pcm: bytes, check: Check | None) -> tuple[list[Spotted], float, float]:
+def run(
+    setting: Setting, pcm: bytes, check: Check | None, embedder: Embedder
+) -> tuple[list[Spotted], float, float]:
     """What the listener acts on in `pcm`, the clock when the first hit was reported, and
     the spotter's CPU seconds per frame."""
-    spotter = Spotter([setting.phrase], setting.loop_penalty)
+    spotter = setting.spotter(embedder)
     kept: list[Spotted] = []
     first = -1.0
     started = time.process_time()
@@ -126,11 +152,18 @@ def said(split: str, phrase: str, with_commands: bool) -> list[tuple[str, bytes,
     """(condition, audio, phrase end or 0) for the phrase alone and before commands."""
     out = []
     directory = cache_dir() / "bench-wake" / split
-    for voice in voices(split):
+    chatter = DEV_CHATTER if split == "dev" else TEST_CHATTER
+    for number, voice in enumerate(voices(split)):
         alone = speak(phrase, voice, directory)
         pcm = read_wav(directory / alone.file)
         out.append(("clean", pcm, alone.speech_end))
         out.append(("pink10", in_pink_noise(pcm, 10.0, seed=len(out)), alone.speech_end))
+        others = [v for v in voices(split) if v != voice][number % 3 :: 3][:4]
+        talkers = [
+            read_wav(directory / speak(chatter[(number + k) % len(chatter)], v, directory).file)
+            for k, v in enumerate(others)
+        ]
+        out.append(("babble10", in_babble(pcm, talkers, 10.0), alone.speech_end))
         if with_commands:
             for command in COMMANDS[split]:
                 utterance = speak(f"{phrase}, {command}", voice, directory)
@@ -138,7 +171,9 @@ def said(split: str, phrase: str, with_commands: bool) -> list[tuple[str, bytes,
     return out
 
 
-def long_speech(split: str) -> list[bytes]:
+def long_speech(split: str, hours: float = 0.0, phrase: str = "hey robot") -> list[bytes]:
+    """The split's long speech that never says the phrase; with `hours`, grown to that
+    many hours with licence texts read aloud by the split's plain voices."""
     directory = cache_dir() / "bench-wake" / split
     half = 0 if split == "dev" else 1
     people = [read_wav(path) for path in sorted(ASTERISK_SOUNDS.rglob("*.wav"))[half::2]]
@@ -151,14 +186,50 @@ def long_speech(split: str) -> list[bytes]:
         return people + chatter
     real_recordings(cache_dir() / "bench-wake" / "people")  # fetches pocketsphinx's source
     readings = sorted((cache_dir() / "bench-wake" / "people" / "pocketsphinx").rglob("*.wav"))
-    return people + [read_wav(path) for path in readings] + chatter
+    speech = people + [read_wav(path) for path in readings] + chatter
+    return speech + read_aloud(directory, hours * 3600 - sum(map(len, speech)) / 32000, phrase)
 
 
-def hits(setting: Setting, split: str, check: Check) -> dict[str, Score]:
+def read_aloud(directory: Path, seconds: float, phrase: str) -> list[bytes]:
+    """Licence texts read by the test split's plain voices, a sentence each in turn, over
+    again (the next voice first) until `seconds` of audio."""
+    if seconds <= 0:
+        return []
+    if not LICENCES.is_dir():
+        sys.exit(f"{LICENCES} is missing (Debian package base-files): no long reading")
+    sentences = reading(TEST_READING, phrase, 10**6)
+    out: list[bytes] = []
+    total = 0.0
+    for turn in range(100):
+        for number, text in enumerate(sentences):
+            voice = TEST_VOICES[(number + turn) % len(TEST_VOICES)]
+            utterance = speak(text, voice, directory / "reading")
+            pcm = read_wav(directory / "reading" / utterance.file)
+            out.append(pcm)
+            total += len(pcm) / 32000
+            if total >= seconds:
+                return out
+    return out
+
+
+def held_out(model: WakeModel) -> None:
+    """Exit unless the model was made without any of the test split's voices."""
+    test = {v.name for v in TEST_VOICES} | set(TEST_KOKORO)
+    used = [*model.made.get("training voices", []), *model.made.get("dev voices", [])]
+    for label in used:
+        name = label.partition(":")[2].partition("@")[0]
+        parts = {name, name.partition("+")[0]} | {
+            part.partition(":")[0] for part in name.split("+")
+        }
+        if parts & test:
+            sys.exit(f"the model was made with {label}, a test voice: not held out")
+
+
+def hits(setting: Setting, split: str, check: Check, embedder: Embedder) -> dict[str, Score]:
     scores: dict[str, Score] = {}
     commands = setting.phrase.text != "stop"
     for condition, pcm, end in said(split, setting.phrase.text, commands):
-        kept, first, cpu = run(setting, pcm, check)
+        kept, first, cpu = run(setting, pcm, check, embedder)
         score = scores.setdefault(condition, Score())
         score.said += 1
         score.hits += bool(kept)
@@ -167,10 +238,14 @@ def hits(setting: Setting, split: str, check: Check) -> dict[str, Score]:
     return scores
 
 
-def false_triggers(setting: Setting, speech: list[bytes], check: Check) -> tuple[int, float]:
+def false_triggers(
+    setting: Setting, speech: list[bytes], check: Check, embedder: Embedder
+) -> tuple[int, float, float]:
+    """False triggers in the long speech, its seconds, and the spotter's CPU seconds per
+    second of audio (a checked setting's include its checks)."""
     stream = b"".join(speech)  # one stream, as a microphone hears it
-    kept, _, _ = run(setting, stream, check)
-    return len(kept), len(stream) / 32000
+    kept, _, cpu = run(setting, stream, check, embedder)
+    return len(kept), len(stream) / 32000, cpu / (PIECE / 32000)
 
 
 def checker(engine: Engine, phrase: str) -> Check:
@@ -184,29 +259,53 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--split", choices=("dev", "test"), default="test")
     parser.add_argument("--wake", default="hey robot")
+    parser.add_argument("--model", type=Path, default=SHIPPED_MODEL, help="a trained phrase")
+    parser.add_argument("--no-stop", action="store_true", help="the wake phrase only")
+    parser.add_argument(
+        "--long-hours", type=float, default=0.0, help="grow the test split's long speech"
+    )
     args = parser.parse_args()
     engine = load_engine(EngineOptions())
+    embedder = Embedder()
     check = checker(engine, args.wake)
-    speech = long_speech(args.split)
+    speech = long_speech(args.split, args.long_hours, args.wake)
     wake, stop = Phrase(args.wake, shipped.WAKE_THRESHOLD), Phrase("stop", shipped.STOP_THRESHOLD)
-    settings = [
+    settings = []
+    if args.model is not None and args.model.exists():
+        model = WakeModel.load(args.model)
+        if args.split == "test":
+            held_out(model)
+        trained = Phrase(model.phrase, model.threshold)
+        settings += [
+            Setting("wake phrase, trained alone", trained, 0.0, model=model),
+            Setting("wake phrase, trained + check", trained, 0.0, checked=True, model=model),
+        ]
+    settings += [
         Setting("wake phrase, shipped: spotter + check", wake, shipped.WAKE_LOOP_PENALTY, True),
         Setting("wake phrase, the spotter alone", wake, shipped.WAKE_LOOP_PENALTY),
         Setting("wake phrase, baseline", Phrase(args.wake, 1e-30), 0.1),
-        Setting("stop, shipped", stop, shipped.STOP_LOOP_PENALTY),
-        Setting("stop, baseline", Phrase("stop", 1e-30), 0.1),
     ]
+    if not args.no_stop:
+        settings += [
+            Setting("stop, shipped", stop, shipped.STOP_LOOP_PENALTY),
+            Setting("stop, baseline", Phrase("stop", 1e-30), 0.1),
+        ]
     print(f"{args.split} split; long speech {sum(map(len, speech)) / 32000 / 60:.1f} min")
     for setting in settings:
         phrase = setting.phrase
         print(
-            f"== {setting.name} ({phrase.text!r}, {phrase.threshold:.0e}, "
-            f"loop penalty {setting.loop_penalty:.0e})"
+            f"== {setting.name} ({phrase.text!r}, {phrase.threshold:.3g}, "
+            f"loop penalty {setting.loop_penalty:.0e})",
+            flush=True,
         )
-        for condition, score in hits(setting, args.split, check).items():
-            print(score.line(f"said, {condition}"))
-        found, seconds = false_triggers(setting, speech, check)
-        print(f"  false triggers: {found} ({found * 3600 / seconds:.1f} per hour)")
+        for condition, score in hits(setting, args.split, check, embedder).items():
+            print(score.line(f"said, {condition}"), flush=True)
+        found, seconds, cpu = false_triggers(setting, speech, check, embedder)
+        print(
+            f"  false triggers: {found} in {seconds / 3600:.2f} h ({found * 3600 / seconds:.2f} "
+            f"per hour); spotter CPU {100 * cpu:.2f} % of a core",
+            flush=True,
+        )
     engine.close()
 
 

@@ -111,6 +111,7 @@ def test_the_hook_refuses_the_hosts_packages() -> None:
         ("soxr", ["listen", "--list-devices"], "listen"),
         ("sounddevice", ["listen", "--list-devices"], "mic"),
         ("pocketsphinx", ["listen", "--list-devices"], "listen"),
+        ("pocketsphinx", ["wake", "train", "hey robot"], "listen"),
         ("pocketsphinx", ["transcribe", "README.md"], "stt"),
         ("starlette", ["up", "--port", "1"], "host"),
         ("cryptography", ["cert", "localhost"], "web"),

@@ -61,6 +61,7 @@ COMMAND_EXTRAS = {
     "web": "web",
     "cert": "web",
     "listen": "listen",
+    "wake": "listen",
 }
 """The extra each command needs beyond the core, named when one of its modules is missing."""
 SHIPPED_ORDERS = shipped_orders()
@@ -85,7 +86,7 @@ def build_parser() -> argparse.ArgumentParser:
         prog="voicectl",
         description="Voice control for robots. Services: "
         + ", ".join(SERVICES)
-        + " (voicectl SERVICE --help).",
+        + " (voicectl SERVICE --help); voicectl wake train PHRASE trains a wake phrase.",
     )
     sub = parser.add_subparsers(dest="command", required=True)
 
@@ -335,6 +336,10 @@ def _main(argv: list[str]) -> int:
         module = importlib.import_module(f"voicectl.services.{argv[0]}.__main__")
         result: int = module.run(argv[1:])
         return result
+    if argv and argv[0] == "wake":  # its own parser, with the listener's packages
+        wake = importlib.import_module("voicectl.services.listen.wake_train")
+        trained: int = wake.main(argv[1:])
+        return trained
     args = build_parser().parse_args(argv)
     match args.command:
         case "up":

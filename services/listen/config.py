@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import argparse
+from pathlib import Path
 
 from voicectl.shared.messages import check_phrase
 from voicectl.shared.process import add_bus_arguments, robot_name
 
 from .listener import ListenConfig
-from .spotter import STOP_THRESHOLD, WAKE_THRESHOLD
+from .spotter import STOP_THRESHOLD, WAKE_THRESHOLD, SpotterError
+from .wake_model import WakeModel, is_model_path
 
 
 def parse_args(argv: list[str] | None) -> argparse.Namespace:
@@ -30,10 +32,22 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
         "--wake",
         type=_wake_phrase,
         default="",
-        metavar="PHRASE",
-        help="hear commands only after this phrase ('hey robot'); default: every utterance",
+        metavar="PHRASE|MODEL",
+        help="hear commands only after this phrase: words pocketsphinx spells ('hey robot'), "
+        "or a model `voicectl wake train` made (a .npz file); default: every utterance",
     )
-    parser.add_argument("--wake-threshold", type=float, default=WAKE_THRESHOLD)
+    parser.add_argument(
+        "--wake-threshold",
+        type=float,
+        default=None,
+        help=f"the spotter's threshold (pocketsphinx: {WAKE_THRESHOLD:.0e}; a model: its own)",
+    )
+    parser.add_argument(
+        "--wake-check",
+        action="store_true",
+        help="with a trained model, have the recogniser's neural ear confirm the phrase too "
+        "(pocketsphinx's phrases always are)",
+    )
     parser.add_argument(
         "--language",
         default="en",
@@ -73,9 +87,16 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
 
 
 def _wake_phrase(text: str) -> str:
-    """A wake phrase the recogniser will check (`check_phrase`); '' for none."""
+    """A wake phrase the recogniser will check (`check_phrase`), or a model file's path;
+    '' for none."""
     if not text.strip():
         return ""
+    if is_model_path(text):
+        try:  # a wrong file is said at once, not once the bus is joined
+            WakeModel.load(Path(text))
+        except SpotterError as exc:
+            raise argparse.ArgumentTypeError(str(exc)) from exc
+        return text
     try:
         return check_phrase(text)
     except ValueError as exc:
@@ -84,10 +105,13 @@ def _wake_phrase(text: str) -> str:
 
 def listen_config(args: argparse.Namespace) -> ListenConfig:
     """The config the command line (`parse_args`) gives."""
+    model = is_model_path(args.wake)
     return ListenConfig(
         robot=args.robot,
-        wake=" ".join(args.wake.lower().split()),
+        wake="" if model else " ".join(args.wake.lower().split()),
+        wake_model=args.wake if model else "",
         wake_threshold=args.wake_threshold,
+        wake_check=args.wake_check or not model,
         stop_word=not args.no_stop_word,
         stop_threshold=args.stop_threshold,
         awake=args.awake,

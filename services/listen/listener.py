@@ -23,6 +23,7 @@ import uuid
 from collections import deque
 from collections.abc import Callable, Coroutine
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import msgspec
@@ -64,6 +65,7 @@ from .spotter import (
     Spotted,
     Spotter,
 )
+from .wake_model import TrainedSpotter, WakeModel
 
 _LOGGER = logging.getLogger(__name__)
 
@@ -98,8 +100,15 @@ ended (and a blip it began to hear may end with no answer at all)."""
 class ListenConfig:
     robot: str
     wake: str = ""
-    """The wake phrase; empty: every utterance goes to the recogniser."""
-    wake_threshold: float = WAKE_THRESHOLD
+    """The wake phrase pocketsphinx listens for; empty: `wake_model`'s, or none (every
+    utterance goes to the recogniser)."""
+    wake_model: str = ""
+    """A trained wake phrase's file (`voicectl wake train`)."""
+    wake_threshold: float | None = None
+    """The spotter's threshold; None: `WAKE_THRESHOLD`, or the model's own."""
+    wake_check: bool = True
+    """Whether the recogniser's neural ear must confirm the phrase before anything said
+    after it is acted on."""
     stop_word: bool = True
     """Hearing "stop" alone while the robot moves stops it, wake phrase or not."""
     stop_threshold: float = STOP_THRESHOLD
@@ -133,6 +142,16 @@ Speak = Callable[[str], None]
 """Say a sentence aloud (blocking; the listener mutes its ear meanwhile)."""
 
 
+def _wake_spotter(config: ListenConfig) -> Spotter | TrainedSpotter | None:
+    """The wake phrase's spotter: a trained model's, pocketsphinx's, or none."""
+    if config.wake_model:
+        return TrainedSpotter(WakeModel.load(Path(config.wake_model)), config.wake_threshold)
+    if config.wake:
+        threshold = WAKE_THRESHOLD if config.wake_threshold is None else config.wake_threshold
+        return Spotter([Phrase(config.wake, threshold)], WAKE_LOOP_PENALTY)
+    return None
+
+
 class Listener(Service):
     """`voicectl listen`: reads `read()` until it returns None (the end of a file), or until
     stopped; `interrupt()` makes a waiting `read()` return None."""
@@ -157,14 +176,13 @@ class Listener(Service):
         )
         self._check_decoder = json_decoder(SttReply)
         self._loop = asyncio.get_running_loop()
-        # Two searches: the wake phrase's is permissive (its false wakes are checked),
-        # the stop word's strict (a stop is acted on at once, unchecked).
-        self._spotters = [
-            *(
-                [Spotter([Phrase(config.wake, config.wake_threshold)], WAKE_LOOP_PENALTY)]
-                if config.wake
-                else []
-            ),
+        # Two searches: the wake phrase's (pocketsphinx's is permissive, its false wakes
+        # checked; a trained one is its own judge), and the stop word's, strict (a stop is
+        # acted on at once, unchecked).
+        wake = _wake_spotter(config)
+        self._wake_phrase = wake.phrase if isinstance(wake, TrainedSpotter) else config.wake
+        self._spotters: list[Spotter | TrainedSpotter] = [
+            *([wake] if wake is not None else []),
             *(
                 [Spotter([Phrase("stop", config.stop_threshold)], STOP_LOOP_PENALTY)]
                 if config.stop_word
@@ -204,13 +222,13 @@ class Listener(Service):
                 keys.state, json_decoder(StateUpdate), self._on_state, history=True
             ),
         ]
-        if not self._config.wake:
+        if not self._wake_phrase:
             self._wake_now()
         self._reader = threading.Thread(target=self._read_all, name="listen", daemon=True)
         self._reader.start()
         _LOGGER.info(
             "listening for %s%s",
-            repr(self._config.wake) if self._config.wake else "commands",
+            repr(self._wake_phrase) if self._wake_phrase else "commands",
             " and 'stop'" if self._config.stop_word else "",
         )
 
@@ -306,8 +324,9 @@ class Listener(Service):
             self._send(awake, b"".join([*room, *after]))
             # Streaming starts at once; what it becomes is submitted only once the
             # recogniser's neural ear agrees the phrase was said (`_heard_wake`).
-            phrase = [f for at, f in self._recent if hit.start - CHECK_BEFORE <= at]
-            self._loop.call_soon_threadsafe(self._check_wake, awake, b"".join(phrase))
+            if self._config.wake_check:
+                phrase = [f for at, f in self._recent if hit.start - CHECK_BEFORE <= at]
+                self._loop.call_soon_threadsafe(self._check_wake, awake, b"".join(phrase))
         elif self._awake is not None:
             self._awake.last_heard = time.monotonic()
 
@@ -343,7 +362,7 @@ class Listener(Service):
         spotter alone wakes about 25 times an hour on speech that never says it
         (docs/benchmarks.md). A recogniser without such an ear leaves it to the spotter."""
         request = CheckPhrase(
-            pcm=pcm[-int(MAX_CHECK_SECONDS * 32000) :], phrase=self._config.wake, wait=CHECK_TIMEOUT
+            pcm=pcm[-int(MAX_CHECK_SECONDS * 32000) :], phrase=self._wake_phrase, wait=CHECK_TIMEOUT
         )
         try:
             reply = await self._bus.request(
@@ -375,7 +394,7 @@ class Listener(Service):
         if awake is None or self._answered is not None:  # a read-back waits for its answer
             return
         quiet = time.monotonic() - awake.last_heard
-        if quiet > self._config.awake and (self._config.wake or self._finished.done()):
+        if quiet > self._config.awake and (self._wake_phrase or self._finished.done()):
             self._sleep()
 
     def _sleep(self) -> None:

@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 import pocketsphinx
 
 from voicectl.shared.errors import VoicectlError
@@ -73,6 +74,34 @@ class Spotted:
     inside a sentence ("... and then stop at the door")."""
 
 
+class Loudness:
+    """Which of the last 2 s of 20 ms frames were loud against the room: someone speaking."""
+
+    def __init__(self) -> None:
+        self._levels: deque[float] = deque(maxlen=150)
+        self._loud: deque[tuple[float, bool]] = deque(maxlen=100)
+        """(stream time, loud) of the last 2 s of 20 ms frames."""
+
+    @property
+    def last_loud(self) -> float:
+        """Stream time of the last loud frame heard, or -1."""
+        return next((at for at, loud in reversed(self._loud) if loud), -1.0)
+
+    def hear(self, samples: npt.NDArray[np.int16], at: float) -> None:
+        """One 20 ms frame of 16-bit samples, which starts at stream time `at`."""
+        floats = samples.astype(np.float32)
+        level = 10.0 * math.log10(float(np.mean(floats * floats)) + 1.0)
+        self._levels.append(level)
+        room = float(np.percentile(np.fromiter(self._levels, dtype=np.float32), 10))
+        loud = len(self._levels) >= 10 and level > room + LOUD
+        self._loud.append((at, loud))
+
+    def quiet_before(self, start: float) -> bool:
+        """Nothing loud in the `QUIET_BEFORE` seconds before stream time `start`."""
+        window = (start - QUIET_BEFORE, start - 0.05)
+        return not any(loud for at, loud in self._loud if window[0] <= at < window[1])
+
+
 class Spotter:
     """Finds phrases in a stream of 16 kHz mono 16-bit audio, fed in pieces of any size."""
 
@@ -104,15 +133,13 @@ class Spotter:
         self._heard_until = 0.0
         """Hits that end before this were found already (before a restart)."""
         self._suppressor = Suppressor(SUPPRESSION)
-        self._levels: deque[float] = deque(maxlen=150)
-        self._loud: deque[tuple[float, bool]] = deque(maxlen=100)
-        """(stream time, loud) of the last 2 s of 20 ms frames."""
+        self._loudness = Loudness()
         self._decoder.start_utt()
 
     @property
     def last_loud(self) -> float:
         """Stream time of the last loud frame heard (someone speaking), or -1."""
-        return next((at for at, loud in reversed(self._loud) if loud), -1.0)
+        return self._loudness.last_loud
 
     @property
     def clock(self) -> float:
@@ -125,7 +152,7 @@ class Spotter:
         pcm = self._suppressor.process(pcm)
         for start in range(0, len(pcm), 640):
             piece = pcm[start : start + 640]
-            self._hear_level(piece)
+            self._loudness.hear(np.frombuffer(piece, dtype="<i2"), self.clock)
             self._remember(piece)
             self._decoder.process_raw(piece, False, False)
             self._fed += len(piece) // 2
@@ -153,7 +180,7 @@ class Spotter:
             end = self._origin + (segment.end_frame + 1) * FRAME_SECONDS
             phrase = segment.word.strip()  # a keyphrase's segment ends with a space
             if phrase in self._phrases and end > self._heard_until:
-                found.append(Spotted(phrase, start, end, self._quiet_before(start)))
+                found.append(Spotted(phrase, start, end, self._loudness.quiet_before(start)))
                 self._heard_until = end
         # A new search from here: the phrase's audio is not heard twice.
         self._decoder.end_utt()
@@ -162,18 +189,6 @@ class Spotter:
         self._forget()
         self._decoder.start_utt()
         return found
-
-    def _hear_level(self, piece: bytes) -> None:
-        samples = np.frombuffer(piece, dtype="<i2").astype(np.float32)
-        level = 10.0 * math.log10(float(np.mean(samples * samples)) + 1.0)
-        self._levels.append(level)
-        room = float(np.percentile(np.fromiter(self._levels, dtype=np.float32), 10))
-        loud = len(self._levels) >= 10 and level > room + LOUD
-        self._loud.append((self.clock, loud))
-
-    def _quiet_before(self, start: float) -> bool:
-        window = (start - QUIET_BEFORE, start - 0.05)
-        return not any(loud for at, loud in self._loud if window[0] <= at < window[1])
 
     def _restart(self, keep: bool) -> None:
         self._decoder.end_utt()
