@@ -144,6 +144,7 @@ def run(
             if acted and first < 0:
                 first = spotter.clock
             kept += acted
+    kept += acted_on(spotter.flush(), pcm, spotter.clock, check if setting.checked else None)
     spotter.close()
     return kept, first, (time.process_time() - started) / max(1, len(pcm) // PIECE)
 

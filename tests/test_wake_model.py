@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from harness.speech_set import LEAD_SILENCE, TAIL_SILENCE
 from voicectl.services.listen.config import listen_config, parse_args
 from voicectl.services.listen.spotter import Spotted, SpotterError
 from voicectl.services.listen.wake_model import TrainedSpotter, WakeModel
@@ -25,10 +26,11 @@ HELD_OUT = ["flite:slt", "festival:ked_diphone"]
 """Voices of bench/wake.py's test split: the model was neither trained nor tuned on them."""
 
 
-def heard(wav: Path, model: Path = MODEL) -> list[Spotted]:
-    """The phrases the trained spotter reports in `wav`, streamed in 20 ms pieces."""
+def heard(wav: Path | bytes, model: Path = MODEL) -> list[Spotted]:
+    """The phrases the trained spotter reports in `wav` (a file or its audio), streamed in
+    20 ms pieces."""
     spotter = TrainedSpotter(WakeModel.load(model))
-    pcm = read_wav(wav) + bytes(32000)
+    pcm = (wav if isinstance(wav, bytes) else read_wav(wav)) + bytes(32000)
     found: list[Spotted] = []
     for at in range(0, len(pcm), 640):
         found += spotter.accept(pcm[at : at + 640])
@@ -44,6 +46,31 @@ def test_the_shipped_model_wakes_on_a_voice_it_never_heard(speech: Speak, voice:
     # listener streams the command from there.
     speech_end = len(read_wav(wav)) / 32000 - 0.6
     assert abs(hits[0].end - speech_end) < 0.4, (hits[0], speech_end)
+
+
+@pytest.mark.parametrize("speed", [100, 120])
+def test_a_slow_speaker_s_phrase_is_placed_whole_before_the_command(
+    speech: Speak, speed: int
+) -> None:
+    """Said slowly, the phrase outlasts the model's typical speaker and its score crosses
+    the threshold before its last syllable. The listener sends the recogniser the room
+    before the phrase's start and everything after its end: a start placed late hands it
+    "hey", an end placed early "-bot", and it answers "I did not catch that" instead of
+    taking the command."""
+    voice = "espeak:en-us"
+    phrase = read_wav(speech("hey robot", voice, speed))
+    phrase_end = len(phrase) / 32000 - TAIL_SILENCE
+    command = read_wav(speech("turn left", voice, speed))
+    pause = 0.4
+    said = (
+        phrase[: int(phrase_end * 16000) * 2]
+        + bytes(int(pause * 32000))
+        + command[int(LEAD_SILENCE * 32000) :]
+    )
+    hits = heard(said)
+    assert [hit.phrase for hit in hits] == ["hey robot"]
+    assert abs(hits[0].start - LEAD_SILENCE) < 0.1, hits[0]
+    assert phrase_end - 0.05 <= hits[0].end <= phrase_end + pause, (hits[0], phrase_end)
 
 
 @pytest.mark.parametrize("voice", HELD_OUT)

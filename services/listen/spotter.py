@@ -38,6 +38,8 @@ WAKE_THRESHOLD = 1e-40
 QUIET_BEFORE = 0.3
 LOUD = 6.0
 """dB above the room (the quietest tenth of the last 3 s) that make a 20 ms frame loud."""
+LOUDNESS_FRAME = 0.02
+"""Seconds of audio in each frame `Loudness` hears."""
 WAKE_LOOP_PENALTY = 1e-6
 """pocketsphinx's phone-loop penalty (`kws_plp`, default 0.1) for the wake phrase: a
 weaker rival lets more true phrases through (dev split, pink noise at 10 dB: 16 of 16
@@ -75,17 +77,17 @@ class Spotted:
 
 
 class Loudness:
-    """Which of the last 2 s of 20 ms frames were loud against the room: someone speaking."""
+    """Which of the last 3 s of 20 ms frames were loud against the room: someone speaking."""
 
     def __init__(self) -> None:
         self._levels: deque[float] = deque(maxlen=150)
-        self._loud: deque[tuple[float, bool]] = deque(maxlen=100)
-        """(stream time, loud) of the last 2 s of 20 ms frames."""
+        self._loud: deque[tuple[float, bool, float]] = deque(maxlen=150)
+        """(stream time, loud, level in dB) of the last 3 s of 20 ms frames."""
 
     @property
     def last_loud(self) -> float:
         """Stream time of the last loud frame heard, or -1."""
-        return next((at for at, loud in reversed(self._loud) if loud), -1.0)
+        return next((at for at, loud, _ in reversed(self._loud) if loud), -1.0)
 
     def hear(self, samples: npt.NDArray[np.int16], at: float) -> None:
         """One 20 ms frame of 16-bit samples, which starts at stream time `at`."""
@@ -94,12 +96,54 @@ class Loudness:
         self._levels.append(level)
         room = float(np.percentile(np.fromiter(self._levels, dtype=np.float32), 10))
         loud = len(self._levels) >= 10 and level > room + LOUD
-        self._loud.append((at, loud))
+        self._loud.append((at, loud, level))
+
+    def last_loud_by(self, at: float) -> float:
+        """Stream time of the last loud frame that began at or before `at`, or -1."""
+        return next((t for t, loud, _ in reversed(self._loud) if loud and t <= at), -1.0)
+
+    def level(self, start: float, end: float) -> float:
+        """The median level in dB of the loud frames between `start` and `end` (a voice's
+        own loudness), or infinity when none was loud."""
+        levels = [level for at, loud, level in self._loud if loud and start <= at < end]
+        return float(np.median(levels)) if levels else math.inf
+
+    def quiet_run(self, after: float, seconds: float, below: float = -math.inf) -> float | None:
+        """Stream time at which the first stretch of frames at least `seconds` long, each
+        quiet against the room or at most `below` dB, that begins after `after` began;
+        None while there is none."""
+        begun: float | None = None
+        for at, loud, level in self._loud:
+            if at <= after or (loud and level > below):
+                begun = None
+            elif begun is None:
+                begun = at
+            if begun is not None and at + LOUDNESS_FRAME - begun >= seconds - 1e-6:
+                return begun
+        return None
+
+    def speech_start(self, end: float, gap: float, earliest: float) -> float | None:
+        """Where the speech that ends at `end` began: its first loud frame after a quiet
+        stretch of `gap` seconds, no earlier than `earliest`; None when there is no such
+        stretch since `earliest` (a room too loud for pauses to be heard in it)."""
+        start, quiet = end, 0.0
+        for at, loud, _ in reversed(self._loud):
+            if at >= end:
+                continue
+            if at < earliest:
+                return None
+            if loud:
+                start, quiet = at, 0.0
+            else:
+                quiet += LOUDNESS_FRAME
+                if quiet >= gap - 1e-6:
+                    return start
+        return None
 
     def quiet_before(self, start: float) -> bool:
         """Nothing loud in the `QUIET_BEFORE` seconds before stream time `start`."""
         window = (start - QUIET_BEFORE, start - 0.05)
-        return not any(loud for at, loud in self._loud if window[0] <= at < window[1])
+        return not any(loud for at, loud, _ in self._loud if window[0] <= at < window[1])
 
 
 class Spotter:
@@ -166,6 +210,10 @@ class Spotter:
         on, and a phrase must start anew after it."""
         self._restart(keep=False)
         self._origin += pcm_bytes / 2 / SAMPLE_RATE
+
+    def flush(self) -> list[Spotted]:
+        """Phrases held back at the end of the stream: the search reports each at once."""
+        return []
 
     def close(self) -> None:
         self._decoder.end_utt()
