@@ -1,7 +1,7 @@
 """The listener's ear: wake phrase and "stop" hits, false triggers per hour, delays.
 
     .venv/bin/python -m bench.wake [--split test] [--wake "hey robot"] [--model FILE]
-        [--no-stop] [--long-hours 2]
+        [--no-stop] [--trained-only] [--long-hours 2]
 
 Hits: the phrase said alone and at the start of a command ("hey robot, turn right"), in
 the split's voices (harness/speech_set.py: espeak-ng, Festival, Flite and Kokoro's
@@ -56,7 +56,7 @@ from harness.speech_set import (
     speak,
 )
 from voicectl.services.listen import spotter as shipped
-from voicectl.services.listen.listener import CHECK_BEFORE
+from voicectl.services.listen.listener import CHECK_AFTER, CHECK_BEFORE
 from voicectl.services.listen.spotter import Phrase, Spotted, Spotter
 from voicectl.services.listen.wake_model import Embedder, TrainedSpotter, WakeModel
 from voicectl.services.listen.wake_train import LICENCES, reading
@@ -113,9 +113,11 @@ def voices(split: str) -> list[Voice]:
     return [*plain, *(Voice("kokoro", name) for name in kokoro)]
 
 
-def acted_on(found: list[Spotted], pcm: bytes, now: float, check: Check | None) -> list[Spotted]:
+def acted_on(
+    found: list[Spotted], pcm: bytes, now: float, check: Check | None, trained: bool = False
+) -> list[Spotted]:
     """The hits the listener acts on: "stop" only when said alone; the wake phrase, when
-    checked, only when the check hears it."""
+    checked, only when the check hears it (up to the hit, or a trained phrase's end)."""
     kept = []
     for hit in found:
         if hit.phrase == "stop":
@@ -123,7 +125,8 @@ def acted_on(found: list[Spotted], pcm: bytes, now: float, check: Check | None) 
                 kept.append(hit)
             continue
         start = max(0, int((hit.start - CHECK_BEFORE) * 16000)) * 2
-        if check is None or check(pcm[start : int(now * 16000) * 2]):
+        end = int((min(now, hit.end + CHECK_AFTER) if trained else now) * 16000) * 2
+        if check is None or check(pcm[start:end]):
             kept.append(hit)
     return kept
 
@@ -134,17 +137,18 @@ def run(
     """What the listener acts on in `pcm`, the clock when the first hit was reported, and
     the spotter's CPU seconds per frame."""
     spotter = setting.spotter(embedder)
+    checked, trained = check if setting.checked else None, setting.model is not None
     kept: list[Spotted] = []
     first = -1.0
     started = time.process_time()
     for at in range(0, len(pcm), PIECE):
         found = spotter.accept(pcm[at : at + PIECE])
         if found:
-            acted = acted_on(found, pcm, spotter.clock, check if setting.checked else None)
+            acted = acted_on(found, pcm, spotter.clock, checked, trained)
             if acted and first < 0:
                 first = spotter.clock
             kept += acted
-    kept += acted_on(spotter.flush(), pcm, spotter.clock, check if setting.checked else None)
+    kept += acted_on(spotter.flush(), pcm, spotter.clock, checked, trained)
     spotter.close()
     return kept, first, (time.process_time() - started) / max(1, len(pcm) // PIECE)
 
@@ -263,6 +267,9 @@ def main() -> None:
     parser.add_argument("--model", type=Path, default=SHIPPED_MODEL, help="a trained phrase")
     parser.add_argument("--no-stop", action="store_true", help="the wake phrase only")
     parser.add_argument(
+        "--trained-only", action="store_true", help="the trained spotter's settings only"
+    )
+    parser.add_argument(
         "--long-hours", type=float, default=0.0, help="grow the test split's long speech"
     )
     args = parser.parse_args()
@@ -281,12 +288,13 @@ def main() -> None:
             Setting("wake phrase, trained alone", trained, 0.0, model=model),
             Setting("wake phrase, trained + check", trained, 0.0, checked=True, model=model),
         ]
-    settings += [
-        Setting("wake phrase, shipped: spotter + check", wake, shipped.WAKE_LOOP_PENALTY, True),
-        Setting("wake phrase, the spotter alone", wake, shipped.WAKE_LOOP_PENALTY),
-        Setting("wake phrase, baseline", Phrase(args.wake, 1e-30), 0.1),
-    ]
-    if not args.no_stop:
+    if not args.trained_only:
+        settings += [
+            Setting("wake phrase, shipped: spotter + check", wake, shipped.WAKE_LOOP_PENALTY, True),
+            Setting("wake phrase, the spotter alone", wake, shipped.WAKE_LOOP_PENALTY),
+            Setting("wake phrase, baseline", Phrase(args.wake, 1e-30), 0.1),
+        ]
+    if not args.no_stop and not args.trained_only:
         settings += [
             Setting("stop, shipped", stop, shipped.STOP_LOOP_PENALTY),
             Setting("stop, baseline", Phrase("stop", 1e-30), 0.1),
