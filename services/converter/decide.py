@@ -41,6 +41,7 @@ from voicectl.shared.messages import Doubt, Hearing, Order, ParseProblem, Transc
 
 from .parser import Parser
 from .slots import NUMBER_PATTERN, read_number, say_number
+from .snap import snapped
 from .text import normalise
 
 GRAMMAR = "grammar"
@@ -109,10 +110,14 @@ class Evidence:
     prompted: bool = False
     """The orders are the prompted decode's, the first having made none: the prompt may
     have put them there, so they are never sent without a yes."""
+    snapped: bool = False
+    """The orders are its words snapped to the orders' words (snap.py): a guess, never
+    sent without a yes."""
 
     def passes(self, rule: Rule) -> bool:
         return (
             not self.prompted
+            and not self.snapped
             and self.second is True
             and self.confidence >= rule.alone_confidence
             and self.no_speech is not None
@@ -241,16 +246,39 @@ def free_reading(heard: Transcription, parser: Parser) -> Reading:
 def alone_reading(heard: Transcription, parser: Parser) -> Reading:
     """The words of an ear that hears its language alone, with its own evidence: the
     model's confidence and no-speech probability, and whether a second decode of it made
-    the same orders."""
+    the same orders. When neither decode's words make orders, the second decode's other
+    hypotheses are read, then every decode's words snapped to the orders' (snap.py): the
+    first that makes whole orders is a guess, only ever read back for a yes."""
     reading = free_reading(heard, parser)
-    if heard.second is None:
+    if heard.second is None and reading.claims:
         return replace(reading, evidence=Evidence(heard.confidence, heard.no_speech, None))
-    again = free_reading(msgspec.structs.replace(heard, text=heard.second), parser)
+    again = free_reading(msgspec.structs.replace(heard, text=heard.second or ""), parser)
     if not reading.claims and again.claims:  # heard as orders only with the prompt
         evidence = Evidence(heard.confidence, heard.no_speech, None, prompted=True)
         return replace(again, evidence=evidence)
-    second = reading.claims and again.claims and again.orders == reading.orders
+    if not reading.claims:
+        return _guessed(heard, parser) or replace(
+            reading, evidence=Evidence(heard.confidence, heard.no_speech, None)
+        )
+    second = again.claims and again.orders == reading.orders
     return replace(reading, evidence=Evidence(heard.confidence, heard.no_speech, second))
+
+
+def _guessed(heard: Transcription, parser: Parser) -> Reading | None:
+    """Orders from the second decode's other hypotheses, else from the words of any
+    decode snapped to the orders' words; None when none makes whole orders."""
+    texts = [heard.text, heard.second or "", *heard.alternatives]
+    tries = [(text, False) for text in heard.alternatives] + [
+        (snapped(text, parser.vocabulary), True) for text in texts
+    ]
+    for text, snap in tries:
+        if not text:
+            continue
+        guess = free_reading(msgspec.structs.replace(heard, text=text), parser)
+        if guess.claims:
+            evidence = Evidence(heard.confidence, heard.no_speech, None, True, snapped=snap)
+            return replace(guess, evidence=evidence)
+    return None
 
 
 def not_a_command(
@@ -439,7 +467,9 @@ def _lone(reading: Reading, hearings: list[Hearing], rule: Rule) -> Decision:
     doubts = _merged(reading.doubts, _teens_or_tens(reading.text))
     evidence = reading.evidence
     said = f"{reading.ear} alone heard {_said(reading)}"
-    if evidence is not None and evidence.prompted:
+    if evidence is not None and evidence.snapped:
+        said += " (its words snapped to the orders')"
+    elif evidence is not None and evidence.prompted:
         said += " (prompted with the orders' words)"
     if rule.alone == "evidence" and evidence is not None and evidence.passes(rule):
         return _take(replace(reading, doubts=doubts), hearings, f"{said}, and again")

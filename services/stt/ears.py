@@ -62,6 +62,14 @@ PROMPT_WORDS = 60
 lone ear. Prompted, Whisper base wrote "gira la izquierda" for Kokoro's Spanish voice that
 it heard unprompted as "kira la izquierda"; it also wrote a German "warte zehn Sekunden"
 from the prompt that nobody said: a prompted decode is never sent without a yes."""
+SECOND_HYPOTHESES = 5
+"""The lone ear's second decode is a beam search that keeps this many hypotheses. On the
+dev split of harness/speech_languages.py (whole files, decoded once each), Spanish: the
+shipped decodes (the prompted one greedy, only after a word of the orders) made the said
+orders of at most 28 of 84 commands; five prompted hypotheses, 30; decoded after any
+words, 36; with the words snapped to the orders' (converter/snap.py), 43; none other
+orders and no non-command's. German: 3, then 5 of 56, and one other order offered (a
+prompted hypothesis put "rückwärts" for "zur Küche"), read back, never sent."""
 WHEN = ("doubt", "always")
 """When the third ear hears an utterance: when the first two leave a doubt (`why_ask`), or
 always (bench/stt.py records every ear's reading, to choose the rule on the dev split)."""
@@ -313,10 +321,12 @@ class _Ear:
 class _Alone:
     """A stream's one ear in a language only Whisper hears (sphinx.py's `Listener`):
     Whisper, told the language, started when the speech pauses as Moonshine is; at the
-    end, when its words hold a word of the orders, a second decode prompted with the
-    orders' words. Both, with the model's own no-speech probability and confidence, are
-    the evidence the converter weighs (decide.py's `Rule.alone`). The run at the pause only
-    tells the endpointer whether a number may follow (`paused_text`)."""
+    end, when it heard any words, a second decode prompted with the orders' words, a beam
+    search that keeps its other hypotheses (`SECOND_HYPOTHESES`): Whisper mishears the
+    orders' words so often that "no word of the orders" is no sign of no command. Both,
+    with the model's own no-speech probability and confidence, are the evidence the
+    converter weighs (decide.py's `Rule.alone`). The run at the pause only tells the
+    endpointer whether a number may follow (`paused_text`)."""
 
     def __init__(self, model: Whisper, pool: ThreadPoolExecutor, runs: Runs, language: str) -> None:
         self._model = model
@@ -346,10 +356,13 @@ class _Alone:
         self._runs.at_end += 1
         heard = self._model.transcribe(audio, self._language)
         self._runs.third += 1
-        second = None
-        if heard.text and _holds_command_word(heard.text, grammar.vocabulary):
+        second, alternatives = None, []
+        if heard.text:
             prompt = ", ".join(sorted(grammar.vocabulary - grammar.numbers)[:PROMPT_WORDS])
-            second = self._model.transcribe(audio, self._language, prompt).text
+            again = self._model.transcribe(
+                audio, self._language, prompt, hypotheses=SECOND_HYPOTHESES
+            )
+            second, alternatives = again.text, list(again.alternatives)
         _LOGGER.debug(
             "whisper alone (%s) heard %r in %.3f s, then %r",
             self._language,
@@ -365,16 +378,10 @@ class _Alone:
                 asked=f"the one ear that hears {self._language}",
                 no_speech=round(heard.no_speech, 3),
                 second=second,
+                alternatives=alternatives,
             ),
             None,
         )
-
-
-def _holds_command_word(text: str, vocabulary: frozenset[str]) -> bool:
-    """Whether a transcript holds a word of the orders, or a number: else it is no
-    command, and a second decode would say nothing more."""
-    words = set(re.findall(r"[^\W\d_]+", text.lower()))
-    return bool(words & vocabulary) or bool(re.search(r"\d", text))
 
 
 def written(words: str) -> str:
