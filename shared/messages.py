@@ -185,8 +185,9 @@ class Transcription(Data):
     """What a second decode of the same ear heard (Whisper, prompted with the orders'
     words), where it alone hears the language: its own evidence, never a second ear."""
     alternatives: list[str] = msgspec.field(default_factory=list)
-    """That second decode's other hypotheses (a beam search), most likely first: where its
-    best makes no orders, one of these may, and is only ever read back for a yes."""
+    """Both decodes' other hypotheses (beam searches), the first decode's then the second's,
+    each most likely first: where neither's best makes orders, one of these may, and is
+    only ever read back for a yes."""
 
 
 class Transcript(Message):

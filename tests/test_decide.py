@@ -11,6 +11,8 @@ from hypothesis import strategies as st
 
 from voicectl.services.converter.decide import (
     GRAMMAR,
+    HYPOTHESIS,
+    SNAPPED,
     Evidence,
     Reading,
     Rule,
@@ -427,7 +429,7 @@ def an_alone_reading(draw: st.DrawFn) -> Reading:
         no_speech=draw(st.sampled_from([None, 0.01, 0.5])),
         second=draw(st.sampled_from([None, False, True])),
         prompted=draw(st.booleans()),
-        snapped=draw(st.booleans()),
+        guess=draw(st.sampled_from(["", HYPOTHESIS, SNAPPED])),
     )
     return replace(reading, evidence=evidence)
 
@@ -447,7 +449,7 @@ def test_one_ear_alone_is_sent_only_on_its_own_evidence(reading: Reading, rule: 
         assert rule.alone == "evidence"
         assert reading.evidence.passes(rule)
         assert not reading.evidence.prompted  # a prompted decode's orders need a yes
-        assert not reading.evidence.snapped  # and so do words snapped to the orders'
+        assert not reading.evidence.guess  # and so do guesses
     if decision.confirm:  # read back: a question, never sent by itself
         assert decision.doubts
     if rule.alone == "confirm":
@@ -538,19 +540,19 @@ def test_a_lone_ear_s_other_hypotheses_and_near_misses_are_read_back() -> None:
                 ("pira a la izquierda", "gira a la izquierda,", "pida a la izquierda,"),
             ),
             [("rotation", "left")],
-            "(prompted with the orders' words)",
+            f"({HYPOTHESIS})",
         ),
         # Kokoro's "toma una foto" and espeak-ng's "vete a la base": no hypothesis says
         # them, each is a few letters off.
         (
             lone("Toma un nafoto.", "toman, a foto,", ("toman, ha, foto", "toman, foto,")),
             [("take_photo", None)],
-            "(its words snapped to the orders')",
+            f"({SNAPPED})",
         ),
         (
             lone("Beite y alabase.", "bete y alabase,", ("bete, alabase,", "bate y alabase,")),
             [("goal", "base")],
-            "(its words snapped to the orders')",
+            f"({SNAPPED})",
         ),
     ]:
         for rule in (SHIPPED_RULE, Rule(alone="evidence")):

@@ -8,7 +8,7 @@ from voicectl.services.converter.grammar import build_grammar
 from voicectl.services.converter.orders import OrderSet
 from voicectl.services.converter.parser import Parser
 from voicectl.services.stt.audio import frames, read_wav
-from voicectl.services.stt.ears import SECOND_HYPOTHESES, load_three
+from voicectl.services.stt.ears import HYPOTHESES, load_three
 from voicectl.services.stt.engine import EngineOptions, Final
 from voicectl.services.stt.service import transcript_of
 
@@ -33,10 +33,10 @@ def test_the_lone_ear_reads_back_what_its_second_decode_heard() -> None:
     heard = final.transcription
     assert heard is not None
     assert heard.text
-    # The second decode, prompted with the orders' words, is a beam search that keeps its
-    # other hypotheses for the converter.
+    # Both decodes, the second prompted with the orders' words, are beam searches that keep
+    # their other hypotheses for the converter.
     assert heard.second
-    assert len(heard.alternatives) == SECOND_HYPOTHESES - 1
+    assert len(heard.alternatives) == 2 * (HYPOTHESES - 1)
     decision = decide(*readings(transcript_of(final, language="es"), Parser(orders)))
     assert [(o.order, o.case) for o in decision.orders] == [
         ("rotation", "left"),

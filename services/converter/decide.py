@@ -45,6 +45,8 @@ from .snap import snapped
 from .text import normalise
 
 GRAMMAR = "grammar"
+HYPOTHESIS = "another of its hypotheses"
+SNAPPED = "its words snapped to the orders'"
 SOUNDS_LIKE_TWO = ("to", "too")
 _NUMBERS = re.compile(rf"(?<!\S){NUMBER_PATTERN}(?!\S)")
 _DIGITS = re.compile(r"(?<!\S)-?\d+(?:\.\d+)?(?!\S)")
@@ -110,14 +112,14 @@ class Evidence:
     prompted: bool = False
     """The orders are the prompted decode's, the first having made none: the prompt may
     have put them there, so they are never sent without a yes."""
-    snapped: bool = False
-    """The orders are its words snapped to the orders' words (snap.py): a guess, never
-    sent without a yes."""
+    guess: str = ""
+    """How the orders were guessed when neither decode's best words made any (`HYPOTHESIS`,
+    `SNAPPED`): a guess is never sent without a yes."""
 
     def passes(self, rule: Rule) -> bool:
         return (
             not self.prompted
-            and not self.snapped
+            and not self.guess
             and self.second is True
             and self.confidence >= rule.alone_confidence
             and self.no_speech is not None
@@ -268,15 +270,15 @@ def _guessed(heard: Transcription, parser: Parser) -> Reading | None:
     """Orders from the second decode's other hypotheses, else from the words of any
     decode snapped to the orders' words; None when none makes whole orders."""
     texts = [heard.text, heard.second or "", *heard.alternatives]
-    tries = [(text, False) for text in heard.alternatives] + [
-        (snapped(text, parser.vocabulary), True) for text in texts
+    tries = [(text, HYPOTHESIS) for text in heard.alternatives] + [
+        (snapped(text, parser.vocabulary), SNAPPED) for text in texts
     ]
-    for text, snap in tries:
+    for text, how in tries:
         if not text:
             continue
         guess = free_reading(msgspec.structs.replace(heard, text=text), parser)
         if guess.claims:
-            evidence = Evidence(heard.confidence, heard.no_speech, None, True, snapped=snap)
+            evidence = Evidence(heard.confidence, heard.no_speech, None, guess=how)
             return replace(guess, evidence=evidence)
     return None
 
@@ -467,8 +469,8 @@ def _lone(reading: Reading, hearings: list[Hearing], rule: Rule) -> Decision:
     doubts = _merged(reading.doubts, _teens_or_tens(reading.text))
     evidence = reading.evidence
     said = f"{reading.ear} alone heard {_said(reading)}"
-    if evidence is not None and evidence.snapped:
-        said += " (its words snapped to the orders')"
+    if evidence is not None and evidence.guess:
+        said += f" ({evidence.guess})"
     elif evidence is not None and evidence.prompted:
         said += " (prompted with the orders' words)"
     if rule.alone == "evidence" and evidence is not None and evidence.passes(rule):

@@ -62,14 +62,13 @@ PROMPT_WORDS = 60
 lone ear. Prompted, Whisper base wrote "gira la izquierda" for Kokoro's Spanish voice that
 it heard unprompted as "kira la izquierda"; it also wrote a German "warte zehn Sekunden"
 from the prompt that nobody said: a prompted decode is never sent without a yes."""
-SECOND_HYPOTHESES = 5
-"""The lone ear's second decode is a beam search that keeps this many hypotheses. On the
-dev split of harness/speech_languages.py (whole files, decoded once each), Spanish: the
-shipped decodes (the prompted one greedy, only after a word of the orders) made the said
-orders of at most 28 of 84 commands; five prompted hypotheses, 30; decoded after any
-words, 36; with the words snapped to the orders' (converter/snap.py), 43; none other
-orders and no non-command's. German: 3, then 5 of 56, and one other order offered (a
-prompted hypothesis put "rückwärts" for "zur Küche"), read back, never sent."""
+HYPOTHESES = 5
+"""Both decodes of the lone ear are beam searches that keep this many hypotheses, and the
+second, prompted, runs after any words, not only after a word of the orders. On the whole
+dev split of harness/speech_languages.py (bench/languages.py, 2026-11-28), commands that
+became the said orders, read back: Spanish 52 of 84 with only the second decode a beam,
+56 with both (whole files decoded once each, main's decodes made at most 28); German 9,
+then 12 of 56. No other orders, no non-command's (docs/benchmarks.md, "Other languages")."""
 WHEN = ("doubt", "always")
 """When the third ear hears an utterance: when the first two leave a doubt (`why_ask`), or
 always (bench/stt.py records every ear's reading, to choose the rule on the dev split)."""
@@ -322,7 +321,7 @@ class _Alone:
     """A stream's one ear in a language only Whisper hears (sphinx.py's `Listener`):
     Whisper, told the language, started when the speech pauses as Moonshine is; at the
     end, when it heard any words, a second decode prompted with the orders' words, a beam
-    search that keeps its other hypotheses (`SECOND_HYPOTHESES`): Whisper mishears the
+    search that keeps its other hypotheses (`HYPOTHESES`): Whisper mishears the
     orders' words so often that "no word of the orders" is no sign of no command. Both,
     with the model's own no-speech probability and confidence, are the evidence the
     converter weighs (decide.py's `Rule.alone`). The run at the pause only tells the
@@ -354,15 +353,13 @@ class _Alone:
         # up for it, the one ear hears the whole utterance again.
         self.drop()
         self._runs.at_end += 1
-        heard = self._model.transcribe(audio, self._language)
+        heard = self._model.transcribe(audio, self._language, hypotheses=HYPOTHESES)
         self._runs.third += 1
-        second, alternatives = None, []
+        second, alternatives = None, list(heard.alternatives)
         if heard.text:
             prompt = ", ".join(sorted(grammar.vocabulary - grammar.numbers)[:PROMPT_WORDS])
-            again = self._model.transcribe(
-                audio, self._language, prompt, hypotheses=SECOND_HYPOTHESES
-            )
-            second, alternatives = again.text, list(again.alternatives)
+            again = self._model.transcribe(audio, self._language, prompt, hypotheses=HYPOTHESES)
+            second, alternatives = again.text, [*alternatives, *again.alternatives]
         _LOGGER.debug(
             "whisper alone (%s) heard %r in %.3f s, then %r",
             self._language,
