@@ -108,7 +108,7 @@ class Evidence:
     """Its probability that the audio held no speech."""
     second: bool | None
     """Whether its second decode (prompted with the orders' words) made the same orders;
-    None when it made none (its first words held no word of the orders)."""
+    None when it made none (its first decode heard no words)."""
     prompted: bool = False
     """The orders are the prompted decode's, the first having made none: the prompt may
     have put them there, so they are never sent without a yes."""
@@ -248,9 +248,9 @@ def free_reading(heard: Transcription, parser: Parser) -> Reading:
 def alone_reading(heard: Transcription, parser: Parser) -> Reading:
     """The words of an ear that hears its language alone, with its own evidence: the
     model's confidence and no-speech probability, and whether a second decode of it made
-    the same orders. When neither decode's words make orders, the second decode's other
-    hypotheses are read, then every decode's words snapped to the orders' (snap.py): the
-    first that makes whole orders is a guess, only ever read back for a yes."""
+    the same orders. When neither decode's best words make orders, their other hypotheses
+    are read, then every hypothesis's words snapped to the orders' (snap.py): the first
+    that makes whole orders is a guess, only ever read back for a yes."""
     reading = free_reading(heard, parser)
     if heard.second is None and reading.claims:
         return replace(reading, evidence=Evidence(heard.confidence, heard.no_speech, None))
@@ -267,8 +267,8 @@ def alone_reading(heard: Transcription, parser: Parser) -> Reading:
 
 
 def _guessed(heard: Transcription, parser: Parser) -> Reading | None:
-    """Orders from the second decode's other hypotheses, else from the words of any
-    decode snapped to the orders' words; None when none makes whole orders."""
+    """Orders from the decodes' other hypotheses, else from the words of any hypothesis
+    snapped to the orders' words; None when none makes whole orders."""
     texts = [heard.text, heard.second or "", *heard.alternatives]
     tries = [(text, HYPOTHESIS) for text in heard.alternatives] + [
         (snapped(text, parser.vocabulary), SNAPPED) for text in texts

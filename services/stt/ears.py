@@ -320,8 +320,8 @@ class _Ear:
 class _Alone:
     """A stream's one ear in a language only Whisper hears (sphinx.py's `Listener`):
     Whisper, told the language, started when the speech pauses as Moonshine is; at the
-    end, when it heard any words, a second decode prompted with the orders' words, a beam
-    search that keeps its other hypotheses (`HYPOTHESES`): Whisper mishears the
+    end, when it heard any words, a second decode prompted with the orders' words, both
+    beam searches that keep their other hypotheses (`HYPOTHESES`): Whisper mishears the
     orders' words so often that "no word of the orders" is no sign of no command. Both,
     with the model's own no-speech probability and confidence, are the evidence the
     converter weighs (decide.py's `Rule.alone`). The run at the pause only tells the
