@@ -6,6 +6,7 @@ from __future__ import annotations
 from dataclasses import replace
 
 import msgspec
+import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
@@ -574,3 +575,11 @@ def test_a_lone_ear_s_chatter_stays_chatter() -> None:
         decision = decide(*readings(transcript, SPANISH))
         assert decision.rejected
         assert decision.orders == []
+
+
+def test_a_transcription_carries_a_bounded_number_of_hypotheses() -> None:
+    heard = msgspec.json.encode(lone("Y haranelecha.", "y la menecha", ("y la",) * 17))
+    with pytest.raises(msgspec.ValidationError, match="alternatives"):
+        msgspec.json.decode(heard, type=Transcript)
+    fine = msgspec.json.encode(lone("Y haranelecha.", "y la menecha", ("y la",) * 16))
+    assert len(msgspec.json.decode(fine, type=Transcript).transcription.alternatives) == 16

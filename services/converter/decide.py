@@ -39,7 +39,7 @@ import msgspec
 
 from voicectl.shared.messages import Doubt, Hearing, Order, ParseProblem, Transcript, Transcription
 
-from .parser import Parser
+from .parser import MAX_TEXT_CHARS, Parser
 from .slots import NUMBER_PATTERN, read_number, say_number
 from .snap import snapped
 from .text import normalise
@@ -271,10 +271,12 @@ def _guessed(heard: Transcription, parser: Parser) -> Reading | None:
     snapped to the orders' words; None when none makes whole orders."""
     texts = [heard.text, heard.second or "", *heard.alternatives]
     tries = [(text, HYPOTHESIS) for text in heard.alternatives] + [
-        (snapped(text, parser.vocabulary), SNAPPED) for text in texts
+        (snapped(text, parser.vocabulary), SNAPPED)
+        for text in texts
+        if len(text) <= MAX_TEXT_CHARS  # the parser reads no more: never snap more
     ]
     for text, how in tries:
-        if not text:
+        if not text or len(text) > MAX_TEXT_CHARS:
             continue
         guess = free_reading(msgspec.structs.replace(heard, text=text), parser)
         if guess.claims:
