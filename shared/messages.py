@@ -162,6 +162,10 @@ class Doubt(Data):
     confidence: float = 0.0
 
 
+MAX_ALTERNATIVES = 16
+"""At most this many other hypotheses travel with a transcription (the recogniser sends 8)."""
+
+
 class Transcription(Data):
     """A free transcript of the utterance by a neural recogniser, bound to no grammar: the
     person's words as the model heard them, for the converter to parse and to weigh
@@ -184,6 +188,12 @@ class Transcription(Data):
     second: str | None = None
     """What a second decode of the same ear heard (Whisper, prompted with the orders'
     words), where it alone hears the language: its own evidence, never a second ear."""
+    alternatives: Annotated[list[str], msgspec.Meta(max_length=MAX_ALTERNATIVES)] = msgspec.field(
+        default_factory=list
+    )
+    """Both decodes' other hypotheses (beam searches), the first decode's then the second's,
+    each most likely first: where neither's best makes orders, one of these may, and is
+    only ever read back for a yes."""
 
 
 class Transcript(Message):

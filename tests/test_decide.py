@@ -6,11 +6,14 @@ from __future__ import annotations
 from dataclasses import replace
 
 import msgspec
+import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
 from voicectl.services.converter.decide import (
     GRAMMAR,
+    HYPOTHESIS,
+    SNAPPED,
     Evidence,
     Reading,
     Rule,
@@ -427,6 +430,7 @@ def an_alone_reading(draw: st.DrawFn) -> Reading:
         no_speech=draw(st.sampled_from([None, 0.01, 0.5])),
         second=draw(st.sampled_from([None, False, True])),
         prompted=draw(st.booleans()),
+        guess=draw(st.sampled_from(["", HYPOTHESIS, SNAPPED])),
     )
     return replace(reading, evidence=evidence)
 
@@ -446,6 +450,7 @@ def test_one_ear_alone_is_sent_only_on_its_own_evidence(reading: Reading, rule: 
         assert rule.alone == "evidence"
         assert reading.evidence.passes(rule)
         assert not reading.evidence.prompted  # a prompted decode's orders need a yes
+        assert not reading.evidence.guess  # and so do guesses
     if decision.confirm:  # read back: a question, never sent by itself
         assert decision.doubts
     if rule.alone == "confirm":
@@ -503,3 +508,78 @@ def test_a_lone_transcript_is_confirmed_with_the_whole_sentence() -> None:
         ("goal", "kitchen"),
     ]
     assert decision.reason.endswith("(prompted with the orders' words): confirm it")
+
+
+def lone(text: str, second: str | None = None, alternatives: tuple[str, ...] = ()) -> Transcript:
+    """What the one ear of Spanish wrote for an utterance (harness/speech_languages.py's dev
+    voices, Whisper base): first decode, prompted decode, its other hypotheses."""
+    return Transcript(
+        text="",
+        language="es",
+        alone=True,
+        transcription=Transcription(
+            engine="whisper",
+            text=text,
+            confidence=0.6,
+            no_speech=0.02,
+            second=second,
+            alternatives=list(alternatives),
+        ),
+    )
+
+
+SPANISH = Parser(OrderSet.load(REPO / "orders", "es"))
+
+
+def test_a_lone_ear_s_other_hypotheses_and_near_misses_are_read_back() -> None:
+    for transcript, said, how in [
+        # Kokoro's "gira a la izquierda": only the beam's third hypothesis says "gira".
+        (
+            lone(
+                "Pira a la izquierda.",
+                "pira a la izquierda,",
+                ("pira a la izquierda", "gira a la izquierda,", "pida a la izquierda,"),
+            ),
+            [("rotation", "left")],
+            f"({HYPOTHESIS})",
+        ),
+        # Kokoro's "toma una foto" and espeak-ng's "vete a la base": no hypothesis says
+        # them, each is a few letters off.
+        (
+            lone("Toma un nafoto.", "toman, a foto,", ("toman, ha, foto", "toman, foto,")),
+            [("take_photo", None)],
+            f"({SNAPPED})",
+        ),
+        (
+            lone("Beite y alabase.", "bete y alabase,", ("bete, alabase,", "bate y alabase,")),
+            [("goal", "base")],
+            f"({SNAPPED})",
+        ),
+    ]:
+        for rule in (SHIPPED_RULE, Rule(alone="evidence")):
+            decision = decide(*readings(transcript, SPANISH), rule=rule)
+            assert [(o.order, o.case) for o in decision.orders] == said
+            assert decision.confirm  # a guess is never sent by itself
+            assert decision.doubts
+            assert decision.reason.endswith(f"{how}: confirm it"), decision.reason
+
+
+def test_a_lone_ear_s_chatter_stays_chatter() -> None:
+    for transcript in [
+        lone("La puerta de la izquierda esta rota.", "la puerta, me la izquierda, esta rota"),
+        lone("la menecha en la silla", "la menecha, inacía,", ("la menecha, en la silla",)),
+        lone("Me voy a la tierra.", "me voy a la tienda,"),
+        # A misheard number is never guessed ("treinta" heard as "venta").
+        lone("Y ahora, siquiera la venta, la voz.", "gira, izquierda, venta, grados,"),
+    ]:
+        decision = decide(*readings(transcript, SPANISH))
+        assert decision.rejected
+        assert decision.orders == []
+
+
+def test_a_transcription_carries_a_bounded_number_of_hypotheses() -> None:
+    heard = msgspec.json.encode(lone("Y haranelecha.", "y la menecha", ("y la",) * 17))
+    with pytest.raises(msgspec.ValidationError, match="alternatives"):
+        msgspec.json.decode(heard, type=Transcript)
+    fine = msgspec.json.encode(lone("Y haranelecha.", "y la menecha", ("y la",) * 16))
+    assert len(msgspec.json.decode(fine, type=Transcript).transcription.alternatives) == 16

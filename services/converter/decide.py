@@ -39,11 +39,14 @@ import msgspec
 
 from voicectl.shared.messages import Doubt, Hearing, Order, ParseProblem, Transcript, Transcription
 
-from .parser import Parser
+from .parser import MAX_TEXT_CHARS, Parser
 from .slots import NUMBER_PATTERN, read_number, say_number
+from .snap import snapped
 from .text import normalise
 
 GRAMMAR = "grammar"
+HYPOTHESIS = "another of its hypotheses"
+SNAPPED = "its words snapped to the orders'"
 SOUNDS_LIKE_TWO = ("to", "too")
 _NUMBERS = re.compile(rf"(?<!\S){NUMBER_PATTERN}(?!\S)")
 _DIGITS = re.compile(r"(?<!\S)-?\d+(?:\.\d+)?(?!\S)")
@@ -105,14 +108,18 @@ class Evidence:
     """Its probability that the audio held no speech."""
     second: bool | None
     """Whether its second decode (prompted with the orders' words) made the same orders;
-    None when it made none (its first words held no word of the orders)."""
+    None when it made none (its first decode heard no words)."""
     prompted: bool = False
     """The orders are the prompted decode's, the first having made none: the prompt may
     have put them there, so they are never sent without a yes."""
+    guess: str = ""
+    """How the orders were guessed when neither decode's best words made any (`HYPOTHESIS`,
+    `SNAPPED`): a guess is never sent without a yes."""
 
     def passes(self, rule: Rule) -> bool:
         return (
             not self.prompted
+            and not self.guess
             and self.second is True
             and self.confidence >= rule.alone_confidence
             and self.no_speech is not None
@@ -241,16 +248,41 @@ def free_reading(heard: Transcription, parser: Parser) -> Reading:
 def alone_reading(heard: Transcription, parser: Parser) -> Reading:
     """The words of an ear that hears its language alone, with its own evidence: the
     model's confidence and no-speech probability, and whether a second decode of it made
-    the same orders."""
+    the same orders. When neither decode's best words make orders, their other hypotheses
+    are read, then every hypothesis's words snapped to the orders' (snap.py): the first
+    that makes whole orders is a guess, only ever read back for a yes."""
     reading = free_reading(heard, parser)
-    if heard.second is None:
+    if heard.second is None and reading.claims:
         return replace(reading, evidence=Evidence(heard.confidence, heard.no_speech, None))
-    again = free_reading(msgspec.structs.replace(heard, text=heard.second), parser)
+    again = free_reading(msgspec.structs.replace(heard, text=heard.second or ""), parser)
     if not reading.claims and again.claims:  # heard as orders only with the prompt
         evidence = Evidence(heard.confidence, heard.no_speech, None, prompted=True)
         return replace(again, evidence=evidence)
-    second = reading.claims and again.claims and again.orders == reading.orders
+    if not reading.claims:
+        return _guessed(heard, parser) or replace(
+            reading, evidence=Evidence(heard.confidence, heard.no_speech, None)
+        )
+    second = again.claims and again.orders == reading.orders
     return replace(reading, evidence=Evidence(heard.confidence, heard.no_speech, second))
+
+
+def _guessed(heard: Transcription, parser: Parser) -> Reading | None:
+    """Orders from the decodes' other hypotheses, else from the words of any hypothesis
+    snapped to the orders' words; None when none makes whole orders."""
+    texts = [heard.text, heard.second or "", *heard.alternatives]
+    tries = [(text, HYPOTHESIS) for text in heard.alternatives] + [
+        (snapped(text, parser.vocabulary), SNAPPED)
+        for text in texts
+        if len(text) <= MAX_TEXT_CHARS  # the parser reads no more: never snap more
+    ]
+    for text, how in tries:
+        if not text or len(text) > MAX_TEXT_CHARS:
+            continue
+        guess = free_reading(msgspec.structs.replace(heard, text=text), parser)
+        if guess.claims:
+            evidence = Evidence(heard.confidence, heard.no_speech, None, guess=how)
+            return replace(guess, evidence=evidence)
+    return None
 
 
 def not_a_command(
@@ -439,7 +471,9 @@ def _lone(reading: Reading, hearings: list[Hearing], rule: Rule) -> Decision:
     doubts = _merged(reading.doubts, _teens_or_tens(reading.text))
     evidence = reading.evidence
     said = f"{reading.ear} alone heard {_said(reading)}"
-    if evidence is not None and evidence.prompted:
+    if evidence is not None and evidence.guess:
+        said += f" ({evidence.guess})"
+    elif evidence is not None and evidence.prompted:
         said += " (prompted with the orders' words)"
     if rule.alone == "evidence" and evidence is not None and evidence.passes(rule):
         return _take(replace(reading, doubts=doubts), hearings, f"{said}, and again")

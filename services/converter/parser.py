@@ -19,6 +19,7 @@ right after an order corrects it there and then (amend.py), so that it never add
 
 from __future__ import annotations
 
+import functools
 import itertools
 import re
 import time
@@ -34,6 +35,7 @@ from voicectl.shared.messages import Order, ParseProblem, ParseResult
 
 from .amend import Amender, AmendRefused
 from .expand import SlotRef
+from .grammar import build_grammar
 from .language import DEFAULT, language_of
 from .model import Command
 from .orders import OrderSet
@@ -230,6 +232,13 @@ class Parser:
             if isinstance(before, SlotRef) and isinstance(word, str)
         )
         """Words that follow a spoken number in some command ("meters", "degrees")."""
+
+    @functools.cached_property
+    def vocabulary(self) -> frozenset[str]:
+        """The words the orders are said with, skip words and number words aside: what a
+        free transcript's near-miss words are snapped to (snap.py)."""
+        grammar = build_grammar(self.orders)
+        return frozenset(grammar.words) - set(grammar.skip_words) - set(grammar.number_words)
 
     def parse(self, text: str) -> ParseResult:
         if len(text) > MAX_TEXT_CHARS:

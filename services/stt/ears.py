@@ -62,6 +62,13 @@ PROMPT_WORDS = 60
 lone ear. Prompted, Whisper base wrote "gira la izquierda" for Kokoro's Spanish voice that
 it heard unprompted as "kira la izquierda"; it also wrote a German "warte zehn Sekunden"
 from the prompt that nobody said: a prompted decode is never sent without a yes."""
+HYPOTHESES = 5
+"""Both decodes of the lone ear are beam searches that keep this many hypotheses, and the
+second, prompted, runs after any words, not only after a word of the orders. On the whole
+dev split of harness/speech_languages.py (bench/languages.py, 2026-11-28), commands that
+became the said orders, read back: Spanish 52 of 84 with only the second decode a beam,
+56 with both (whole files decoded once each, main's decodes made at most 28); German 9,
+then 12 of 56. No other orders, no non-command's (docs/benchmarks.md, "Other languages")."""
 WHEN = ("doubt", "always")
 """When the third ear hears an utterance: when the first two leave a doubt (`why_ask`), or
 always (bench/stt.py records every ear's reading, to choose the rule on the dev split)."""
@@ -313,10 +320,12 @@ class _Ear:
 class _Alone:
     """A stream's one ear in a language only Whisper hears (sphinx.py's `Listener`):
     Whisper, told the language, started when the speech pauses as Moonshine is; at the
-    end, when its words hold a word of the orders, a second decode prompted with the
-    orders' words. Both, with the model's own no-speech probability and confidence, are
-    the evidence the converter weighs (decide.py's `Rule.alone`). The run at the pause only
-    tells the endpointer whether a number may follow (`paused_text`)."""
+    end, when it heard any words, a second decode prompted with the orders' words, both
+    beam searches that keep their other hypotheses (`HYPOTHESES`): Whisper mishears the
+    orders' words so often that "no word of the orders" is no sign of no command. Both,
+    with the model's own no-speech probability and confidence, are the evidence the
+    converter weighs (decide.py's `Rule.alone`). The run at the pause only tells the
+    endpointer whether a number may follow (`paused_text`)."""
 
     def __init__(self, model: Whisper, pool: ThreadPoolExecutor, runs: Runs, language: str) -> None:
         self._model = model
@@ -344,12 +353,13 @@ class _Alone:
         # up for it, the one ear hears the whole utterance again.
         self.drop()
         self._runs.at_end += 1
-        heard = self._model.transcribe(audio, self._language)
+        heard = self._model.transcribe(audio, self._language, hypotheses=HYPOTHESES)
         self._runs.third += 1
-        second = None
-        if heard.text and _holds_command_word(heard.text, grammar.vocabulary):
+        second, alternatives = None, list(heard.alternatives)
+        if heard.text:
             prompt = ", ".join(sorted(grammar.vocabulary - grammar.numbers)[:PROMPT_WORDS])
-            second = self._model.transcribe(audio, self._language, prompt).text
+            again = self._model.transcribe(audio, self._language, prompt, hypotheses=HYPOTHESES)
+            second, alternatives = again.text, [*alternatives, *again.alternatives]
         _LOGGER.debug(
             "whisper alone (%s) heard %r in %.3f s, then %r",
             self._language,
@@ -365,16 +375,10 @@ class _Alone:
                 asked=f"the one ear that hears {self._language}",
                 no_speech=round(heard.no_speech, 3),
                 second=second,
+                alternatives=alternatives,
             ),
             None,
         )
-
-
-def _holds_command_word(text: str, vocabulary: frozenset[str]) -> bool:
-    """Whether a transcript holds a word of the orders, or a number: else it is no
-    command, and a second decode would say nothing more."""
-    words = set(re.findall(r"[^\W\d_]+", text.lower()))
-    return bool(words & vocabulary) or bool(re.search(r"\d", text))
 
 
 def written(words: str) -> str:

@@ -85,6 +85,8 @@ class Heard:
     """The encoder's view of the audio, to weigh other words against (`likelihood`)."""
     frames: int = 0
     """Mel frames of audio (not of padding) in `encoded`."""
+    alternatives: tuple[str, ...] = ()
+    """The beam search's other hypotheses, most likely first (`hypotheses` > 1)."""
 
 
 def weights_dir(cache: Path) -> Path:
@@ -280,8 +282,10 @@ class Whisper:
         language: str = "en",
         prompt: str = "",
         cancel: threading.Event | None = None,
+        hypotheses: int = 1,
     ) -> Heard:
-        """`pcm` (16 kHz, 16-bit) heard in `language`, with `prompt` as the text before it.
+        """`pcm` (16 kHz, 16-bit) heard in `language`, with `prompt` as the text before it;
+        greedy, or a beam search of `hypotheses` that keeps them all (`Heard.alternatives`).
         Raises Cancelled when `cancel` is set before it starts."""
         started = time.perf_counter()
         samples = np.frombuffer(pcm, dtype="<i2").astype(np.float32) / 32768.0
@@ -306,12 +310,14 @@ class Whisper:
             result = self._model.generate(
                 encoded,
                 [sequence],
-                beam_size=1,
+                beam_size=max(1, hypotheses),
+                num_hypotheses=max(1, hypotheses),
                 max_length=limit,
                 return_no_speech_prob=True,
                 suppress_blank=True,
             )[0]
-            tokens = [t for t in result.sequences_ids[0] if t < self._special["endoftext"]]
+            texts = [[t for t in ids if t < self._tokens.end] for ids in result.sequences_ids]
+            tokens = texts[0]
             log_probability = self._score(encoded, language, tokens, frames) if tokens else 0.0
         text = self._tokens.decode(tokens).strip()
         return Heard(
@@ -321,6 +327,7 @@ class Whisper:
             time.perf_counter() - started,
             encoded,
             frames,
+            tuple(self._tokens.decode(other).strip() for other in texts[1:]),
         )
 
     def likelihood(self, heard: Heard, text: str, language: str = "en") -> float:
