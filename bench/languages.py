@@ -72,13 +72,13 @@ def verdict(outcome: Outcome, parser: Parser) -> str:
     if not outcome.spoken.command:
         return "confirmed" if asked else "accepted"
     expected = parser.parse(outcome.spoken.text).orders
-    same = _same(decision.orders, expected)
+    same = same_orders(decision.orders, expected)
     if asked:
         return "confirmed" if same else "offered wrong"
     return "right" if same else "wrong"
 
 
-def _same(made: list[Order], expected: list[Order]) -> bool:
+def same_orders(made: list[Order], expected: list[Order]) -> bool:
     """The same orders, the descriptions aside (one ear's words, another's)."""
     return [(o.order, o.case, o.params, o.target_pose) for o in made] == [
         (o.order, o.case, o.params, o.target_pose) for o in expected

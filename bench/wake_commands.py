@@ -30,7 +30,9 @@ import time
 from collections import Counter
 from pathlib import Path
 
+from bench.languages import same_orders
 from bench.wake import SHIPPED_MODEL, held_out, voices
+from harness.processes import REPO
 from harness.speech_set import DEV_COMMANDS, LEAD_SILENCE, TEST_COMMANDS, speak
 from voicectl.services.converter.decide import SHIPPED, Decision, decide, readings
 from voicectl.services.converter.grammar import build_grammar
@@ -38,18 +40,15 @@ from voicectl.services.converter.orders import OrderSet
 from voicectl.services.converter.parser import Parser
 from voicectl.services.listen.listener import ROOM_BEFORE
 from voicectl.services.listen.wake_model import Embedder, TrainedSpotter, WakeModel
-from voicectl.services.stt.audio import frames, read_wav
+from voicectl.services.stt.audio import BYTES_PER_SECOND, frames, read_wav
 from voicectl.services.stt.engine import Engine, EngineOptions, Final
 from voicectl.services.stt.load import load_engine
 from voicectl.services.stt.service import transcript_of
 from voicectl.shared.config import cache_dir
 from voicectl.shared.messages import Order
 
-REPO = Path(__file__).resolve().parents[1]
 PAUSE = 0.4
 """Seconds of silence between the phrase and the command, said after a pause."""
-RATE = 32000
-"""Bytes per second of 16 kHz 16-bit audio."""
 FORMS = ("alone", "one breath", "after a pause")
 
 
@@ -65,7 +64,11 @@ def recordings(split: str, phrase: str, count: int) -> list[tuple[str, str, str,
             lone = speak(command, voice, directory)
             pcm = read_wav(directory / lone.file)
             breath = read_wav(directory / speak(f"{phrase}, {command}", voice, directory).file)
-            paused = alone_phrase + bytes(int(PAUSE * 16000) * 2) + pcm[int(LEAD_SILENCE * RATE) :]
+            paused = (
+                alone_phrase
+                + bytes(int(PAUSE * 16000) * 2)
+                + pcm[int(LEAD_SILENCE * BYTES_PER_SECOND) :]
+            )
             label = f"{voice.source}:{voice.name}"
             out += [
                 (label, command, "alone", pcm),
@@ -106,9 +109,7 @@ def decided(engine: Engine, parser: Parser, pcm: bytes) -> Decision | None:
 def verdict(decision: Decision | None, expected: list[Order]) -> str:
     if decision is None or decision.rejected or not decision.orders:
         return "refused"
-    same = [(o.order, o.case, o.params) for o in decision.orders] == [
-        (o.order, o.case, o.params) for o in expected
-    ]
+    same = same_orders(decision.orders, expected)
     if decision.confirm or decision.doubts:
         return "asked" if same else "asked wrong"
     return "right" if same else "wrong"

@@ -31,6 +31,7 @@ written down in docs/speech.md ("How the ears decide") and walked by a property 
 
 from __future__ import annotations
 
+import itertools
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
@@ -269,14 +270,19 @@ def alone_reading(heard: Transcription, parser: Parser) -> Reading:
 def _guessed(heard: Transcription, parser: Parser) -> Reading | None:
     """Orders from the decodes' other hypotheses, else from the words of any hypothesis
     snapped to the orders' words; None when none makes whole orders."""
+    # The parser reads no more than MAX_TEXT_CHARS (longer text makes no orders): never
+    # snap more. Snapped only when no hypothesis as heard makes orders.
     texts = [heard.text, heard.second or "", *heard.alternatives]
-    tries = [(text, HYPOTHESIS) for text in heard.alternatives] + [
-        (snapped(text, parser.vocabulary), SNAPPED)
-        for text in texts
-        if len(text) <= MAX_TEXT_CHARS  # the parser reads no more: never snap more
-    ]
+    tries = itertools.chain(
+        ((text, HYPOTHESIS) for text in heard.alternatives),
+        (
+            (snapped(text, parser.vocabulary), SNAPPED)
+            for text in texts
+            if len(text) <= MAX_TEXT_CHARS
+        ),
+    )
     for text, how in tries:
-        if not text or len(text) > MAX_TEXT_CHARS:
+        if not text:  # nothing snapped
             continue
         guess = free_reading(msgspec.structs.replace(heard, text=text), parser)
         if guess.claims:
