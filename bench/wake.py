@@ -12,13 +12,16 @@ file, 13 and 13 minutes) and the split's chatter; test adds the LibriVox reading
 names of pocketsphinx's source (people).
 
 With `--model` (default: the shipped services/listen/hey_robot.npz), the same run also
-hears the trained spotter (`voicectl wake train`, wake_model.py), alone and with
-Moonshine's check behind it; it refuses a model trained or tuned on one of the test
-voices. Its wake hits are also heard in babble (four other test voices' chatter, 10 dB
-below), and the long speech grows with licence texts no training or dev voice read
-(GPL-1, GPL-2, GPL-3, read sentence by sentence by the test split's espeak-ng, Festival and
-Flite voices in turn, over again until `--long-hours` of speech in all). Each setting's
-CPU time per second of audio is its spotter's, on the long speech.
+hears the trained spotter (`voicectl wake train`, wake_model.py) three ways: as the
+listener runs it, Moonshine's check hearing only the phrases the spotter is not sure of
+(`TrainedSpotter.sure`); alone; and with the check on every phrase (`--wake-check`). It
+refuses a model trained or tuned on one of the test voices. Its wake hits are also heard
+in babble (four other voices' chatter, 10 dB below), and `--long-hours` grows the long
+speech with licence texts read sentence by sentence by the split's espeak-ng, Festival
+and Flite voices in turn, over again until that many hours in all: on test GPL-1, GPL-2
+and GPL-3, which no training or dev voice read; on dev `DEV_READING`, which training
+never read. Each setting's CPU time per second of audio is its spotter's, on the long
+speech.
 
 For the wake phrase, each hit is checked as the listener has it checked: Moonshine, the
 recogniser's neural ear, on the phrase's audio (`CheckPhrase`). Reported beside it, in the
@@ -68,6 +71,8 @@ from voicectl.shared.config import cache_dir
 PIECE = 640
 SHIPPED_MODEL = Path(__file__).parents[1] / "services" / "listen" / "hey_robot.npz"
 TEST_READING = ("GPL-3", "GPL-2", "GPL-1")
+DEV_READING = ("Apache-2.0", "BSD", "CC0-1.0", "MPL-1.1", "LGPL-3")
+"""Read by the dev voices: neither the training's licence texts nor the test's."""
 COMMANDS = {
     "dev": ["go to the kitchen", "turn left", "take a picture"],
     "test": ["reach the bathroom", "move back", "turn right then take a photo"],
@@ -83,6 +88,8 @@ class Setting:
     checked: bool = False
     model: WakeModel | None = None
     """A trained spotter instead of pocketsphinx's search (`phrase` names its phrase)."""
+    doubtful: bool = False
+    """Checked only when the trained spotter is not sure (`TrainedSpotter.sure`)."""
 
     def spotter(self, embedder: Embedder) -> Spotter | TrainedSpotter:
         if self.model is not None:
@@ -135,20 +142,33 @@ def run(
     setting: Setting, pcm: bytes, check: Check | None, embedder: Embedder
 ) -> tuple[list[Spotted], float, float]:
     """What the listener acts on in `pcm`, the clock when the first hit was reported, and
-    the spotter's CPU seconds per frame."""
+    the spotter's CPU seconds per frame. A doubtful setting's hit waits, as the listener's
+    does, until the spotter knows whether it is sure of it: checked only if not."""
     spotter = setting.spotter(embedder)
     checked, trained = check if setting.checked else None, setting.model is not None
     kept: list[Spotted] = []
     first = -1.0
+    waiting: list[tuple[Spotted, float]] = []
+    """Hits and when they were reported, until they are acted on or not."""
+
+    def settle(ended: bool = False) -> None:
+        nonlocal first, waiting
+        sure = spotter.sure() if setting.doubtful and isinstance(spotter, TrainedSpotter) else False
+        if not waiting or (sure is None and not ended):
+            return
+        for hit, reported in waiting:
+            acted = acted_on([hit], pcm, spotter.clock, None if sure else checked, trained)
+            if acted and first < 0:
+                first = reported
+            kept.extend(acted)
+        waiting = []
+
     started = time.process_time()
     for at in range(0, len(pcm), PIECE):
-        found = spotter.accept(pcm[at : at + PIECE])
-        if found:
-            acted = acted_on(found, pcm, spotter.clock, checked, trained)
-            if acted and first < 0:
-                first = spotter.clock
-            kept += acted
-    kept += acted_on(spotter.flush(), pcm, spotter.clock, checked, trained)
+        waiting += [(hit, spotter.clock) for hit in spotter.accept(pcm[at : at + PIECE])]
+        settle()
+    waiting += [(hit, spotter.clock) for hit in spotter.flush()]
+    settle(ended=True)
     spotter.close()
     return kept, first, (time.process_time() - started) / max(1, len(pcm) // PIECE)
 
@@ -188,26 +208,29 @@ def long_speech(split: str, hours: float = 0.0, phrase: str = "hey robot") -> li
         for voice in voices(split)[:4]
     ]
     if split == "dev":
-        return people + chatter
-    real_recordings(cache_dir() / "bench-wake" / "people")  # fetches pocketsphinx's source
-    readings = sorted((cache_dir() / "bench-wake" / "people" / "pocketsphinx").rglob("*.wav"))
-    speech = people + [read_wav(path) for path in readings] + chatter
-    return speech + read_aloud(directory, hours * 3600 - sum(map(len, speech)) / 32000, phrase)
+        speech = people + chatter
+    else:
+        real_recordings(cache_dir() / "bench-wake" / "people")  # fetches pocketsphinx's source
+        readings = sorted((cache_dir() / "bench-wake" / "people" / "pocketsphinx").rglob("*.wav"))
+        speech = people + [read_wav(path) for path in readings] + chatter
+    seconds = hours * 3600 - sum(map(len, speech)) / 32000
+    return speech + read_aloud(directory, seconds, phrase, split)
 
 
-def read_aloud(directory: Path, seconds: float, phrase: str) -> list[bytes]:
-    """Licence texts read by the test split's plain voices, a sentence each in turn, over
-    again (the next voice first) until `seconds` of audio."""
+def read_aloud(directory: Path, seconds: float, phrase: str, split: str) -> list[bytes]:
+    """Licence texts read by the split's plain voices, a sentence each in turn, over again
+    (the next voice first) until `seconds` of audio."""
     if seconds <= 0:
         return []
     if not LICENCES.is_dir():
         sys.exit(f"{LICENCES} is missing (Debian package base-files): no long reading")
-    sentences = reading(TEST_READING, phrase, 10**6)
+    plain = DEV_VOICES if split == "dev" else TEST_VOICES
+    sentences = reading(DEV_READING if split == "dev" else TEST_READING, phrase, 10**6)
     out: list[bytes] = []
     total = 0.0
     for turn in range(100):
         for number, text in enumerate(sentences):
-            voice = TEST_VOICES[(number + turn) % len(TEST_VOICES)]
+            voice = plain[(number + turn) % len(plain)]
             utterance = speak(text, voice, directory / "reading")
             pcm = read_wav(directory / "reading" / utterance.file)
             out.append(pcm)
@@ -285,6 +308,14 @@ def main() -> None:
             held_out(model)
         trained = Phrase(model.phrase, model.threshold)
         settings += [
+            Setting(
+                "wake phrase, trained, checked when doubtful (shipped)",
+                trained,
+                0.0,
+                checked=True,
+                model=model,
+                doubtful=True,
+            ),
             Setting("wake phrase, trained alone", trained, 0.0, model=model),
             Setting("wake phrase, trained + check", trained, 0.0, checked=True, model=model),
         ]

@@ -371,8 +371,11 @@ def test_a_trained_wake_phrase_puts_the_command_after_it_in_the_queue(
     stack: Stack, speech: Speak, tmp_path: Path
 ) -> None:
     """`voicectl listen --wake MODEL FILE`, with the shipped model and a voice it was
-    neither trained nor tuned on: a command without the phrase is not taken, the one said
-    after it in the same breath is."""
+    neither trained nor tuned on: a command without the phrase is not taken; one after
+    "hey rover" and a pause, which wakes the spotter without making it sure, is not either,
+    the recogniser's check having turned the phrase down (said in one breath with a
+    command, "hey rover" makes the spotter sure: docs/listen.md); the one said after the
+    phrase in the same breath is."""
     model = REPO / "services" / "listen" / "hey_robot.npz"
     said = tmp_path / "said.wav"
     with wave.open(str(said), "wb") as out:
@@ -380,6 +383,9 @@ def test_a_trained_wake_phrase_puts_the_command_after_it_in_the_queue(
         out.setsampwidth(2)
         out.setframerate(16000)
         out.writeframes(read_wav(speech("go to the kitchen", HELD_OUT)))
+        out.writeframes(read_wav(speech("hey rover", HELD_OUT)))
+        out.writeframes(read_wav(speech("take a picture", HELD_OUT)))
+        out.writeframes(bytes(32000 * 3))  # the listener falls asleep again
         out.writeframes(read_wav(speech("hey robot, turn left", HELD_OUT)))
     listen = [sys.executable, "-m", "voicectl", "listen", str(said), "--wake", str(model)]
     done = subprocess.run(
@@ -396,8 +402,10 @@ def test_a_trained_wake_phrase_puts_the_command_after_it_in_the_queue(
         60.0,
         "the command after the trained wake phrase to run",
     )
-    assert done.stderr.count("heard the wake phrase") == 1
-    assert not [d for d, _ in descriptions(state(stack)) if "kitchen" in d]
+    assert done.stderr.count("heard the wake phrase") == 2
+    assert done.stderr.count("wake phrase not confirmed") == 1
+    assert done.stderr.count("wake phrase sure") == 1
+    assert not [d for d, _ in descriptions(state(stack)) if "kitchen" in d or "picture" in d]
 
 
 def test_a_read_back_answered_no_or_not_at_all_moves_nothing(stack: Stack, speech: Speak) -> None:

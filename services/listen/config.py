@@ -45,8 +45,8 @@ def parse_args(argv: list[str] | None) -> argparse.Namespace:
     parser.add_argument(
         "--wake-check",
         action="store_true",
-        help="with a trained model, have the recogniser's neural ear confirm the phrase too "
-        "(pocketsphinx's phrases always are)",
+        help="with a trained model, have the recogniser's neural ear confirm every phrase, "
+        "not only those the model is not sure of (pocketsphinx's phrases always are)",
     )
     parser.add_argument(
         "--language",

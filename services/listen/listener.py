@@ -115,8 +115,9 @@ class ListenConfig:
     wake_threshold: float | None = None
     """The spotter's threshold; None: `WAKE_THRESHOLD`, or the model's own."""
     wake_check: bool = True
-    """Whether the recogniser's neural ear must confirm the phrase before anything said
-    after it is acted on."""
+    """Whether the recogniser's neural ear must confirm every wake phrase before anything
+    said after it is acted on; without, a trained phrase is checked only when its model is
+    not sure of it (`TrainedSpotter.sure`)."""
     stop_word: bool = True
     """Hearing "stop" alone while the robot moves stops it, wake phrase or not."""
     stop_threshold: float = STOP_THRESHOLD
@@ -139,7 +140,10 @@ class _Awake:
     last_heard: float = field(default_factory=time.monotonic)
     """When the person last said something in it (monotonic)."""
     checked: asyncio.Future[bool] | None = None
-    """Whether the recogniser's neural ear heard the wake phrase too; None without one."""
+    """Whether the wake phrase was confirmed (`_woken`); None when nothing checks it."""
+    sure: asyncio.Future[bool] | None = None
+    """Whether the trained spotter is sure of the phrase; None when its phrases are all
+    checked, or it is pocketsphinx's."""
     begun: int = -1
     """The last utterance the recogniser has begun to hear (its partial transcripts)..."""
     answered: int = -1
@@ -185,9 +189,13 @@ class Listener(Service):
         self._check_decoder = json_decoder(SttReply)
         self._loop = asyncio.get_running_loop()
         # Two searches: the wake phrase's (pocketsphinx's is permissive, its false wakes
-        # checked; a trained one is its own judge), and the stop word's, strict (a stop is
-        # acted on at once, unchecked).
+        # checked; a trained one is its own judge when sure, else checked too), and the stop
+        # word's, strict (a stop is acted on at once, unchecked).
         wake = _wake_spotter(config)
+        self._trained = wake if isinstance(wake, TrainedSpotter) else None
+        self._unsure: _Awake | None = None
+        """The session whose trained phrase the spotter may still become sure of (the
+        reader's thread)."""
         self._wake_phrase = wake.phrase if isinstance(wake, TrainedSpotter) else config.wake
         # How far past the phrase's end its check hears: pocketsphinx's search reports the
         # phrase as it ends, and the check hears up to then; a trained one, at the pause.
@@ -277,6 +285,8 @@ class Listener(Service):
         except Exception:  # the reader's end must reach the loop, whatever ended it
             _LOGGER.exception("the audio source failed")
         finally:
+            if self._unsure is not None:  # no audio to grow surer on: the check decides
+                self._loop.call_soon_threadsafe(self._settle, self._unsure, False)
             self._loop.call_soon_threadsafe(self._ended)
 
     def _ended(self) -> None:
@@ -300,6 +310,7 @@ class Listener(Service):
         if muted:  # the spotters' clocks run on with the stream's
             for spotter in self._spotters:
                 spotter.skip(len(pcm))
+            self._grow_sure()
             return
         if self._answer is not None:
             for hit in self._answer.accept(pcm):
@@ -307,6 +318,7 @@ class Listener(Service):
         for spotter in self._spotters:
             for hit in spotter.accept(pcm):
                 self._on_hit(hit)
+        self._grow_sure()
         # Someone still speaking keeps the listener awake, however late the recogniser's
         # partial transcripts come on a busy host.
         awake = self._awake
@@ -335,15 +347,28 @@ class Listener(Service):
             self._send(awake, b"".join([*room, *after]))
             # Streaming starts at once; what it becomes is submitted only once the
             # recogniser's neural ear agrees the phrase was said (`_heard_wake`).
-            if self._config.wake_check:
+            if self._config.wake_check or self._trained is not None:
                 phrase = [
                     f
                     for at, f in self._recent
                     if hit.start - CHECK_BEFORE <= at < hit.end + self._check_after
                 ]
-                self._loop.call_soon_threadsafe(self._check_wake, awake, b"".join(phrase))
+                doubtful = not self._config.wake_check
+                self._unsure = awake if doubtful else None
+                pcm = b"".join(phrase)
+                self._loop.call_soon_threadsafe(self._check_wake, awake, pcm, doubtful)
         elif self._awake is not None:
             self._awake.last_heard = time.monotonic()
+
+    def _grow_sure(self) -> None:
+        """Tell the session whether the trained spotter became sure of its phrase, once it
+        knows (`TrainedSpotter.sure`)."""
+        if self._unsure is None or self._trained is None:
+            return
+        sure = self._trained.sure()
+        if sure is not None:
+            self._loop.call_soon_threadsafe(self._settle, self._unsure, sure)
+            self._unsure = None
 
     def _wake_now(self) -> _Awake:
         session = uuid.uuid4().hex[:16]
@@ -363,9 +388,25 @@ class Listener(Service):
 
     # --- on the event loop -------------------------------------------------------------
 
-    def _check_wake(self, awake: _Awake, pcm: bytes) -> None:
-        awake.checked = asyncio.ensure_future(self._heard_wake(pcm))
+    def _check_wake(self, awake: _Awake, pcm: bytes, doubtful: bool) -> None:
+        # Scheduled before `_settle` by the same thread: the future is there when it comes.
+        if doubtful:
+            awake.sure = self._loop.create_future()
+        awake.checked = asyncio.ensure_future(self._woken(awake, pcm))
         awake.checked.add_done_callback(lambda checked: self._false_wake(awake, checked))
+
+    def _settle(self, awake: _Awake, sure: bool) -> None:
+        if awake.sure is not None and not awake.sure.done():
+            awake.sure.set_result(sure)
+
+    async def _woken(self, awake: _Awake, pcm: bytes) -> bool:
+        """A phrase the trained spotter is sure of is taken (it becomes sure within
+        `SURE_AFTER` seconds of audio: before the command after it is heard); any other is
+        the recogniser's to confirm."""
+        if awake.sure is not None and await awake.sure:
+            _LOGGER.info("wake phrase sure: taken without the recogniser's check")
+            return True
+        return await self._heard_wake(pcm)
 
     def _false_wake(self, awake: _Awake, checked: asyncio.Future[bool]) -> None:
         """A wake the check turned down: back to sleep at once, the recogniser freed."""

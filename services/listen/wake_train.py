@@ -39,6 +39,7 @@ from voicectl.shared.errors import VoicectlError
 from .wake_model import (
     EMBEDDING_SIZE,
     SAMPLE_RATE,
+    SURE,
     WINDOW,
     Embedder,
     Floats,
@@ -748,6 +749,7 @@ def train(config: TrainConfig, progress: Progress | None = None) -> WakeModel:
         out_weights=params["out_weights"],
         out_bias=float(params["out_bias"][0]),
         threshold=0.5,
+        sure=SURE,
         lag=0.0,
         seconds=float(np.median([len(p) for p in positives]) / SAMPLE_RATE),
         made={},
@@ -831,6 +833,7 @@ def choose_threshold(
     )
     threshold = min(threshold, MAX_THRESHOLD)
     hits = {"clean": 0, "pink10": 0}
+    sure = dict.fromkeys(hits, 0)  # the hits taken without the recogniser's check
     lags = []
     takes = [voices.say(phrase, s) for s in speakers]
     for take in takes:
@@ -843,6 +846,7 @@ def choose_threshold(
             above = np.flatnonzero(scores >= threshold)
             if len(above):
                 hits[condition] += 1
+                sure[condition] += bool(scores.max() >= model.sure)
                 if condition == "clean":
                     lags.append(float(ends[above[0]]) - end)
     lag = float(np.percentile(lags, 20)) if lags else 0.0
@@ -853,6 +857,8 @@ def choose_threshold(
         f"min read, highest score {max(ordinary_top):.3f}",
         "hits clean": f"{hits['clean']}/{len(takes)}",
         "hits pink 10 dB": f"{hits['pink10']}/{len(takes)}",
+        "sure clean": f"{sure['clean']}/{len(takes)}",
+        "sure pink 10 dB": f"{sure['pink10']}/{len(takes)}",
         "lag": round(lag, 3),
     }
     fields = asdict_shallow(model)
