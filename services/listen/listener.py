@@ -345,8 +345,9 @@ class Listener(Service):
             room = [f for at, f in self._recent if hit.start - ROOM_BEFORE <= at < hit.start]
             after = [f for at, f in self._recent if at >= hit.end]
             self._send(awake, b"".join([*room, *after]))
-            # Streaming starts at once; what it becomes is submitted only once the
-            # recogniser's neural ear agrees the phrase was said (`_heard_wake`).
+            # Streaming starts at once; what it becomes is submitted only once the trained
+            # spotter is sure of the phrase, or the recogniser's neural ear agrees it was
+            # said (`_woken`).
             if self._config.wake_check or self._trained is not None:
                 phrase = [
                     f

@@ -63,7 +63,8 @@ the check, which turns down one phrase in ten, hears only the doubtful ones."""
 SURE_AFTER = 0.2
 """Seconds after the phrase is reported during which its score may still reach `SURE`:
 the score crosses the threshold as the phrase ends and peaks a window or two (80 ms each)
-later; on the dev split, waiting 0.4 s made no phrase surer than 0.2 s did."""
+later. Of the phrases the dev split heard, 36 were sure when reported, 71 by 0.2 s
+after, 72 by 0.4 s, which would hold back the check of every doubtful one longer."""
 REFRACTORY = 1.5
 """Seconds after a hit during which the same phrase is not reported again."""
 PRIME = 2.0
