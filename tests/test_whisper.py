@@ -11,6 +11,8 @@ from voicectl.services.stt.audio import frames, read_wav
 from voicectl.services.stt.ears import HYPOTHESES, load_three
 from voicectl.services.stt.engine import EngineOptions, Final
 from voicectl.services.stt.service import transcript_of
+from voicectl.services.stt.whisper import Heard, Whisper, weights_dir
+from voicectl.shared.config import cache_dir
 
 from .conftest import REPO
 from .test_panel_languages import SPOKEN
@@ -43,3 +45,18 @@ def test_the_lone_ear_reads_back_what_its_second_decode_heard() -> None:
         ("goal", "kitchen"),
     ]
     assert decision.confirm  # one ear is not two: read back
+
+
+def test_the_prompted_decode_reuses_the_audio_encoded_and_hears_the_same() -> None:
+    """`Whisper.again` decodes from the encoder's view the first decode made: the same words
+    and hypotheses as encoding the audio once more, without its time."""
+    model = Whisper(weights_dir(cache_dir()))
+    pcm = read_wav(SPOKEN)
+    prompt = "cocina, gira, izquierda, luego"
+    first = model.transcribe(pcm, "es", hypotheses=HYPOTHESES)
+    afresh = model.transcribe(pcm, "es", prompt, hypotheses=HYPOTHESES)
+    again = model.again(first, "es", prompt, hypotheses=HYPOTHESES)
+    assert again.text
+    assert (again.text, again.alternatives) == (afresh.text, afresh.alternatives)
+    assert again.no_speech == afresh.no_speech
+    assert model.again(Heard("", 0.0, 1.0, 0.0), "es", prompt).text == ""

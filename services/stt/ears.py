@@ -358,7 +358,7 @@ class _Alone:
         second, alternatives = None, list(heard.alternatives)
         if heard.text:
             prompt = ", ".join(sorted(grammar.vocabulary - grammar.numbers)[:PROMPT_WORDS])
-            again = self._model.transcribe(audio, self._language, prompt, hypotheses=HYPOTHESES)
+            again = self._model.again(heard, self._language, prompt, hypotheses=HYPOTHESES)
             second, alternatives = again.text, [*alternatives, *again.alternatives]
         _LOGGER.debug(
             "whisper alone (%s) heard %r in %.3f s, then %r",
