@@ -37,6 +37,7 @@ submitted); a stop is sent at that moment.
 from __future__ import annotations
 
 import argparse
+import math
 import statistics
 import sys
 import time
@@ -101,11 +102,15 @@ class Setting:
 class Score:
     said: int = 0
     hits: int = 0
+    sure: int = 0
+    """Hits a trained spotter was sure of (`TrainedSpotter.sure`)."""
     delays: list[float] = field(default_factory=list)
 
     def line(self, name: str) -> str:
         rate = 100 * self.hits / max(self.said, 1)
         text = f"  {name:<28} {self.hits:>4}/{self.said:<4} {rate:5.1f} %"
+        if self.sure:
+            text += f", {self.sure} sure"
         if self.delays:
             delays = sorted(self.delays)
             p95 = delays[min(len(delays) - 1, int(0.95 * len(delays)))]
@@ -138,29 +143,43 @@ def acted_on(
     return kept
 
 
-def run(
-    setting: Setting, pcm: bytes, check: Check | None, embedder: Embedder
-) -> tuple[list[Spotted], float, float]:
-    """What the listener acts on in `pcm`, the clock when the first hit was reported, and
-    the spotter's CPU seconds per frame. A doubtful setting's hit waits, as the listener's
-    does, until the spotter knows whether it is sure of it: checked only if not."""
+@dataclass
+class Heard:
+    """What the listener acts on in one stream."""
+
+    kept: list[Spotted]
+    first: float
+    """The clock when the first hit acted on was reported (-1: none)."""
+    cpu: float
+    """The spotter's CPU seconds per frame (a checked setting's, its checks' too)."""
+    peaks: list[float]
+    """A trained spotter's highest score of each hit acted on, by `SURE_AFTER` after it."""
+
+
+def run(setting: Setting, pcm: bytes, check: Check | None, embedder: Embedder) -> Heard:
+    """What the listener acts on in `pcm`. A trained spotter's hit waits, as the listener's
+    does, until the spotter knows whether it is sure of it: a doubtful setting checks it
+    only if not."""
     spotter = setting.spotter(embedder)
     checked, trained = check if setting.checked else None, setting.model is not None
-    kept: list[Spotted] = []
-    first = -1.0
+    heard = Heard([], -1.0, 0.0, [])
     waiting: list[tuple[Spotted, float]] = []
     """Hits and when they were reported, until they are acted on or not."""
 
     def settle(ended: bool = False) -> None:
-        nonlocal first, waiting
-        sure = spotter.sure() if setting.doubtful and isinstance(spotter, TrainedSpotter) else False
+        nonlocal waiting
+        sure = spotter.sure() if isinstance(spotter, TrainedSpotter) else False
         if not waiting or (sure is None and not ended):
             return
         for hit, reported in waiting:
-            acted = acted_on([hit], pcm, spotter.clock, None if sure else checked, trained)
-            if acted and first < 0:
-                first = reported
-            kept.extend(acted)
+            check_it = checked if not (setting.doubtful and sure) else None
+            # The listener takes the phrase's audio for the check when the hit comes.
+            acted = acted_on([hit], pcm, reported, check_it, trained)
+            if acted and heard.first < 0:
+                heard.first = reported
+            heard.kept.extend(acted)
+            if acted and isinstance(spotter, TrainedSpotter):
+                heard.peaks.append(spotter.peak)
         waiting = []
 
     started = time.process_time()
@@ -170,7 +189,8 @@ def run(
     waiting += [(hit, spotter.clock) for hit in spotter.flush()]
     settle(ended=True)
     spotter.close()
-    return kept, first, (time.process_time() - started) / max(1, len(pcm) // PIECE)
+    heard.cpu = (time.process_time() - started) / max(1, len(pcm) // PIECE)
+    return heard
 
 
 def said(split: str, phrase: str, with_commands: bool) -> list[tuple[str, bytes, float]]:
@@ -256,24 +276,29 @@ def held_out(model: WakeModel) -> None:
 def hits(setting: Setting, split: str, check: Check, embedder: Embedder) -> dict[str, Score]:
     scores: dict[str, Score] = {}
     commands = setting.phrase.text != "stop"
+    sure = setting.model.sure if setting.model is not None else math.inf
     for condition, pcm, end in said(split, setting.phrase.text, commands):
-        kept, first, cpu = run(setting, pcm, check, embedder)
+        heard = run(setting, pcm, check, embedder)
         score = scores.setdefault(condition, Score())
         score.said += 1
-        score.hits += bool(kept)
-        if kept and end:
-            score.delays.append(max(0.0, first - end) + cpu)
+        score.hits += bool(heard.kept)
+        score.sure += any(peak >= sure for peak in heard.peaks)
+        if heard.kept and end:
+            score.delays.append(max(0.0, heard.first - end) + heard.cpu)
     return scores
 
 
 def false_triggers(
     setting: Setting, speech: list[bytes], check: Check, embedder: Embedder
-) -> tuple[int, float, float]:
-    """False triggers in the long speech, its seconds, and the spotter's CPU seconds per
-    second of audio (a checked setting's include its checks)."""
+) -> tuple[Heard, float]:
+    """What the listener acts on in the long speech (false triggers), and its seconds."""
     stream = b"".join(speech)  # one stream, as a microphone hears it
-    kept, _, cpu = run(setting, stream, check, embedder)
-    return len(kept), len(stream) / 32000, cpu / (PIECE / 32000)
+    return run(setting, stream, check, embedder), len(stream) / 32000
+
+
+def logit(score: float) -> float:
+    score = min(max(score, 1e-12), 1 - 1e-12)
+    return math.log(score / (1 - score))
 
 
 def checker(engine: Engine, phrase: str) -> Check:
@@ -340,12 +365,15 @@ def main() -> None:
         )
         for condition, score in hits(setting, args.split, check, embedder).items():
             print(score.line(f"said, {condition}"), flush=True)
-        found, seconds, cpu = false_triggers(setting, speech, check, embedder)
+        heard, seconds = false_triggers(setting, speech, check, embedder)
+        found, cpu = len(heard.kept), heard.cpu / (PIECE / 32000)
         print(
             f"  false triggers: {found} in {seconds / 3600:.2f} h ({found * 3600 / seconds:.2f} "
             f"per hour); spotter CPU {100 * cpu:.2f} % of a core",
             flush=True,
         )
+        if heard.peaks:
+            print(f"  their highest score: a logit of {logit(max(heard.peaks)):.1f}", flush=True)
     engine.close()
 
 

@@ -350,6 +350,11 @@ class TrainedSpotter:
             self._reported = self.clock
         return found
 
+    @property
+    def peak(self) -> float:
+        """The highest score since the last time it crossed the threshold."""
+        return self._peak
+
     def sure(self) -> bool | None:
         """Whether the model is sure of the last phrase it reported: True once its score
         has reached the model's `sure`, False if it has not `SURE_AFTER` seconds after
