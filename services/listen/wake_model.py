@@ -56,8 +56,8 @@ GAP_BEFORE = 0.15
 SURE = 0.99966
 """Score (a logit of 8) at or above which the listener takes a phrase without the
 recogniser's check (`TrainedSpotter.sure`); below it, the check decides. On the dev split
-(bench/wake.py's dev voices, and 2.6 hours of dev speech that never says the phrase) the
-highest score of its 9 false wakes was a logit of 7.2, while 24 of the 32 phrases said
+(bench/wake.py's dev voices, and 2.5 hours of dev speech that never says the phrase) the
+highest score of its 15 false wakes was a logit of 7.2, while 24 of the 32 phrases said
 alone clean or in pink noise, and 42 of the 48 said before a command, reached 8 or more:
 the check, which turns down one phrase in ten, hears only the doubtful ones."""
 SURE_AFTER = 0.2
