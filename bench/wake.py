@@ -5,7 +5,8 @@
 
 Hits: the phrase said alone and at the start of a command ("hey robot, turn right"), in
 the split's voices (harness/speech_set.py: espeak-ng, Festival, Flite and Kokoro's
-speakers), clean and in pink noise at 10 dB; "stop" said alone. False triggers: long
+speakers), clean and in pink noise at 10 dB; "stop" said alone. Wrong wakes: the phrase's
+near-misses (`NEAR`) said before a command in one breath. False triggers: long
 speech that never says either phrase, heard as one stream, per hour. The long speech of
 each split is half of Debian's Asterisk prompts (a person, Allison Smith: every other
 file, 13 and 13 minutes) and the split's chatter; test adds the LibriVox readings and card
@@ -78,6 +79,10 @@ COMMANDS = {
     "dev": ["go to the kitchen", "turn left", "take a picture"],
     "test": ["reach the bathroom", "move back", "turn right then take a photo"],
 }
+NEAR = {"hey robot": ["hey robin", "hey rover", "hey ruby", "they rob it"]}
+"""Near-misses said before a command in one breath: a hit there is a wrong wake, and the
+command after it a wrong order (the shipped model was trained against these alone)."""
+NEAR_COMMAND = "near-miss, command (wrong)"
 Check = Callable[[bytes], bool]
 
 
@@ -194,8 +199,9 @@ def run(setting: Setting, pcm: bytes, check: Check | None, embedder: Embedder) -
 
 
 def said(split: str, phrase: str, with_commands: bool) -> list[tuple[str, bytes, float]]:
-    """(condition, audio, phrase end or 0) for the phrase alone and before commands."""
-    out = []
+    """(condition, audio, phrase end or 0) for the phrase alone and before commands, and
+    its near-misses before commands."""
+    out, wrong = [], []
     directory = cache_dir() / "bench-wake" / split
     chatter = DEV_CHATTER if split == "dev" else TEST_CHATTER
     for number, voice in enumerate(voices(split)):
@@ -213,7 +219,11 @@ def said(split: str, phrase: str, with_commands: bool) -> list[tuple[str, bytes,
             for command in COMMANDS[split]:
                 utterance = speak(f"{phrase}, {command}", voice, directory)
                 out.append(("command", read_wav(directory / utterance.file), 0.0))
-    return out
+            for turn, near in enumerate(NEAR.get(phrase, [])):
+                command = COMMANDS[split][(number + turn) % len(COMMANDS[split])]
+                utterance = speak(f"{near}, {command}", voice, directory)
+                wrong.append((NEAR_COMMAND, read_wav(directory / utterance.file), 0.0))
+    return out + wrong  # after the rest: the noise's seeds stay as they were
 
 
 def long_speech(split: str, hours: float = 0.0, phrase: str = "hey robot") -> list[bytes]:
