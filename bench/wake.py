@@ -159,6 +159,8 @@ class Heard:
     """The spotter's CPU seconds per frame (a checked setting's, its checks' too)."""
     peaks: list[float]
     """A trained spotter's highest score of each hit acted on, by `SURE_AFTER` after it."""
+    sure: int = 0
+    """The hits acted on that the trained spotter was sure of (`TrainedSpotter.sure`)."""
 
 
 def run(setting: Setting, pcm: bytes, check: Check | None, embedder: Embedder) -> Heard:
@@ -185,6 +187,7 @@ def run(setting: Setting, pcm: bytes, check: Check | None, embedder: Embedder) -
             heard.kept.extend(acted)
             if acted and isinstance(spotter, TrainedSpotter):
                 heard.peaks.append(spotter.peak)
+                heard.sure += bool(sure)
         waiting = []
 
     started = time.process_time()
@@ -286,13 +289,12 @@ def held_out(model: WakeModel) -> None:
 def hits(setting: Setting, split: str, check: Check, embedder: Embedder) -> dict[str, Score]:
     scores: dict[str, Score] = {}
     commands = setting.phrase.text != "stop"
-    sure = setting.model.sure if setting.model is not None else math.inf
     for condition, pcm, end in said(split, setting.phrase.text, commands):
         heard = run(setting, pcm, check, embedder)
         score = scores.setdefault(condition, Score())
         score.said += 1
         score.hits += bool(heard.kept)
-        score.sure += any(peak >= sure for peak in heard.peaks)
+        score.sure += bool(heard.sure)
         if heard.kept and end:
             score.delays.append(max(0.0, heard.first - end) + heard.cpu)
     return scores

@@ -196,10 +196,10 @@ class Listener(Service):
         self._unsure: _Awake | None = None
         """The session whose trained phrase the spotter may still become sure of (the
         reader's thread)."""
-        self._wake_phrase = wake.phrase if isinstance(wake, TrainedSpotter) else config.wake
+        self._wake_phrase = self._trained.phrase if self._trained is not None else config.wake
         # How far past the phrase's end its check hears: pocketsphinx's search reports the
         # phrase as it ends, and the check hears up to then; a trained one, at the pause.
-        self._check_after = CHECK_AFTER if isinstance(wake, TrainedSpotter) else math.inf
+        self._check_after = CHECK_AFTER if self._trained is not None else math.inf
         self._spotters: list[Spotter | TrainedSpotter] = [
             *([wake] if wake is not None else []),
             *(
